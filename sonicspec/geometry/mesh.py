@@ -225,9 +225,7 @@ class SceneMesh:
             Labels are needed but the mesh has none, or a label has no material.
         """
         if isinstance(assign, str):
-            return self._replace(
-                face_material=np.zeros(self.n_faces, np.int32), materials=(assign,)
-            )
+            return self.replace(face_material=np.zeros(self.n_faces, np.int32), materials=(assign,))
         if self.face_label is None:
             raise GeometryError(
                 "SceneMesh.with_materials: expected a mesh with face labels to map, got a mesh "
@@ -251,7 +249,7 @@ class SceneMesh:
         face_material = (
             label_to_material[self.face_label] if label_to_material.size else np.zeros(0, np.int32)
         )
-        return self._replace(face_material=face_material, materials=materials)
+        return self.replace(face_material=face_material, materials=materials)
 
     def subset(self, face_indices: np.ndarray) -> SceneMesh:
         """Return the mesh of the given faces (indices or boolean mask), unused vertices dropped."""
@@ -268,7 +266,8 @@ class SceneMesh:
             face_object=None if self.face_object is None else self.face_object[selected],
         )
 
-    def _replace(self, **changes: object) -> SceneMesh:
+    def replace(self, **changes: object) -> SceneMesh:
+        """Return a copy with some fields changed (checked like a new mesh)."""
         fields = {
             "vertices": self.vertices,
             "faces": self.faces,

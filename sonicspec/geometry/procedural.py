@@ -415,7 +415,7 @@ def _yaw_matrix(yaw_deg: float) -> np.ndarray:
 
 def _flip(mesh: SceneMesh) -> SceneMesh:
     """Reverse every face's winding: a room (normals in) becomes a solid (normals out)."""
-    return mesh._replace(faces=mesh.faces[:, ::-1])
+    return mesh.replace(faces=mesh.faces[:, ::-1])
 
 
 def _as_obstacle(mesh: SceneMesh, material: str, label: str) -> SceneMesh:
@@ -458,7 +458,7 @@ def box_obstacle(
     size = _positive_vector("box_obstacle.size_m", size_m, 3)
     room = shoebox(size)
     vertices = (room.vertices - size / 2.0) @ _yaw_matrix(yaw_deg).T + center
-    return _as_obstacle(_flip(room._replace(vertices=vertices)), material, label)
+    return _as_obstacle(_flip(room.replace(vertices=vertices)), material, label)
 
 
 def cylinder_obstacle(
@@ -480,7 +480,7 @@ def cylinder_obstacle(
     base = _finite_vector("cylinder_obstacle.base_z_m", [base_z_m], 1)[0]
     room = cylinder(radius_m, height_m, segments)
     vertices = room.vertices + np.array([center[0] - radius_m, center[1] - radius_m, base])
-    return _as_obstacle(_flip(room._replace(vertices=vertices)), material, label)
+    return _as_obstacle(_flip(room.replace(vertices=vertices)), material, label)
 
 
 def mesh_obstacle(
@@ -524,11 +524,11 @@ def mesh_obstacle(
             "whose normals point inwards; reverse its faces (faces[:, ::-1])"
         )
     vertices = (mesh.vertices * factors) @ _yaw_matrix(yaw_deg).T + position
-    placed = mesh._replace(vertices=vertices, face_object=None)
+    placed = mesh.replace(vertices=vertices, face_object=None)
     if material is not None:
         placed = placed.with_materials(material)
     if label is not None:
-        placed = placed._replace(face_label=np.zeros(placed.n_faces, np.int32), labels=(label,))
+        placed = placed.replace(face_label=np.zeros(placed.n_faces, np.int32), labels=(label,))
     return placed
 
 
@@ -557,7 +557,7 @@ def add_obstacles(room: SceneMesh, obstacles: Sequence[SceneMesh]) -> SceneMesh:
     room.validate()
     lo, hi = room.bounds
     tolerance = 1e-9 * max(float(np.ptp(room.vertices, axis=0).max()), 1.0)
-    parts = [room._replace(face_object=np.full(room.n_faces, -1, np.int32))]
+    parts = [room.replace(face_object=np.full(room.n_faces, -1, np.int32))]
     for k, obstacle in enumerate(obstacles):
         obstacle.validate()
         if obstacle.n_faces == 0:
@@ -569,5 +569,5 @@ def add_obstacles(room: SceneMesh, obstacles: Sequence[SceneMesh]) -> SceneMesh:
                 f"{lo.round(3).tolist()}..{hi.round(3).tolist()} m, got "
                 f"{o_lo.round(3).tolist()}..{o_hi.round(3).tolist()} m"
             )
-        parts.append(obstacle._replace(face_object=np.full(obstacle.n_faces, k, np.int32)))
+        parts.append(obstacle.replace(face_object=np.full(obstacle.n_faces, k, np.int32)))
     return SceneMesh.concatenate(parts).validate()

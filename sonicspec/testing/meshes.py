@@ -1,0 +1,294 @@
+"""Fixture writers: small scenes on disk in the real file formats, for tests and the demo.
+
+Each writer returns the paths it wrote and the :class:`SceneMesh` an importer should give back
+(z up, metres), so a test can compare what was read with what was meant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sonicspec.geometry.io import mpcat40_table
+from sonicspec.geometry.mesh import UNLABELED, SceneMesh
+from sonicspec.geometry.procedural import box_obstacle, shoebox
+
+__all__ = [
+    "MatterportFixture",
+    "PlainMeshFixture",
+    "write_matterport_scene",
+    "write_plain_meshes",
+]
+
+
+def _z_up_to_gltf(vertices: np.ndarray) -> np.ndarray:
+    """Scene frame (z up) → glTF frame (y up): (x, y, z) → (x, z, −y)."""
+    return np.column_stack([vertices[:, 0], vertices[:, 2], -vertices[:, 1]])
+
+
+# --------------------------------------------------------------------------- plain files
+@dataclass(frozen=True)
+class PlainMeshFixture:
+    """A room with a table, written as glb, gltf, ply and obj.
+
+    ``mesh`` has labels ``"room"`` and ``"table"`` and ``face_object`` -1 (room) / 0 (table).
+    The glb and gltf are y up with the table as a separate node translated by its transform;
+    the ply and obj are z up; the ply carries integer face properties ``label`` (the index into
+    ``mesh.labels``) and ``object_id``.
+    """
+
+    glb: Path
+    gltf: Path
+    ply: Path
+    obj: Path
+    mesh: SceneMesh
+
+
+def write_plain_meshes(directory: str | Path, stem: str = "scene") -> PlainMeshFixture:
+    """Write ``<stem>.glb/.gltf/.ply/.obj`` into ``directory`` (created if needed)."""
+    import trimesh
+    from trimesh.exchange.gltf import export_gltf
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    room = shoebox((4.0, 3.0, 2.5))
+    table_center = np.array([1.5, 1.2, 0.6])
+    table_local = box_obstacle((0.0, 0.0, 0.0), (1.2, 0.8, 0.4), yaw_deg=20.0)
+    table = table_local.replace(vertices=table_local.vertices + table_center)
+    labels = ("room", "table")
+    mesh = SceneMesh.concatenate(
+        [
+            room.replace(
+                face_label=np.zeros(room.n_faces, np.int32),
+                labels=labels[:1],
+                face_object=np.full(room.n_faces, -1, np.int32),
+            ),
+            table.replace(
+                face_label=np.zeros(table.n_faces, np.int32),
+                labels=labels[1:],
+                face_object=np.zeros(table.n_faces, np.int32),
+            ),
+        ]
+    ).with_materials("default")
+
+    # glTF: y up; the table's vertices are local and its node carries the translation.
+    scene = trimesh.Scene()
+    scene.add_geometry(
+        trimesh.Trimesh(_z_up_to_gltf(room.vertices), room.faces, process=False),
+        geom_name="room",
+        node_name="room",
+    )
+    transform = np.eye(4)
+    transform[:3, 3] = _z_up_to_gltf(table_center[None, :])[0]
+    scene.add_geometry(
+        trimesh.Trimesh(_z_up_to_gltf(table_local.vertices), table_local.faces, process=False),
+        geom_name="table",
+        node_name="table",
+        transform=transform,
+    )
+    glb = directory / f"{stem}.glb"
+    glb.write_bytes(scene.export(file_type="glb"))
+    gltf = directory / f"{stem}.gltf"
+    gltf.write_bytes(export_gltf(scene, embed_buffers=True)["model.gltf"])
+
+    ply = directory / f"{stem}.ply"
+    _write_binary_ply(
+        ply,
+        mesh.vertices,
+        mesh.faces,
+        face_properties={"label": mesh.face_label, "object_id": mesh.face_object},
+    )
+
+    obj = directory / f"{stem}.obj"
+    lines = ["# sonicspec test fixture: a room and a table, z up, metres"]
+    offset = 0
+    for name, part in (("room", room), ("table", table)):
+        lines.append(f"o {name}")
+        lines.extend(f"v {x!r} {y!r} {z!r}" for x, y, z in part.vertices.tolist())
+        lines.extend(f"f {a} {b} {c}" for a, b, c in part.faces + 1 + offset)
+        offset += part.vertices.shape[0]
+    obj.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return PlainMeshFixture(glb=glb, gltf=gltf, ply=ply, obj=obj, mesh=mesh)
+
+
+def _write_binary_ply(
+    path: Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    face_properties: dict[str, np.ndarray],
+    vertex_colors: np.ndarray | None = None,
+) -> None:
+    """A binary little-endian PLY: float xyz (+ uchar rgb), uchar/int face lists, int properties."""
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(vertices)}"]
+    header += [f"property float {axis}" for axis in "xyz"]
+    vertex_fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if vertex_colors is not None:
+        header += [f"property uchar {c}" for c in ("red", "green", "blue")]
+        vertex_fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    header += [f"element face {len(faces)}", "property list uchar int vertex_indices"]
+    header += [f"property int {name}" for name in face_properties]
+    header.append("end_header")
+    vertex_data = np.zeros(len(vertices), dtype=vertex_fields)
+    for k, axis in enumerate("xyz"):
+        vertex_data[axis] = vertices[:, k]
+    if vertex_colors is not None:
+        for k, channel in enumerate(("red", "green", "blue")):
+            vertex_data[channel] = vertex_colors[:, k]
+    face_fields = [("n", "u1"), ("v", "<i4", (3,))] + [(n, "<i4") for n in face_properties]
+    face_data = np.zeros(len(faces), dtype=face_fields)  # packed: 1 + 12 + 4 per property
+    face_data["n"] = 3
+    face_data["v"] = faces
+    for name, values in face_properties.items():
+        face_data[name] = values
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(vertex_data.tobytes())
+        f.write(face_data.tobytes())
+
+
+# --------------------------------------------------------------------------- Matterport3D
+@dataclass(frozen=True)
+class MatterportFixture:
+    """A small Matterport3D-shaped scene: ``<id>.glb``, ``<id>_semantic.ply``, ``<id>.house``.
+
+    ``mesh`` is what :func:`sonicspec.geometry.io.load_matterport` should return with all three
+    files: mpcat40 labels per face and house object ids in ``face_object``.
+    """
+
+    glb: Path
+    semantic_ply: Path
+    house: Path
+    mesh: SceneMesh
+
+
+# House objects of the fixture: (object index, raw category name or None, mpcat40 name)
+_OBJECTS = (
+    (0, "wall", "wall"),
+    (1, "floor", "floor"),
+    (2, "ceiling", "ceiling"),
+    (3, "dining table", "table"),
+    (4, "chair", "chair"),
+    (5, None, UNLABELED),  # annotated object without category
+)
+
+
+def write_matterport_scene(
+    directory: str | Path, scene_id: str = "mp3dFixture0"
+) -> MatterportFixture:
+    """Write a one-room Matterport3D-shaped scene in the formats Habitat serves.
+
+    The room (5 × 4 × 2.6 m) holds a table and a chair. Object ids follow the house file's
+    ``O`` lines; the chair's underside is object 5, which has no category, and the table's
+    underside has object id -1 (no object); both read back as ``"unlabeled"``. All files are
+    z up in metres, as MP3D's are (the glb too, against the glTF convention).
+
+    * ``<id>_semantic.ply``: binary little-endian, ``float x y z``, ``uchar red green blue``
+      per vertex, ``list uchar int vertex_indices`` and ``int object_id`` per face (the layout
+      habitat-sim writes).
+    * ``<id>.house``: ``ASCII 1.1`` with H, L, R, P, C, O and E lines.
+    * ``<id>.glb``: the same surface as the render mesh.
+    """
+    import trimesh
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    room = shoebox((5.0, 4.0, 2.6))
+    table = box_obstacle((2.0, 2.0, 0.375), (1.2, 0.8, 0.75), yaw_deg=10.0)
+    chair = box_obstacle((3.4, 2.6, 0.45), (0.5, 0.5, 0.9))
+    room_object = np.array([0, 1, 2], np.int32)[room.face_label]  # wall, floor, ceiling
+    downward = np.array([0.0, 0.0, -1.0])
+    table_object = np.where(table.face_normals @ downward > 0.99, -1, 3).astype(np.int32)
+    chair_object = np.where(chair.face_normals @ downward > 0.99, 5, 4).astype(np.int32)
+    geometry = SceneMesh.concatenate([room, table, chair])
+    face_object = np.concatenate([room_object, table_object, chair_object])
+
+    object_label = {index: name for index, _, name in _OBJECTS}
+    order = {c.name: c.index for c in mpcat40_table()}
+    present = {object_label.get(int(i), UNLABELED) for i in np.unique(face_object)}
+    labels = tuple(sorted(present, key=lambda name: order[name]))
+    face_label = np.array(
+        [labels.index(object_label.get(int(i), UNLABELED)) for i in face_object], np.int32
+    )
+    mesh = SceneMesh(
+        vertices=geometry.vertices,
+        faces=geometry.faces,
+        face_material=np.zeros(geometry.n_faces, np.int32),
+        materials=("default",),
+        face_label=face_label,
+        labels=labels,
+        face_object=face_object,
+    )
+
+    # Vertex colours as habitat's semantic meshes have them: the category's mpcat40 colour.
+    colors = {c.name: c.color_hex for c in mpcat40_table()}
+    rgb = np.zeros((mesh.vertices.shape[0], 3), np.uint8)
+    for face, label in zip(mesh.faces, face_label, strict=True):
+        hex_color = colors[labels[label]].lstrip("#")
+        rgb[face] = [int(hex_color[k : k + 2], 16) for k in (0, 2, 4)]
+    semantic_ply = directory / f"{scene_id}_semantic.ply"
+    _write_binary_ply(
+        semantic_ply, mesh.vertices, mesh.faces, {"object_id": face_object}, vertex_colors=rgb
+    )
+
+    glb = directory / f"{scene_id}.glb"
+    render = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgb, process=False)
+    glb.write_bytes(trimesh.Scene({"mesh_0": render}).export(file_type="glb"))
+
+    house = directory / f"{scene_id}.house"
+    house.write_text(_house_text(scene_id, mesh), encoding="ascii")
+    return MatterportFixture(glb=glb, semantic_ply=semantic_ply, house=house, mesh=mesh)
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{v:.6f}" for v in values)
+
+
+def _house_text(scene_id: str, mesh: SceneMesh) -> str:
+    lo, hi = mesh.bounds
+    center = (lo + hi) / 2
+    categories = [(raw, name) for _, raw, name in _OBJECTS if raw is not None]
+    mpcat40 = {c.name: c.index for c in mpcat40_table()}
+    n_objects, n_categories = len(_OBJECTS), len(categories)
+    lines = [
+        "ASCII 1.1",
+        # H name label #images #panoramas #vertices #surfaces #segments #objects #categories
+        #   #regions #portals #levels  0 0 0 0 0  xlo ylo zlo xhi yhi zhi  0 0 0 0 0
+        f"H {scene_id} fixture 0 1 4 1 {n_objects} {n_objects} {n_categories} 1 1 1  0 0 0 0 0  "
+        f"{_fmt(lo)}  {_fmt(hi)}  0 0 0 0 0",
+        # L level_index #regions label  px py pz  xlo ylo zlo xhi yhi zhi  0 0 0 0 0
+        f"L 0 1 -  {_fmt(center)}  {_fmt(lo)}  {_fmt(hi)}  0 0 0 0 0",
+        # R region_index level_index 0 0 label  px py pz  xlo ylo zlo xhi yhi zhi height 0 0 0 0
+        f"R 0 0 0 0 d  {_fmt(center)}  {_fmt(lo)}  {_fmt(hi)}  {hi[2] - lo[2]:.6f}  0 0 0 0",
+        # P portal_index region0_index region1_index label  xlo ylo zlo xhi yhi zhi  0 0 0 0
+        f"P 0 0 -1 door  {_fmt([0.0, 1.5, 0.0])}  {_fmt([0.0, 2.4, 2.1])}  0 0 0 0",
+    ]
+    for index, (raw, name) in enumerate(categories):
+        # C category_index category_mapping_index category_mapping_name mpcat40_index
+        #   mpcat40_name 0 0 0 0 0
+        raw_token = raw.replace(" ", "#")
+        lines.append(f"C {index} {index + 1} {raw_token} {mpcat40[name]} {name}  0 0 0 0 0")
+    category_of = {raw: k for k, (raw, _) in enumerate(categories)}
+    for index, raw, _ in _OBJECTS:
+        faces = mesh.face_object == index
+        points = mesh.vertices[mesh.faces[faces].ravel()]
+        o_lo, o_hi = points.min(axis=0), points.max(axis=0)
+        radius = np.maximum((o_hi - o_lo) / 2, 0.01)
+        category = -1 if raw is None else category_of[raw]
+        # O object_index region_index category_index px py pz  a0x a0y a0z  a1x a1y a1z
+        #   r0 r1 r2 0 0 0 0 0 0 0 0
+        lines.append(
+            f"O {index} 0 {category}  {_fmt((o_lo + o_hi) / 2)}  1 0 0  0 1 0  "
+            f"{_fmt(radius)}  0 0 0 0 0 0 0 0"
+        )
+    for index, _, _ in _OBJECTS:
+        faces = mesh.face_object == index
+        area = float(mesh.face_areas[faces].sum())
+        points = mesh.vertices[mesh.faces[faces].ravel()]
+        # E segment_index object_index id area px py pz xlo ylo zlo xhi yhi zhi 0 0 0 0 0
+        lines.append(
+            f"E {index} {index} {index + 1000} {area:.6f}  {_fmt(points.mean(axis=0))}  "
+            f"{_fmt(points.min(axis=0))}  {_fmt(points.max(axis=0))}  0 0 0 0 0"
+        )
+    return "\n".join(lines) + "\n"
