@@ -1,0 +1,183 @@
+"""The ``sonicspec`` command. Thin: parse arguments, call package functions, print, exit.
+
+Exit codes: 0 success (a valid spec), 2 an invalid spec or bad arguments, 1 any other failure.
+Tracebacks are shown only with ``SONICSPEC_DEBUG=1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from sonicspec import __version__
+
+EXIT_OK, EXIT_FAILURE, EXIT_INVALID = 0, 1, 2
+
+
+def _print_problems(problems: Sequence, source: str, stream=sys.stderr) -> None:
+    for p in problems:
+        print(p.format(source), file=stream)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from sonicspec.spec import validate_file
+
+    worst = EXIT_OK
+    report = []
+    for path in args.specs:
+        loaded, problems = validate_file(path, files=args.check_files)
+        errors = [p for p in problems if p.severity == "error"]
+        warnings = [p for p in problems if p.severity == "warning"]
+        if args.json:
+            report.append({
+                "spec": path,
+                "valid": loaded is not None,
+                "problems": [
+                    {"severity": p.severity, "path": list(p.path), "line": p.line,
+                     "column": p.column, "message": p.message, "text": p.format(path)}
+                    for p in problems
+                ],
+            })
+        else:
+            _print_problems(problems, path)
+            if loaded is None:
+                print(f"{path}: invalid ({len(errors)} error{'s' * (len(errors) != 1)})",
+                      file=sys.stderr)
+            elif not args.quiet:
+                from sonicspec.plan.summary import summarize
+
+                s = summarize(loaded.spec)
+                extra = f", {len(warnings)} warning{'s' * (len(warnings) != 1)}" if warnings else ""
+                print(f"{path}: valid ({len(loaded.spec.scenes)} scene entries, "
+                      f"{len(s.splits)} splits, {s.groups} groups{extra})")
+        if loaded is None:
+            worst = EXIT_INVALID
+    if args.json:
+        print(json.dumps(report, indent=2))
+    return worst
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from sonicspec.spec.schema import schema_text
+
+    text = schema_text()
+    if args.output:
+        _write_atomic(Path(args.output), text)
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return EXIT_OK
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    from sonicspec.spec.templates import render_template
+
+    out = Path(args.output) if args.output else None
+    text = render_template(args.preset, out)
+    if out is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    if out.exists() and not args.force:
+        print(f"sonicspec: error: {out} exists; pass --force to overwrite it", file=sys.stderr)
+        return EXIT_FAILURE
+    _write_atomic(out, text)
+    print(f"wrote {out} (preset {args.preset}); check it with: sonicspec validate {out}",
+          file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from sonicspec.plan.summary import format_summary, summarize
+    from sonicspec.spec import validate_file
+
+    loaded, problems = validate_file(args.spec)
+    _print_problems(problems, args.spec)
+    if loaded is None:
+        return EXIT_INVALID
+    summary = summarize(loaded.spec)
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2))
+    else:
+        print(format_summary(summary))
+    return EXIT_OK
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temp file and a rename: never a half-written file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sonicspec",
+        description="Realistic moving-source speech datasets from a versioned spec.",
+    )
+    parser.add_argument("--version", action="version", version=f"sonicspec {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    p = sub.add_parser("validate", help="check spec files; exit 0 if valid, 2 if not")
+    p.add_argument("specs", nargs="+", metavar="SPEC", help="spec files (YAML or JSON)")
+    p.add_argument("--check-files", action="store_true",
+                   help="also check that referenced meshes, SOFA files and corpus folders exist")
+    p.add_argument("--json", action="store_true", help="print the findings as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only problems")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("schema", help="print the JSON Schema of the spec language")
+    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
+    p.set_defaults(func=cmd_schema)
+
+    from sonicspec.spec.templates import PRESETS
+
+    p = sub.add_parser("init", help="write a commented starting spec that validates as written")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="demo",
+                   help="starting point (default: demo)")
+    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.set_defaults(func=cmd_init)
+
+    p = sub.add_parser("plan", help="show what a spec will build: splits, groups, hours, RIRs")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=cmd_plan)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("sonicspec: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # the last line of defence: a message, never a traceback
+        if os.environ.get("SONICSPEC_DEBUG"):
+            raise
+        from sonicspec.errors import SonicspecError, SpecError
+
+        if isinstance(exc, SpecError):
+            print(str(exc), file=sys.stderr)
+            return EXIT_INVALID
+        kind = "error" if isinstance(exc, SonicspecError) else f"internal error ({type(exc).__name__})"
+        print(f"sonicspec: {kind}: {exc}", file=sys.stderr)
+        if not isinstance(exc, SonicspecError):
+            print("run again with SONICSPEC_DEBUG=1 for the traceback, and please report it",
+                  file=sys.stderr)
+        return EXIT_FAILURE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

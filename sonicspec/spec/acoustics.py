@@ -1,0 +1,59 @@
+"""Acoustic simulation settings for the Embree tracer."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from sonicspec.spec.base import SpecModel
+
+OctaveBand = Literal[125, 250, 500, 1000, 2000, 4000, 8000]
+
+
+class AcousticsSpec(SpecModel):
+    """Tracer settings: image sources for the early part, stochastic rays for the late part."""
+
+    rays: int = Field(
+        20_000, ge=100, le=10_000_000, description="Rays traced per source for the late part."
+    )
+    image_source_order: int = Field(
+        3, ge=0, le=8, description="Highest reflection order found exactly by image sources."
+    )
+    max_rir_length_s: float = Field(
+        2.0, gt=0, le=20.0,
+        description="Longest RIR kept, seconds; tracing stops earlier once the energy is below "
+        "the threshold.",
+    )
+    energy_threshold_db: float = Field(
+        80.0, gt=0, le=200.0,
+        description="Decay below the direct sound at which a ray is terminated, dB.",
+    )
+    bands_hz: list[OctaveBand] | Literal["auto"] = Field(
+        "auto",
+        description="Octave bands simulated; 'auto' is every band from 125 Hz whose upper edge "
+        "lies below Nyquist.",
+    )
+    air_absorption: bool = Field(True, description="Apply ISO 9613-1 air absorption.")
+    temperature_c: float = Field(20.0, ge=-20, le=50, description="Air temperature, °C.")
+    relative_humidity_pct: float = Field(
+        50.0, ge=0, le=100, description="Relative humidity of the air, percent."
+    )
+    transmission: bool = Field(
+        True, description="Let sound pass through surfaces by their transmission coefficient."
+    )
+    diffraction: bool = Field(
+        False, description="Add edge-diffracted sound around occluders (not yet supported: "
+        "must be false)."
+    )
+    detection: Literal["diffuse_rain", "receiver_volume"] = Field(
+        "diffuse_rain",
+        description="How rays reach the receiver: a shadow ray from every hit (low variance) "
+        "or by crossing a sphere.",
+    )
+    receiver_radius_m: float = Field(
+        0.1, gt=0, le=2.0, description="Radius of the detection sphere around a receiver, metres."
+    )
+    histogram_bin_s: float = Field(
+        0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
+    )

@@ -1,0 +1,479 @@
+"""Semantic checks: the rules JSON Schema cannot express, all reported at once.
+
+They run on a structurally valid :class:`~sonicspec.spec.dataset.DatasetSpec` and return
+:class:`~sonicspec.spec.load.Problem` objects (errors and warnings) with document paths; the
+loader attaches line numbers. ``check_files`` adds the checks that need the file system.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import glob
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+from sonicspec.spec.dataset import DatasetSpec
+from sonicspec.spec.load import Problem, did_you_mean
+from sonicspec.spec.microphone import channel_count
+from sonicspec.spec.scene import (
+    BoxObstacleSpec,
+    CylinderObstacleSpec,
+    MeshObstacleSpec,
+    MeshSceneSpec,
+    PolygonSceneSpec,
+)
+from sonicspec.spec.corpora import (
+    FmaCorpusSpec,
+    FolderCorpusSpec,
+    Fsd50kCorpusSpec,
+    GeneratedSpeechSpec,
+    LibriSpeechCorpusSpec,
+)
+from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec
+from sonicspec.spec.trajectory import (
+    LineTrajectorySpec,
+    StaticTrajectorySpec,
+    WaypointsTrajectorySpec,
+)
+from sonicspec.units import bands_below_nyquist
+
+Point2 = tuple[float, float]
+
+MIN_RAYS_WITHOUT_WARNING = 2000
+
+
+def _err(path: tuple, message: str) -> Problem:
+    return Problem(tuple(path), message)
+
+
+def _warn(path: tuple, message: str) -> Problem:
+    return Problem(tuple(path), message, severity="warning")
+
+
+# --- small plane geometry (pure Python: the spec must not need numpy to validate) ----------
+
+def _cross(o: Point2, a: Point2, b: Point2) -> float:
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+def _segments_cross(p1: Point2, p2: Point2, q1: Point2, q2: Point2) -> bool:
+    """True if the closed segments p1p2 and q1q2 intersect."""
+    d1, d2 = _cross(q1, q2, p1), _cross(q1, q2, p2)
+    d3, d4 = _cross(p1, p2, q1), _cross(p1, p2, q2)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and d1 * d2 < 0 and d3 * d4 < 0:
+        return True
+
+    def on_seg(a: Point2, b: Point2, c: Point2) -> bool:
+        return (min(a[0], b[0]) - 1e-12 <= c[0] <= max(a[0], b[0]) + 1e-12
+                and min(a[1], b[1]) - 1e-12 <= c[1] <= max(a[1], b[1]) + 1e-12)
+
+    return ((abs(d1) < 1e-12 and on_seg(q1, q2, p1)) or (abs(d2) < 1e-12 and on_seg(q1, q2, p2))
+            or (abs(d3) < 1e-12 and on_seg(p1, p2, q1))
+            or (abs(d4) < 1e-12 and on_seg(p1, p2, q2)))
+
+
+def polygon_area(poly: list[Point2]) -> float:
+    """Signed area (positive for counter-clockwise)."""
+    n = len(poly)
+    return 0.5 * sum(poly[i][0] * poly[(i + 1) % n][1] - poly[(i + 1) % n][0] * poly[i][1]
+                     for i in range(n))
+
+
+def polygon_self_intersection(poly: list[Point2]) -> tuple[int, int] | None:
+    """Indices of two non-adjacent edges that cross, or None for a simple polygon."""
+    n = len(poly)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if j == i + 1 or (i == 0 and j == n - 1):
+                continue
+            if _segments_cross(poly[i], poly[(i + 1) % n], poly[j], poly[(j + 1) % n]):
+                return i, j
+    return None
+
+
+def point_in_polygon(p: Point2, poly: list[Point2]) -> bool:
+    inside = False
+    n = len(poly)
+    for i in range(n):
+        a, b = poly[i], poly[(i + 1) % n]
+        if (a[1] > p[1]) != (b[1] > p[1]):
+            x = a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+            if p[0] < x:
+                inside = not inside
+    return inside
+
+
+def distance_to_boundary(p: Point2, poly: list[Point2]) -> float:
+    best = math.inf
+    n = len(poly)
+    for i in range(n):
+        a, b = poly[i], poly[(i + 1) % n]
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        length2 = dx * dx + dy * dy
+        t = 0.0 if length2 == 0 else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy)
+                                                  / length2))
+        best = min(best, math.hypot(p[0] - a[0] - t * dx, p[1] - a[1] - t * dy))
+    return best
+
+
+def _inside_room(p: tuple[float, ...], poly: list[Point2], height: float) -> bool:
+    return point_in_polygon((p[0], p[1]), poly) and 0.0 <= p[2] <= height
+
+
+def _box_corners(ob: BoxObstacleSpec) -> list[tuple[float, float, float]]:
+    cx, cy, cz = ob.center_m
+    hx, hy, hz = (s / 2 for s in ob.size_m)
+    c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
+    return [(cx + c * dx - s * dy, cy + s * dx + c * dy, cz + dz)
+            for dx in (-hx, hx) for dy in (-hy, hy) for dz in (-hz, hz)]
+
+
+# --- the checks --------------------------------------------------------------------------
+
+def check_spec(spec: DatasetSpec) -> list[Problem]:
+    """Every semantic error and warning in ``spec``."""
+    problems: list[Problem] = []
+    for check in (_check_scenes, _check_materials, _check_positions, _check_splits,
+                  _check_corpora, _check_mixture, _check_acoustics, _check_outputs,
+                  _check_trajectory, _check_heights_and_distances):
+        problems.extend(check(spec))
+    return problems
+
+
+def _check_scenes(spec: DatasetSpec) -> Iterator[Problem]:
+    first: dict[str, int] = {}
+    for i, scene in enumerate(spec.scenes):
+        if scene.id in first:
+            yield _err(("scenes", i, "id"),
+                       f"scene id {scene.id!r} is already used by scenes[{first[scene.id]}]; "
+                       "ids must be unique")
+        else:
+            first[scene.id] = i
+        if scene.kind == "l_shape":
+            x, y, _ = scene.size_m
+            cx, cy = scene.cutout_m
+            if cx >= x or cy >= y:
+                yield _err(("scenes", i, "cutout_m"),
+                           f"the cutout must be smaller than the room's floor ({x:g} x {y:g} m), "
+                           f"got [{cx:g}, {cy:g}]")
+        if isinstance(scene, PolygonSceneSpec):
+            poly = scene.floor_polygon()
+            crossing = polygon_self_intersection(poly)
+            if crossing is not None:
+                a, b = crossing
+                yield _err(("scenes", i, "floor_m"),
+                           f"the floor polygon crosses itself (edge {a}-{a + 1} meets edge "
+                           f"{b}-{(b + 1) % len(poly)}); list the corners in walking order")
+            elif abs(polygon_area(poly)) < 1e-6:
+                yield _err(("scenes", i, "floor_m"), "the floor polygon has no area")
+        if not isinstance(scene, MeshSceneSpec):
+            poly, height = scene.floor_polygon(), scene.height()
+            for j, ob in enumerate(scene.obstacles):
+                where = ("scenes", i, "obstacles", j)
+                if isinstance(ob, BoxObstacleSpec):
+                    if not all(_inside_room(c, poly, height + 1e-9) for c in _box_corners(ob)):
+                        yield _err((*where, "center_m"),
+                                   f"the box does not fit inside scene {scene.id!r}")
+                elif isinstance(ob, CylinderObstacleSpec):
+                    c = ob.center_xy_m
+                    if (not point_in_polygon(c, poly)
+                            or distance_to_boundary(c, poly) < ob.radius_m - 1e-9
+                            or ob.base_z_m < 0 or ob.base_z_m + ob.height_m > height + 1e-9):
+                        yield _err((*where, "center_xy_m"),
+                                   f"the cylinder does not fit inside scene {scene.id!r}")
+                elif isinstance(ob, MeshObstacleSpec) and not _inside_room(ob.position_m, poly,
+                                                                         height):
+                    yield _err((*where, "position_m"),
+                               f"position {list(ob.position_m)} is outside scene {scene.id!r}")
+
+
+def _material_refs(spec: DatasetSpec) -> Iterator[tuple[tuple, str]]:
+    for i, scene in enumerate(spec.scenes):
+        if isinstance(scene, MeshSceneSpec):
+            for label, name in scene.label_materials.items():
+                yield ("scenes", i, "label_materials", label), name
+            if scene.default_material is not None:
+                yield ("scenes", i, "default_material"), scene.default_material
+        else:
+            for part in ("walls", "floor", "ceiling"):
+                yield ("scenes", i, "materials", part), getattr(scene.materials, part)
+        for j, ob in enumerate(scene.obstacles):
+            yield ("scenes", i, "obstacles", j, "material"), ob.material
+    for label, name in spec.materials.label_materials.items():
+        yield ("materials", "label_materials", label), name
+
+
+def _check_materials(spec: DatasetSpec) -> Iterator[Problem]:
+    from sonicspec.geometry.materials import material_names
+
+    known = set(material_names(spec.materials.library)) | set(spec.materials.custom)
+    for path, name in _material_refs(spec):
+        if name not in known:
+            yield _err(path, f"unknown material {name!r} in library "
+                             f"{spec.materials.library!r}" + did_you_mean(name, sorted(known))
+                       + (" (or define it under materials.custom)"
+                          if not did_you_mean(name, sorted(known)) else ""))
+
+
+def _procedural(spec: DatasetSpec) -> list[tuple[int, object]]:
+    return [(i, s) for i, s in enumerate(spec.scenes) if not isinstance(s, MeshSceneSpec)]
+
+
+def _check_positions(spec: DatasetSpec) -> Iterator[Problem]:
+    points: list[tuple[tuple, tuple[float, float, float]]] = []
+    if spec.placement.mic_position_m is not None:
+        points.append((("placement", "mic_position_m"), spec.placement.mic_position_m))
+    for prefix, traj in (("trajectory",), spec.trajectory), (("microphone", "trajectory"),
+                                                            spec.microphone.trajectory):
+        if isinstance(traj, LineTrajectorySpec):
+            for end in ("start_m", "end_m"):
+                if getattr(traj, end) is not None:
+                    points.append(((*prefix, end), getattr(traj, end)))
+        elif isinstance(traj, WaypointsTrajectorySpec):
+            points.extend(((*prefix, "points_m", k), p) for k, p in enumerate(traj.points_m))
+    for path, p in points:
+        for _, scene in _procedural(spec):
+            if not _inside_room(p, scene.floor_polygon(), scene.height()):
+                yield _err(path, f"position {list(p)} is outside scene {scene.id!r}")
+                break
+
+
+def scene_matches(pattern: str, spec: DatasetSpec) -> list[str]:
+    """Scene ids (or mesh-glob id prefixes) that a split's pattern selects, statically."""
+    out = []
+    for scene in spec.scenes:
+        if isinstance(scene, MeshSceneSpec) and glob.has_magic(scene.path):
+            # The files are unknown until compile time; a pattern selects this scene family
+            # if it names the family or could match one of its members.
+            if pattern == scene.id or fnmatch.fnmatchcase(scene.id + "/x", pattern) or \
+                    pattern.startswith(scene.id + "/"):
+                out.append(scene.id + "/*")
+        elif fnmatch.fnmatchcase(scene.id, pattern):
+            out.append(scene.id)
+    return out
+
+
+def _check_splits(spec: DatasetSpec) -> Iterator[Problem]:
+    owner: dict[str, str] = {}
+    for name, split in spec.splits.items():
+        matched: list[str] = []
+        for k, pattern in enumerate(split.scenes):
+            hits = scene_matches(pattern, spec)
+            if not hits:
+                ids = [s.id for s in spec.scenes]
+                yield _err(("splits", name, "scenes", k),
+                           f"{pattern!r} matches no scene id" + did_you_mean(pattern, ids))
+            matched.extend(hits)
+        matched = sorted(set(matched))
+        concrete = [m for m in matched if not m.endswith("/*")]
+        if split.scene_count is not None and len(concrete) == len(matched) \
+                and split.scene_count > len(concrete):
+            yield _err(("splits", name, "scene_count"),
+                       f"asks for {split.scene_count} scenes but its patterns match only "
+                       f"{len(concrete)}")
+        for sid in matched:
+            if sid in owner and owner[sid] != name:
+                other = spec.splits[owner[sid]]
+                if split.scene_count is None or other.scene_count is None:
+                    yield _err(("splits", name, "scenes"),
+                               f"splits {owner[sid]!r} and {name!r} share scene {sid!r}; splits "
+                               "must use disjoint scenes (or give both a scene_count to "
+                               "partition a shared pool)")
+            else:
+                owner.setdefault(sid, name)
+
+
+def _corpus_split_problems(path: tuple, corpus: object, splits: list[str]) -> Iterator[Problem]:
+    if isinstance(corpus, LibriSpeechCorpusSpec):
+        for s in splits:
+            if s not in corpus.subsets:
+                yield _err((*path, "subsets"), f"no subset feeds split {s!r}"
+                           + did_you_mean(s, list(corpus.subsets)))
+        used: dict[str, str] = {}
+        for s, subsets in corpus.subsets.items():
+            if not subsets:
+                yield _err((*path, "subsets", s), "lists no subset")
+            for sub in subsets:
+                if sub in used and used[sub] != s:
+                    yield _err((*path, "subsets", s),
+                               f"subset {sub!r} also feeds split {used[sub]!r}; speakers would "
+                               "cross splits")
+                used.setdefault(sub, s)
+    elif isinstance(corpus, (FolderCorpusSpec, Fsd50kCorpusSpec, FmaCorpusSpec)):
+        ratios = corpus.split_ratios
+        for s in splits:
+            if s not in ratios:
+                yield _err((*path, "split_ratios"), f"no share given for split {s!r}"
+                           + did_you_mean(s, list(ratios)))
+        for s, r in ratios.items():
+            if not 0 < r <= 1:
+                yield _err((*path, "split_ratios", s), f"shares must lie in (0, 1], got {r:g}")
+        total = sum(ratios.values())
+        if abs(total - 1.0) > 1e-6:
+            yield _err((*path, "split_ratios"), f"shares must sum to 1, got {total:g}")
+
+
+def _check_corpora(spec: DatasetSpec) -> Iterator[Problem]:
+    splits = list(spec.splits)
+    c = spec.corpora
+    yield from _corpus_split_problems(("corpora", "speech"), c.speech, splits)
+    for kind in ("noise", "music"):
+        corpus = getattr(c, kind)
+        if corpus is not None:
+            yield from _corpus_split_problems(("corpora", kind), corpus, splits)
+    if isinstance(c.speech, GeneratedSpeechSpec) and \
+            c.speech.speakers_per_split < spec.mixture.speakers:
+        yield _err(("corpora", "speech", "speakers_per_split"),
+                   f"each group needs {spec.mixture.speakers} different speakers but a split has "
+                   f"only {c.speech.speakers_per_split}")
+
+
+def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
+    m = spec.mixture
+    for k, task in enumerate(m.tasks):
+        path = ("mixture", "tasks", k)
+        if isinstance(task, SeparationTaskSpec) and task.speakers > m.speakers:
+            yield _err((*path, "speakers"),
+                       f"needs {task.speakers} speakers but a group has mixture.speakers = "
+                       f"{m.speakers}")
+        if isinstance(task, EnhancementTaskSpec | SeparationTaskSpec):
+            needs = {"noise": ["noise"], "music": ["music"], "both": ["noise", "music"],
+                     "none": []}[task.background]
+            for kind in needs:
+                if getattr(spec.corpora, kind) is None:
+                    yield _err((*path, "background"),
+                               f"{task.background!r} needs a {kind} corpus: add corpora.{kind}")
+                elif getattr(m, f"{kind}_clips")[1] == 0:
+                    yield _err((*path, "background"),
+                               f"{task.background!r} needs {kind} but mixture.{kind}_clips is 0")
+    shortest_speech = m.utterances_per_speaker[0] * m.utterance_gap_s[0]
+    if shortest_speech >= m.duration_s:
+        yield _err(("mixture", "utterance_gap_s"),
+                   f"{m.utterances_per_speaker[0]} utterances with at least "
+                   f"{m.utterance_gap_s[0]:g} s of silence each cannot fit in "
+                   f"{m.duration_s:g} s")
+    if m.interpolation != "sample_crossfade" and isinstance(spec.trajectory, StaticTrajectorySpec):
+        yield _warn(("mixture", "interpolation"),
+                    f"{m.interpolation!r} has no effect: sources are static")
+
+
+def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
+    a = spec.acoustics
+    if a.bands_hz != "auto":
+        allowed = bands_below_nyquist(spec.sample_rate_hz)
+        for k, band in enumerate(a.bands_hz):
+            if float(band) not in allowed:
+                yield _err(("acoustics", "bands_hz", k),
+                           f"the {band} Hz band reaches above Nyquist "
+                           f"({spec.sample_rate_hz / 2:g} Hz at sample_rate_hz = "
+                           f"{spec.sample_rate_hz}); remove it or raise the sample rate")
+        if len(set(a.bands_hz)) != len(a.bands_hz):
+            yield _err(("acoustics", "bands_hz"), "bands are listed more than once")
+    if a.diffraction:
+        yield _err(("acoustics", "diffraction"),
+                   "edge diffraction is not supported by this version's tracer; set it to false")
+    if a.rays < MIN_RAYS_WITHOUT_WARNING:
+        yield _warn(("acoustics", "rays"),
+                    f"{a.rays} rays leave audible Monte-Carlo noise in the late reverberation; "
+                    f"use at least {MIN_RAYS_WITHOUT_WARNING}")
+
+
+def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
+    o = spec.outputs
+    if o.audio_format == "flac" and o.subtype == "FLOAT":
+        yield _err(("outputs", "subtype"),
+                   "FLAC cannot store FLOAT samples; use PCM_16 or PCM_24, or audio_format: wav")
+    if Path(o.dir) == Path(o.store_dir):
+        yield _err(("outputs", "store_dir"), "must differ from outputs.dir")
+    if channel_count(spec.microphone) > 8 and o.audio_format == "flac":
+        yield _err(("outputs", "audio_format"),
+                   f"FLAC holds at most 8 channels and the microphone renders "
+                   f"{channel_count(spec.microphone)}; use audio_format: wav")
+
+
+def _check_trajectory(spec: DatasetSpec) -> Iterator[Problem]:
+    for prefix, traj in ((("trajectory",), spec.trajectory),
+                         (("microphone", "trajectory"), spec.microphone.trajectory)):
+        if isinstance(traj, WaypointsTrajectorySpec):
+            for k in range(1, len(traj.points_m)):
+                if math.dist(traj.points_m[k - 1], traj.points_m[k]) < 1e-6:
+                    yield _err((*prefix, "points_m", k),
+                               f"repeats waypoint {k - 1}; consecutive points must differ")
+        if isinstance(traj, LineTrajectorySpec) and traj.start_m is not None \
+                and traj.end_m is not None and math.dist(traj.start_m, traj.end_m) < 1e-6:
+            yield _err((*prefix, "end_m"), "equals start_m; a line needs two distinct points")
+
+
+def _check_heights_and_distances(spec: DatasetSpec) -> Iterator[Problem]:
+    p = spec.placement
+    for _, scene in _procedural(spec):
+        h = scene.height()
+        poly = scene.floor_polygon()
+        if spec.microphone.height_m >= h:
+            yield _err(("microphone", "height_m"),
+                       f"{spec.microphone.height_m:g} m is not below the ceiling of scene "
+                       f"{scene.id!r} ({h:g} m)")
+        for name in ("source_height_m", "noise_height_m"):
+            if getattr(p, name)[1] >= h:
+                yield _err(("placement", name),
+                           f"up to {getattr(p, name)[1]:g} m is not below the ceiling of scene "
+                           f"{scene.id!r} ({h:g} m)")
+        xs, ys = [q[0] for q in poly], [q[1] for q in poly]
+        reach = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
+        reach = math.hypot(reach, h)
+        for name in ("source_start_distance_m", "source_end_distance_m",
+                     "source_travel_distance_m", "noise_distance_m", "music_distance_m"):
+            low = getattr(p, name)[0]
+            if low > reach:
+                yield _err(("placement", name),
+                           f"at least {low:g} m cannot fit in scene {scene.id!r}, whose largest "
+                           f"distance is {reach:.2f} m")
+
+
+def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
+    """Problems with files and folders the spec refers to, resolved against ``base_dir``."""
+    problems: list[Problem] = []
+
+    def exists(path: tuple, rel: str, what: str, folder: bool = False) -> bool:
+        full = base_dir / rel
+        ok = full.is_dir() if folder else full.exists()
+        if not ok:
+            problems.append(_err(path, f"{what} {str(full)!r} does not exist"))
+        return ok
+
+    for i, scene in enumerate(spec.scenes):
+        if isinstance(scene, MeshSceneSpec):
+            if glob.has_magic(scene.path):
+                if not glob.glob(str(base_dir / scene.path)):
+                    problems.append(_err(("scenes", i, "path"),
+                                         f"glob {scene.path!r} matches no file under "
+                                         f"{str(base_dir)!r}"))
+            else:
+                exists(("scenes", i, "path"), scene.path, "mesh file")
+        for j, ob in enumerate(scene.obstacles):
+            if isinstance(ob, MeshObstacleSpec):
+                exists(("scenes", i, "obstacles", j, "path"), ob.path, "mesh file")
+    hrtf = getattr(spec.microphone, "hrtf", None)
+    if hrtf is not None and hrtf.kind == "sofa":
+        exists(("microphone", "hrtf", "path"), hrtf.path, "SOFA file")
+    for kind in ("speech", "noise", "music"):
+        corpus = getattr(spec.corpora, kind)
+        path = ("corpora", kind)
+        if corpus is None or not hasattr(corpus, "root"):
+            continue
+        if not exists((*path, "root"), corpus.root, "corpus folder", folder=True):
+            continue
+        root = corpus.root
+        if isinstance(corpus, LibriSpeechCorpusSpec):
+            for split, subsets in corpus.subsets.items():
+                for sub in subsets:
+                    exists((*path, "subsets", split), f"{root}/{sub}", "LibriSpeech subset",
+                           folder=True)
+        elif isinstance(corpus, Fsd50kCorpusSpec):
+            for part in ("FSD50K.dev_audio", "FSD50K.eval_audio", "FSD50K.ground_truth"):
+                exists((*path, "root"), f"{root}/{part}", "FSD50K folder", folder=True)
+        elif isinstance(corpus, FmaCorpusSpec):
+            exists((*path, "size"), f"{root}/fma_{corpus.size}", "FMA audio folder", folder=True)
+            exists((*path, "root"), f"{root}/fma_metadata/tracks.csv", "FMA metadata file")
+    return problems

@@ -1,0 +1,53 @@
+"""The root of a spec file: one dataset."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.base import Identifier, SpecModel, SplitName
+from sonicspec.spec.corpora import CorporaSpec
+from sonicspec.spec.materials import MaterialsSpec
+from sonicspec.spec.microphone import MicrophoneSpec, MonoMicSpec
+from sonicspec.spec.mixture import MixtureSpec
+from sonicspec.spec.outputs import OutputsSpec
+from sonicspec.spec.placement import PlacementSpec
+from sonicspec.spec.scene import SceneSpec
+from sonicspec.spec.splits import SplitSpec
+from sonicspec.spec.trajectory import ShortestPathTrajectorySpec, TrajectorySpec
+
+SPEC_VERSION = 1
+
+
+class DatasetSpec(SpecModel):
+    """A whole dataset: scenes, acoustics, corpora, mixing recipe, splits and outputs."""
+
+    sonicspec: Literal[1] = Field(description="Spec language version; this release reads 1.")
+    name: Identifier = Field(description="Dataset name; used for folder names and manifests.")
+    description: str = Field("", description="Free text shown in dataset.json.")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Root of every random draw.")
+    sample_rate_hz: int = Field(16000, ge=8000, le=192000, description="Output sample rate, Hz.")
+    speed_of_sound_m_s: float = Field(343.0, ge=300, le=400, description="Speed of sound, m/s.")
+    scenes: list[SceneSpec] = Field(min_length=1, description="Rooms and buildings to simulate.")
+    materials: MaterialsSpec = Field(
+        default_factory=MaterialsSpec, description="Material library and user materials."
+    )
+    microphone: MicrophoneSpec = Field(
+        default_factory=lambda: MonoMicSpec(kind="mono"), description="The receiver."
+    )
+    placement: PlacementSpec = Field(
+        default_factory=PlacementSpec, description="Placement rules for mic and sources."
+    )
+    trajectory: TrajectorySpec = Field(
+        default_factory=lambda: ShortestPathTrajectorySpec(kind="shortest_path"),
+        description="How speech sources move (noise and music are always static).",
+    )
+    acoustics: AcousticsSpec = Field(default_factory=AcousticsSpec, description="Tracer settings.")
+    corpora: CorporaSpec = Field(description="Speech, noise and music corpora.")
+    mixture: MixtureSpec = Field(default_factory=MixtureSpec, description="Mixing recipe.")
+    splits: dict[SplitName, SplitSpec] = Field(
+        min_length=1, description="Splits by name (e.g. train, val, test)."
+    )
+    outputs: OutputsSpec = Field(default_factory=OutputsSpec, description="Output locations and formats.")

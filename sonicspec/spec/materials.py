@@ -1,0 +1,42 @@
+"""Materials: a built-in library plus user-defined materials."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from sonicspec.spec.base import BandCoefficients, SpecModel
+
+
+class CustomMaterialSpec(SpecModel):
+    """A material defined in the spec, per octave band 125 Hz–8 kHz (one value: all bands)."""
+
+    absorption: BandCoefficients = Field(
+        description="Energy absorption coefficient per band, 0–1 (random incidence)."
+    )
+    scattering: BandCoefficients = Field(
+        0.1, description="Scattering coefficient per band (ISO 17497-1), 0–1."
+    )
+    transmission: BandCoefficients = Field(
+        0.0, description="Energy transmission coefficient per band, 0–1 (1: acoustically open)."
+    )
+    description: str = Field("", description="Free text: what the material is, its source.")
+
+
+class MaterialsSpec(SpecModel):
+    """Which material library names resolve against, and materials the spec adds."""
+
+    library: Literal["sonicspec", "sonicset"] = Field(
+        "sonicspec",
+        description="Built-in library: 'sonicspec' (7 octave bands, literature values) or "
+        "'sonicset' (SonicSet's Matterport3D table and label rule, reproduced exactly).",
+    )
+    custom: dict[str, CustomMaterialSpec] = Field(
+        default_factory=dict,
+        description="User-defined materials by name; a name equal to a library material replaces it.",
+    )
+    label_materials: dict[str, str] = Field(
+        default_factory=dict,
+        description="Semantic label -> material name for every mesh scene (a scene's own map wins).",
+    )

@@ -1,0 +1,96 @@
+"""Mixing recipe: what a group contains, how loud each part is, which mixtures to export."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field
+
+from sonicspec.spec.base import SpecModel, value_range
+
+Background = Literal["noise", "music", "both", "none"]
+
+
+class LoudnessSpec(SpecModel):
+    """Target loudness of each component (ITU-R BS.1770), before mixing."""
+
+    speech_lufs: float = Field(-17.0, ge=-70, le=0, description="Each speech track, LUFS.")
+    noise_lufs: float = Field(-21.0, ge=-70, le=0, description="The noise track, LUFS.")
+    music_lufs: float = Field(-24.0, ge=-70, le=0, description="The music track, LUFS.")
+    jitter_lu: float = Field(
+        0.0, ge=0, le=20,
+        description="Each target is drawn uniformly in target ± jitter, LU (SonicSet's "
+        "released scripts: 2).",
+    )
+    stage: Literal["reverberant", "dry"] = Field(
+        "reverberant",
+        description="Which signal is normalised: the reverberant track at the microphone (the "
+        "level heard) or the dry source before rendering (the gain then carries over).",
+    )
+    peak_limit_dbfs: float = Field(
+        -1.0, le=0,
+        description="If any mixture peak exceeds this, the whole group is scaled down and the "
+        "gain recorded, dBFS.",
+    )
+
+
+class SeparationTaskSpec(SpecModel):
+    """Mixtures of several speakers (plus optional background) with each speaker as target."""
+
+    kind: Literal["separation"] = Field(description="Task type.")
+    speakers: int = Field(2, ge=2, le=10, description="Speakers in each mixture.")
+    background: Background = Field("noise", description="Background added to each mixture.")
+
+
+class EnhancementTaskSpec(SpecModel):
+    """Mixtures of one speaker and background with the clean speaker as target."""
+
+    kind: Literal["enhancement"] = Field(description="Task type.")
+    background: Literal["noise", "music", "both"] = Field(
+        "noise", description="Background added to the speaker."
+    )
+
+
+TaskSpec = Annotated[SeparationTaskSpec | EnhancementTaskSpec, Field(discriminator="kind")]
+
+
+class MixtureSpec(SpecModel):
+    """One group: a clip of ``duration_s`` in one scene (the SonicSet recipe by default)."""
+
+    duration_s: float = Field(60.0, gt=0, le=3600, description="Length of a group's clip, seconds.")
+    speakers: int = Field(3, ge=1, le=10, description="Speech tracks (one speaker each) per group.")
+    utterances_per_speaker: value_range(ge=1, integer=True) = Field(  # type: ignore[valid-type]
+        (3, 5), description="Whole utterances of the speaker in each speech track."
+    )
+    utterance_gap_s: value_range(ge=0) = Field(  # type: ignore[valid-type]
+        (0.0, 8.0), description="Silence drawn before each utterance, seconds."
+    )
+    noise_clips: value_range(ge=0, integer=True) = Field(  # type: ignore[valid-type]
+        (6, 8), description="Noise clips in the noise track (0: no noise track)."
+    )
+    noise_gap_s: value_range(ge=0) = Field(  # type: ignore[valid-type]
+        (0.0, 4.0), description="Silence drawn before each noise clip, seconds."
+    )
+    music_clips: value_range(ge=0, integer=True) = Field(  # type: ignore[valid-type]
+        (6, 8), description="Music clips in the music track (0: no music track)."
+    )
+    music_gap_s: value_range(ge=0) = Field(  # type: ignore[valid-type]
+        (0.0, 4.0), description="Silence drawn before each music clip, seconds."
+    )
+    loudness: LoudnessSpec = Field(default_factory=LoudnessSpec, description="Target levels.")
+    interpolation: Literal["sample_crossfade", "stft_crossfade", "segment_ola"] = Field(
+        "sample_crossfade",
+        description="How a moving source blends the RIRs along its path: per-sample crossfade of "
+        "neighbouring convolutions (SonicSet), STFT-domain interpolation (DCASE/SpatialScaper), "
+        "or one RIR per segment with overlap-added tails (gpuRIR).",
+    )
+    targets: list[Literal["dry", "direct", "early"]] = Field(
+        default_factory=list,
+        description="Extra training targets exported per source besides the reverberant track.",
+    )
+    tasks: list[TaskSpec] = Field(
+        default_factory=lambda: [
+            SeparationTaskSpec(kind="separation"), EnhancementTaskSpec(kind="enhancement")
+        ],
+        description="Mixtures exported for each group.",
+    )

@@ -1,0 +1,58 @@
+"""Trajectories: how sources (and optionally the microphone) move during a clip."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field
+
+from sonicspec.spec.base import SpecModel, vector
+
+Vec3 = vector(3)
+
+
+class StaticTrajectorySpec(SpecModel):
+    """The source stays at its start position (one RIR)."""
+
+    kind: Literal["static"] = Field(description="Trajectory type.")
+
+
+class _MovingBase(SpecModel):
+    rir_spacing_m: float = Field(
+        0.25, gt=0, le=5.0,
+        description="Distance between RIR points along the path, metres; dense points keep "
+        "neighbouring RIRs alike so the crossfade does not comb-filter.",
+    )
+    speed_m_s: float | None = Field(
+        None, gt=0, le=10.0,
+        description="Walking speed, m/s; null sets it so the path spans the source's active time.",
+    )
+
+
+class LineTrajectorySpec(_MovingBase):
+    """A straight line from the start to the end point (placement draws them unless given)."""
+
+    kind: Literal["line"] = Field(description="Trajectory type.")
+    start_m: Vec3 | None = Field(None, description="Fixed start point, metres (null: sampled).")
+    end_m: Vec3 | None = Field(None, description="Fixed end point, metres (null: sampled).")
+
+
+class WaypointsTrajectorySpec(_MovingBase):
+    """A polyline through fixed points."""
+
+    kind: Literal["waypoints"] = Field(description="Trajectory type.")
+    points_m: list[Vec3] = Field(min_length=2, description="Waypoints [x, y, z] in order, metres.")
+
+
+class ShortestPathTrajectorySpec(_MovingBase):
+    """The shortest walkable path between a sampled start and end point (the SonicSet recipe)."""
+
+    kind: Literal["shortest_path"] = Field(description="Trajectory type.")
+    smooth: bool = Field(True, description="Shorten the grid path by line-of-sight smoothing.")
+
+
+TrajectorySpec = Annotated[
+    StaticTrajectorySpec | LineTrajectorySpec | WaypointsTrajectorySpec | ShortestPathTrajectorySpec,
+    Field(discriminator="kind"),
+]
+MicrophoneTrajectorySpec = TrajectorySpec

@@ -1,0 +1,94 @@
+"""Load a spec file end to end: parse, check the version, validate, run the semantic checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from sonicspec.errors import SpecError
+from sonicspec.spec.checks import check_files, check_spec
+from sonicspec.spec.dataset import SPEC_VERSION, DatasetSpec
+from sonicspec.spec.load import (
+    LoadedSpec,
+    Problem,
+    SourceMap,
+    parse_text,
+    problems_from_validation,
+    sort_problems,
+)
+from sonicspec.spec.versions import migrate, version_problem
+
+
+def _locate(problems: list[Problem], smap: SourceMap) -> list[Problem]:
+    out = []
+    for p in problems:
+        if p.line is None:
+            where = smap.locate(p.path)
+            if where is not None:
+                p = Problem(p.path, p.message, where[0], where[1], p.severity)
+        out.append(p)
+    return out
+
+
+def validate_text(text: str, source: str, base_dir: Path | None = None, *,
+                  files: bool = False) -> tuple[LoadedSpec | None, list[Problem]]:
+    """Validate spec text; returns the loaded spec (None if invalid) and every problem found.
+
+    ``source`` names the text in messages (usually the file path); ``base_dir`` anchors the
+    relative paths inside the spec (default: the folder of ``source``).
+    """
+    base = Path(base_dir) if base_dir is not None else Path(source).parent
+    try:
+        data, smap = parse_text(text, source)
+    except SpecError as exc:
+        return None, list(exc.problems)
+    if "sonicspec" not in data:
+        return None, [Problem(("sonicspec",),
+                              f"required field missing: put 'sonicspec: {SPEC_VERSION}' at the "
+                              "top of the file", 1, 1)]
+    why = version_problem(data["sonicspec"])
+    if why is not None:
+        where = smap.locate(("sonicspec",)) or (1, 1)
+        return None, [Problem(("sonicspec",), why, *where)]
+    data = migrate(data)
+    try:
+        spec = DatasetSpec.model_validate(data)
+    except ValidationError as exc:
+        return None, sort_problems(problems_from_validation(exc, DatasetSpec, data, smap))
+    problems = check_spec(spec)
+    if files:
+        problems += check_files(spec, base)
+    problems = sort_problems(_locate(problems, smap))
+    errors = [p for p in problems if p.severity == "error"]
+    if errors:
+        return None, problems
+    warnings = tuple(p for p in problems if p.severity == "warning")
+    return LoadedSpec(spec=spec, source=source, base_dir=base, warnings=warnings), problems
+
+
+def validate_file(path: str | Path, *, files: bool = False) -> tuple[LoadedSpec | None,
+                                                                     list[Problem]]:
+    """Validate the spec file at ``path`` (see :func:`validate_text`)."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None, [Problem((), "no such file")]
+    except IsADirectoryError:
+        return None, [Problem((), "is a folder, not a spec file")]
+    except UnicodeDecodeError as exc:
+        return None, [Problem((), f"not UTF-8 text (byte {exc.start}); save the spec as UTF-8")]
+    except OSError as exc:
+        return None, [Problem((), f"cannot be read: {exc.strerror}")]
+    return validate_text(text, source, path.parent, files=files)
+
+
+def load_spec(path: str | Path, *, files: bool = False) -> LoadedSpec:
+    """Load and validate a spec file, raising :class:`SpecError` with every problem if invalid."""
+    loaded, problems = validate_file(path, files=files)
+    if loaded is None:
+        errors = [p for p in problems if p.severity == "error"]
+        raise SpecError("\n".join(p.format(str(path)) for p in errors), errors)
+    return loaded
