@@ -1,0 +1,168 @@
+"""The command line on good and bad specs: exit codes, messages, never a traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sonicspec.cli import main
+from sonicspec.spec import validate_file
+from sonicspec.spec.templates import PRESETS
+from spec_cases import BASE
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run the real console entry point in a child process (what a user sees)."""
+    return subprocess.run([sys.executable, "-m", "sonicspec.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=120)
+
+
+def write(tmp_path: Path, name: str, text: str | bytes) -> Path:
+    path = tmp_path / name
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    return path
+
+
+def test_valid_examples_exit_zero() -> None:
+    result = run_cli("validate", *[str(p) for p in sorted((ROOT / "specs").glob("*.yaml"))])
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.count(": valid (") == len(list((ROOT / "specs").glob("*.yaml")))
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "expected"),
+    [
+        ("malformed.yaml", "sonicspec: 1\nname: [unclosed\n", "malformed YAML"),
+        ("tabs.yaml", "sonicspec: 1\nname:\n\t- x\n", "malformed YAML"),
+        ("empty.yaml", "", "the file is empty"),
+        ("comments.yaml", "# only a comment\n", "the file is empty"),
+        ("list.yaml", "- sonicspec: 1\n", "expected a mapping of sections at the top level"),
+        ("scalar.yaml", "hello\n", "expected a mapping of sections at the top level"),
+        ("version.yaml", "sonicspec: 7\nname: x\n", "spec version 7 is newer"),
+        ("version0.yaml", "sonicspec: 0\nname: x\n", "unknown spec version 0"),
+        ("noversion.yaml", "name: x\n", "put 'sonicspec: 1' at the top"),
+        ("twodocs.yaml", "sonicspec: 1\n---\nsonicspec: 1\n", "found several"),
+        ("dupkey.yaml", "sonicspec: 1\nname: a\nname: b\n", "duplicate key (first given on line 2)"),
+        ("badjson.json", '{"sonicspec": 1,,}', "malformed JSON"),
+        ("latin1.yaml", b"sonicspec: 1\nname: caf\xe9\n", "not UTF-8"),
+    ],
+)
+def test_broken_files_get_their_own_message_and_exit_2(tmp_path: Path, name: str, text: str,
+                                                        expected: str) -> None:
+    path = write(tmp_path, name, text)
+    result = run_cli("validate", str(path))
+    assert result.returncode == 2, result
+    assert expected in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr + result.stdout
+    assert result.stderr.startswith(str(path)), result.stderr
+
+
+def test_missing_file_exits_2(tmp_path: Path) -> None:
+    result = run_cli("validate", str(tmp_path / "nope.yaml"))
+    assert result.returncode == 2 and "no such file" in result.stderr
+
+
+def test_five_errors_printed_with_locations(tmp_path: Path) -> None:
+    text = (BASE.replace("seed: 1", "seed: -1")
+            .replace("size_m: [6, 5, 3]", "size_m: [6, 0, 3]")
+            .replace("  n: 4", "  n: 1")
+            .replace("rays: 5000", "rays: 1")
+            .replace("audio_format: flac", "audio_format: ogg"))
+    path = write(tmp_path, "five.yaml", text)
+    result = run_cli("validate", str(path))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1] == f"{path}: invalid (5 errors)"
+    for fragment in (":3:7: seed:", ":8:13: scenes[0].size_m:", ":22:6: microphone.n:",
+                     ":31:9: acoustics.rays:", ":47:17: outputs.audio_format:"):
+        assert any(fragment in line for line in lines), (fragment, lines)
+
+
+def test_json_output(tmp_path: Path) -> None:
+    path = write(tmp_path, "bad.yaml", BASE.replace("seed: 1", "seed: -1"))
+    result = run_cli("validate", "--json", str(path))
+    assert result.returncode == 2
+    (report,) = json.loads(result.stdout)
+    assert report["valid"] is False
+    assert report["problems"][0]["path"] == ["seed"] and report["problems"][0]["line"] == 3
+
+
+def test_check_files_reports_missing_corpus_and_mesh(tmp_path: Path) -> None:
+    spec = (ROOT / "specs" / "sonicset.yaml").read_text()
+    path = write(tmp_path, "s.yaml", spec)
+    assert run_cli("validate", str(path)).returncode == 0
+    result = run_cli("validate", "--check-files", str(path))
+    assert result.returncode == 2
+    assert "scenes[0].path: glob 'data/mp3d/*/*.glb' matches no file" in result.stderr
+    assert "corpora.speech.root: corpus folder" in result.stderr
+    # Make the folders exist: the LibriSpeech subsets are then checked one by one.
+    (tmp_path / "data/mp3d/abc").mkdir(parents=True)
+    (tmp_path / "data/mp3d/abc/abc.glb").write_bytes(b"")
+    for sub in ("train-clean-360", "dev-clean"):
+        (tmp_path / "data/LibriSpeech" / sub).mkdir(parents=True)
+    result = run_cli("validate", "--check-files", str(path))
+    assert "glob" not in result.stderr
+    assert "test-clean' does not exist" in result.stderr
+
+
+def test_warnings_do_not_fail(tmp_path: Path) -> None:
+    path = write(tmp_path, "w.yaml", BASE.replace("rays: 5000", "rays: 500"))
+    result = run_cli("validate", str(path))
+    assert result.returncode == 0, result.stderr
+    assert "warning: acoustics.rays" in result.stderr
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_init_writes_specs_that_validate(tmp_path: Path, preset: str) -> None:
+    out = tmp_path / "sub" / f"{preset}.yaml"
+    assert main(["init", "--preset", preset, "-o", str(out)]) == 0
+    loaded, problems = validate_file(out)
+    assert loaded is not None, [p.format(str(out)) for p in problems]
+    first = out.read_text().splitlines()[0]
+    assert first.startswith("# yaml-language-server: $schema=")
+    schema_ref = first.split("$schema=")[1]
+    assert json.loads((out.parent / schema_ref).read_text())["title"].startswith("sonicspec")
+
+
+def test_init_refuses_to_overwrite(tmp_path: Path) -> None:
+    out = write(tmp_path, "keep.yaml", "precious\n")
+    assert main(["init", "-o", str(out)]) == 1
+    assert out.read_text() == "precious\n"
+    assert main(["init", "-o", str(out), "--force"]) == 0
+
+
+def test_schema_command_prints_the_checked_in_schema() -> None:
+    result = run_cli("schema")
+    assert result.returncode == 0
+    assert result.stdout == (ROOT / "schema" / "sonicspec-v1.schema.json").read_text()
+
+
+def test_plan_summary_of_the_demo() -> None:
+    result = run_cli("plan", str(ROOT / "specs" / "demo.yaml"))
+    assert result.returncode == 0, result.stderr
+    assert "dataset demo: 6 groups" in result.stdout
+    result = run_cli("plan", "--json", str(ROOT / "specs" / "demo.yaml"))
+    summary = json.loads(result.stdout)
+    assert summary["groups"] == 6
+    assert [s["name"] for s in summary["splits"]] == ["train", "val", "test"]
+
+
+def test_plan_on_invalid_spec_exits_2(tmp_path: Path) -> None:
+    path = write(tmp_path, "bad.yaml", yaml.safe_dump({"sonicspec": 1}))
+    result = run_cli("plan", str(path))
+    assert result.returncode == 2 and "required field missing" in result.stderr
+
+
+def test_bad_arguments_exit_2() -> None:
+    assert run_cli("validate").returncode == 2
+    assert run_cli("init", "--preset", "nonsense").returncode == 2
