@@ -6,6 +6,7 @@ Each writer returns the paths it wrote and the :class:`SceneMesh` an importer sh
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,8 +17,16 @@ from sonicspec.geometry.mesh import UNLABELED, SceneMesh
 from sonicspec.geometry.procedural import box_obstacle, shoebox
 
 __all__ = [
+    "HOUSE_DOORS",
+    "HOUSE_DOOR_HEIGHT_M",
+    "HOUSE_HEIGHT_M",
+    "HOUSE_ROOMS",
     "MatterportFixture",
     "PlainMeshFixture",
+    "ScannedHouse",
+    "house_mesh",
+    "scanned_house",
+    "voxel_air_surface",
     "write_matterport_scene",
     "write_plain_meshes",
 ]
@@ -292,3 +301,187 @@ def _house_text(scene_id: str, mesh: SceneMesh) -> str:
             f"{_fmt(points.min(axis=0))}  {_fmt(points.max(axis=0))}  0 0 0 0 0"
         )
     return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- scanned house
+#: Rooms of the synthetic house, (x0, x1, y0, y1) in metres: two rooms side by side and a long
+#: room behind them, separated by 0.2 m walls.
+HOUSE_ROOMS = ((0.0, 4.0, 0.0, 5.0), (4.2, 8.0, 0.0, 5.0), (0.0, 8.0, 5.2, 8.0))
+#: Door openings through the walls, (x0, x1, y0, y1) in metres, from the floor to 2.1 m.
+HOUSE_DOORS = ((4.0, 4.2, 2.0, 3.0), (1.0, 2.0, 5.0, 5.2), (6.0, 7.0, 5.0, 5.2))
+HOUSE_HEIGHT_M = 2.6
+HOUSE_DOOR_HEIGHT_M = 2.1
+
+
+@dataclass(frozen=True)
+class ScannedHouse:
+    """A synthetic multi-room house: the intact surface and a copy damaged like a scan.
+
+    ``clean`` is watertight with normals into the air. ``damaged`` has, on top of it: vertex
+    noise, duplicated (split) vertices that open cracks, one missing wall panel, flipped faces,
+    duplicated faces and a small piece of floating debris. ``missing_panel_m`` is the panel's
+    (y0, y1, z0, z1) on the west wall x = 0 of the first room.
+    """
+
+    clean: SceneMesh
+    damaged: SceneMesh
+    missing_panel_m: tuple[float, float, float, float]
+    n_flipped: int
+    n_split_vertices: int
+    n_duplicated_faces: int
+
+    @staticmethod
+    def contains_air(points: np.ndarray) -> np.ndarray:
+        """True for points in a room or a door opening (the oracle for 'inside the air')."""
+        points = np.atleast_2d(points)
+        x, y, z = points[:, 0], points[:, 1], points[:, 2]
+        inside = np.zeros(len(points), bool)
+        for x0, x1, y0, y1 in HOUSE_ROOMS:
+            inside |= (x > x0) & (x < x1) & (y > y0) & (y < y1) & (z > 0) & (z < HOUSE_HEIGHT_M)
+        for x0, x1, y0, y1 in HOUSE_DOORS:
+            inside |= (
+                (x > x0) & (x < x1) & (y > y0) & (y < y1) & (z > 0) & (z < HOUSE_DOOR_HEIGHT_M)
+            )
+        return inside
+
+
+def _grid(breaks: list[float], max_step_m: float) -> np.ndarray:
+    """Grid lines through every break, at most ``max_step_m`` apart."""
+    lines = [breaks[0]]
+    for a, b in itertools.pairwise(breaks):
+        n = max(1, int(np.ceil((b - a) / max_step_m - 1e-9)))
+        lines.extend(np.linspace(a, b, n + 1)[1:].tolist())
+    return np.array(lines)
+
+
+def voxel_air_surface(xs: np.ndarray, ys: np.ndarray, zs: np.ndarray, air: np.ndarray) -> SceneMesh:
+    """The surface between air cells and solid cells of a rectilinear grid, normals into the air.
+
+    ``air[i, j, k]`` says whether the cell [xs[i], xs[i+1]] × [ys[j], ys[j+1]] × [zs[k], zs[k+1]]
+    is air; everything outside the grid is solid. Faces lie on the grid, so the surface is
+    conforming and watertight unless two air cells touch along an edge only. Faces are labelled
+    ``floor`` (normal up), ``ceiling`` (normal down) or ``wall``.
+    """
+    nx, ny, nz = air.shape
+    padded = np.zeros((nx + 2, ny + 2, nz + 2), bool)
+    padded[1:-1, 1:-1, 1:-1] = air
+
+    def node(i, j, k):
+        return (i * (ny + 1) + j) * (nz + 1) + k
+
+    quads = []
+    # For each axis: faces between cell c-1 and c along that axis; the quad's corner order
+    # (u, v in-plane with u × v = +axis) gives normal +axis, reversed when the air is behind.
+    for axis in range(3):
+        shape = [nx, ny, nz]
+        shape[axis] += 1
+        idx = np.indices(shape).reshape(3, -1).T
+        lo = idx.copy()
+        hi = idx.copy() + 1  # indices into padded array
+        lo = lo + 1
+        lo[:, axis] -= 1
+        a_lo = padded[lo[:, 0], lo[:, 1], lo[:, 2]]
+        a_hi = padded[hi[:, 0], hi[:, 1], hi[:, 2]]
+        change = a_lo != a_hi
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for (i, j, k), air_ahead in zip(idx[change], a_hi[change], strict=True):
+            base = np.array([i, j, k])
+            du, dv = np.eye(3, dtype=int)[u], np.eye(3, dtype=int)[v]
+            corners = [base, base + du, base + du + dv, base + dv]
+            ids = [node(*c) for c in corners]
+            quads.append(ids if air_ahead else ids[::-1])
+    quads = np.array(quads, dtype=np.int64)
+    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    used, inverse = np.unique(faces.ravel(), return_inverse=True)
+    i, rest = np.divmod(used, (ny + 1) * (nz + 1))
+    j, k = np.divmod(rest, nz + 1)
+    vertices = np.column_stack([xs[i], ys[j], zs[k]])
+    mesh = SceneMesh(vertices, inverse.reshape(-1, 3), np.zeros(len(faces), np.int32), ("default",))
+    nz_component = mesh.face_normals[:, 2]
+    label = np.where(nz_component > 0.5, 1, np.where(nz_component < -0.5, 2, 0)).astype(np.int32)
+    return mesh.replace(face_label=label, labels=("wall", "floor", "ceiling"))
+
+
+def house_mesh(max_step_m: float = 1.0) -> SceneMesh:
+    """The intact synthetic house (:data:`HOUSE_ROOMS`, :data:`HOUSE_DOORS`) as a voxel surface."""
+    boxes = HOUSE_ROOMS + HOUSE_DOORS
+    xs = _grid(sorted({v for b in boxes for v in b[:2]}), max_step_m)
+    ys = _grid(sorted({v for b in boxes for v in b[2:]}), max_step_m)
+    zs = _grid([0.0, HOUSE_DOOR_HEIGHT_M, HOUSE_HEIGHT_M], max_step_m)
+    centers = np.stack(
+        np.meshgrid(
+            (xs[:-1] + xs[1:]) / 2, (ys[:-1] + ys[1:]) / 2, (zs[:-1] + zs[1:]) / 2, indexing="ij"
+        ),
+        axis=-1,
+    )
+    air = ScannedHouse.contains_air(centers.reshape(-1, 3)).reshape(centers.shape[:3])
+    return voxel_air_surface(xs, ys, zs, air)
+
+
+def scanned_house(
+    rng: np.random.Generator,
+    *,
+    noise_m: float = 0.003,
+    flipped_fraction: float = 0.05,
+    split_fraction: float = 0.05,
+    duplicated_faces: int = 10,
+) -> ScannedHouse:
+    """The synthetic house and a copy with scan damage (see :class:`ScannedHouse`).
+
+    Randomness (noise, which faces flip, which vertices split) comes from ``rng``.
+    """
+    clean = house_mesh()
+    vertices = clean.vertices + rng.normal(scale=noise_m, size=clean.vertices.shape)
+    faces = np.array(clean.faces)
+    n_faces = len(faces)
+
+    # Missing wall panel: one grid cell of the west wall of room 0, y 1..2 m, z 0.7..1.4 m
+    centroids = clean.face_centroids
+    panel = (1.0, 2.0, 0.7, 1.4)
+    on_panel = (
+        (np.abs(centroids[:, 0]) < 1e-9)
+        & (centroids[:, 1] > panel[0])
+        & (centroids[:, 1] < panel[1])
+        & (centroids[:, 2] > panel[2])
+        & (centroids[:, 2] < panel[3])
+    )
+    keep = ~on_panel
+
+    # Split vertices: a copy a hair away (0.1 mm) that some of the faces use instead (a crack).
+    n_split = int(split_fraction * len(vertices))
+    split = rng.choice(len(vertices), size=n_split, replace=False)
+    copies = vertices[split] + rng.normal(scale=1e-4, size=(n_split, 3))
+    copy_index = np.full(len(vertices), -1)
+    copy_index[split] = len(vertices) + np.arange(n_split)
+    vertices = np.concatenate([vertices, copies])
+    use_copy = rng.random(faces.shape) < 0.5
+    redirected = np.where(use_copy & (copy_index[faces] >= 0), copy_index[faces], faces)
+
+    # Flipped faces and duplicated faces.
+    flip = rng.random(n_faces) < flipped_fraction
+    redirected[flip] = redirected[flip][:, ::-1]
+    face_ids = np.flatnonzero(keep)
+    duplicates = rng.choice(face_ids, size=duplicated_faces, replace=False)
+    order = np.concatenate([face_ids, duplicates])
+
+    # Debris: a small floating triangle pair in the middle of room 0 (about 4 cm across).
+    debris_vertices = np.array(
+        [[2.0, 2.5, 1.2], [2.04, 2.5, 1.2], [2.04, 2.54, 1.2], [2.0, 2.54, 1.2]]
+    )
+    debris_faces = np.array([[0, 1, 2], [0, 2, 3]]) + len(vertices)
+    damaged = SceneMesh(
+        vertices=np.concatenate([vertices, debris_vertices]),
+        faces=np.concatenate([redirected[order], debris_faces]),
+        face_material=np.zeros(len(order) + 2, np.int32),
+        materials=clean.materials,
+        face_label=np.concatenate([clean.face_label[order], [0, 0]]),
+        labels=clean.labels,
+    )
+    return ScannedHouse(
+        clean=clean,
+        damaged=damaged,
+        missing_panel_m=panel,
+        n_flipped=int(np.count_nonzero(flip & keep)),
+        n_split_vertices=n_split,
+        n_duplicated_faces=duplicated_faces,
+    )

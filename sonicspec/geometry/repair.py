@@ -1,0 +1,651 @@
+"""Mesh repair for scanned scenes, and the leak test that says whether sound can escape.
+
+Scans have cracks (vertices duplicated along seams), duplicate and zero-area triangles, floating
+debris, edges shared by more than two faces, holes where the scanner saw nothing, and faces
+wound either way. A ray tracer needs a closed surface whose normals all face the air
+(:mod:`sonicspec.geometry.mesh`). :func:`repair_mesh` runs, in order:
+
+1. merge vertices closer than ``merge_distance_m`` (closes cracks);
+2. drop degenerate faces (repeated vertex, near-zero area) and duplicate faces (same three
+   vertices, either winding: a two-sided sheet of zero thickness keeps one side);
+3. make edges manifold: where more than two faces share an edge, drop the smallest ones;
+4. drop connected pieces smaller than ``min_component_area_m2`` (debris);
+5. orient faces coherently within each connected piece (neighbours traverse their shared edge
+   in opposite directions);
+6. close holes whose boundary loop spans at most ``max_hole_size_m``: the loop is projected to
+   its best-fit plane and triangulated by ear clipping (a fan around its centroid when the
+   projection is not simple); new faces take the material, label and object of the faces
+   around the hole;
+7. point each piece's normals into the air, decided by ray parity: a point just in front of a
+   face is in the air when a ray from it crosses the whole surface an odd number of times
+   (one envelope around it, obstacles entered and left in pairs).
+
+The per-face material, label and object id follow their faces throughout. Vertex merging and
+the topology steps are numpy/scipy; ray casting uses trimesh's Embree backend (embreex) when
+available and its pure-numpy one otherwise.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+from scipy.spatial import cKDTree
+
+from sonicspec.errors import GeometryError, SonicspecWarning
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.procedural import triangulate_polygon
+
+__all__ = [
+    "LeakReport",
+    "MeshStats",
+    "RepairReport",
+    "RepairSettings",
+    "leak_test",
+    "mesh_stats",
+    "repair_mesh",
+]
+
+# Fixed, non-axis-aligned probe directions for the parity vote: deterministic without an RNG,
+# and unlikely to graze the edges of axis-aligned architecture.
+_PARITY_DIRECTIONS = np.array(
+    [[0.5773, 0.3131, 0.7547], [-0.6123, 0.5412, -0.5764], [0.2357, -0.9012, 0.3636]]
+)
+_PARITY_DIRECTIONS /= np.linalg.norm(_PARITY_DIRECTIONS, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class RepairSettings:
+    """What :func:`repair_mesh` may change.
+
+    Attributes
+    ----------
+    merge_distance_m : float
+        Vertices closer than this (metres) are merged.
+    min_component_area_m2 : float
+        Connected pieces with less total area (m²) are removed as debris.
+    max_hole_size_m : float
+        Holes whose boundary loop fits in a box of this diagonal (metres) are closed;
+        0 closes none.
+    orient : bool
+        Re-orient faces so normals point into the air.
+    if_not_watertight : {"warn", "error"}
+        What to do when the result still has open or non-manifold edges: a
+        :class:`SonicspecWarning` or a :class:`GeometryError`. Never silent.
+    """
+
+    merge_distance_m: float = 1e-3
+    min_component_area_m2: float = 0.01
+    max_hole_size_m: float = 1.0
+    orient: bool = True
+    if_not_watertight: str = "warn"
+
+    def __post_init__(self) -> None:
+        for name in ("merge_distance_m", "min_component_area_m2", "max_hole_size_m"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise GeometryError(
+                    f"RepairSettings.{name}: expected a finite value >= 0, got {value!r}"
+                )
+        if self.if_not_watertight not in ("warn", "error"):
+            raise GeometryError(
+                "RepairSettings.if_not_watertight: expected 'warn' or 'error', got "
+                f"{self.if_not_watertight!r}"
+            )
+
+
+@dataclass(frozen=True)
+class MeshStats:
+    """Topology counts of a triangle mesh."""
+
+    vertices: int
+    faces: int
+    boundary_edges: int
+    non_manifold_edges: int
+    inconsistent_edges: int
+    components: int
+
+    @property
+    def watertight(self) -> bool:
+        """Every edge shared by exactly two faces (closed, manifold)."""
+        return self.boundary_edges == 0 and self.non_manifold_edges == 0
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    """What :func:`repair_mesh` found and changed (counts)."""
+
+    before: MeshStats
+    after: MeshStats
+    merged_vertices: int
+    degenerate_faces_removed: int
+    duplicate_faces_removed: int
+    non_manifold_faces_removed: int
+    debris_components_removed: int
+    debris_faces_removed: int
+    faces_flipped_coherent: int
+    holes_found: int
+    holes_closed: int
+    hole_faces_added: int
+    components_flipped: int
+
+    @property
+    def watertight(self) -> bool:
+        """The repaired mesh is closed and manifold."""
+        return self.after.watertight
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (for ``scene inspect --json``)."""
+        out = {k: v for k, v in self.__dict__.items() if k not in ("before", "after")}
+        out["before"] = dict(self.before.__dict__, watertight=self.before.watertight)
+        out["after"] = dict(self.after.__dict__, watertight=self.after.watertight)
+        out["watertight"] = self.watertight
+        return out
+
+
+# --------------------------------------------------------------------------- topology helpers
+def _edge_keys(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Directed edges (a→b of each face, 3F) as int64 keys a·n + b, and their face ids."""
+    a = faces[:, [0, 1, 2]].ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    return a * n_vertices + b, np.repeat(np.arange(len(faces)), 3)
+
+
+def _undirected(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    a = faces[:, [0, 1, 2]].ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    return np.minimum(a, b) * n_vertices + np.maximum(a, b), np.repeat(np.arange(len(faces)), 3)
+
+
+def mesh_stats(faces: np.ndarray, n_vertices: int) -> MeshStats:
+    """Count boundary, non-manifold and inconsistently wound edges, and connected pieces."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        return MeshStats(n_vertices, 0, 0, 0, 0, 0)
+    keys, _ = _undirected(faces, n_vertices)
+    _, counts = np.unique(keys, return_counts=True)
+    directed, _ = _edge_keys(faces, n_vertices)
+    _, directed_counts = np.unique(directed, return_counts=True)
+    # An edge used twice in the same direction is wound inconsistently.
+    inconsistent = int(np.count_nonzero(directed_counts > 1))
+    used = np.unique(faces)
+    return MeshStats(
+        vertices=len(used),
+        faces=len(faces),
+        boundary_edges=int(np.count_nonzero(counts == 1)),
+        non_manifold_edges=int(np.count_nonzero(counts > 2)),
+        inconsistent_edges=inconsistent,
+        components=_n_components(faces, n_vertices),
+    )
+
+
+def _face_components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+    """Connected pieces (faces sharing a vertex), as (count, label per face)."""
+    n_faces = len(faces)
+    rows = np.repeat(np.arange(n_faces), 3)
+    graph = sparse.coo_matrix(
+        (np.ones(3 * n_faces, bool), (rows, faces.ravel())), shape=(n_faces, n_vertices)
+    ).tocsr()
+    # faces and vertices as one bipartite graph
+    bipartite = sparse.bmat([[None, graph], [graph.T, None]], format="csr")
+    _, labels = connected_components(bipartite, directed=False)
+    face_labels = labels[:n_faces]
+    _, face_labels = np.unique(face_labels, return_inverse=True)
+    return int(face_labels.max()) + 1 if n_faces else 0, face_labels
+
+
+def _n_components(faces: np.ndarray, n_vertices: int) -> int:
+    return _face_components(faces, n_vertices)[0]
+
+
+def _areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+# --------------------------------------------------------------------------- repair steps
+def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
+    if distance_m <= 0 or len(vertices) < 2:
+        return vertices, faces, 0
+    pairs = cKDTree(vertices).query_pairs(distance_m, output_type="ndarray")
+    if len(pairs) == 0:
+        return vertices, faces, 0
+    n = len(vertices)
+    graph = sparse.coo_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), (n, n))
+    n_clusters, cluster = connected_components(graph, directed=False)
+    # Each cluster moves to its mean position.
+    counts = np.bincount(cluster, minlength=n_clusters)[:, None]
+    merged = np.zeros((n_clusters, 3))
+    np.add.at(merged, cluster, vertices)
+    return merged / counts, cluster[faces], n - n_clusters
+
+
+def _drop_degenerate(vertices, faces, keep_attrs, scale_m):
+    repeated = (
+        (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    )
+    tiny = _areas(vertices, faces) <= (1e-9 * scale_m) ** 2
+    bad = repeated | tiny
+    return faces[~bad], keep_attrs[~bad], int(np.count_nonzero(bad))
+
+
+def _drop_duplicates(faces, keep_attrs, n_vertices):
+    s = np.sort(faces, axis=1)
+    key = (s[:, 0] * n_vertices + s[:, 1]) * n_vertices + s[:, 2]
+    _, first = np.unique(key, return_index=True)
+    first = np.sort(first)
+    return faces[first], keep_attrs[first], len(faces) - len(first)
+
+
+def _fix_non_manifold(vertices, faces, keep_attrs, n_vertices):
+    """Where more than two faces share an edge, drop the smallest until two remain.
+
+    Dropping faces never raises another edge's count, so one pass suffices.
+    """
+    keys, face_of = _undirected(faces, n_vertices)
+    order = np.argsort(keys, kind="stable")
+    keys_sorted, faces_sorted = keys[order], face_of[order]
+    _, start, counts = np.unique(keys_sorted, return_index=True, return_counts=True)
+    bad = np.flatnonzero(counts > 2)
+    if len(bad) == 0:
+        return faces, keep_attrs, 0
+    areas = _areas(vertices, faces)
+    drop = np.zeros(len(faces), bool)
+    for e in bad:
+        incident = faces_sorted[start[e] : start[e] + counts[e]]
+        incident = incident[~drop[incident]]
+        if len(incident) > 2:
+            by_area = incident[np.argsort(areas[incident], kind="stable")]
+            drop[by_area[: len(incident) - 2]] = True
+    return faces[~drop], keep_attrs[~drop], int(np.count_nonzero(drop))
+
+
+def _drop_debris(vertices, faces, keep_attrs, n_vertices, min_area_m2):
+    if min_area_m2 <= 0 or len(faces) == 0:
+        return faces, keep_attrs, 0, 0
+    n, label = _face_components(faces, n_vertices)
+    area = np.bincount(label, weights=_areas(vertices, faces), minlength=n)
+    small = area < min_area_m2
+    drop = small[label]
+    return (
+        faces[~drop],
+        keep_attrs[~drop],
+        int(np.count_nonzero(small)),
+        int(np.count_nonzero(drop)),
+    )
+
+
+def _orient_coherently(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
+    """Flip faces so that faces sharing a manifold edge traverse it in opposite directions."""
+    n_faces = len(faces)
+    keys, face_of = _undirected(faces, n_vertices)
+    a = faces[:, [0, 1, 2]].ravel()
+    forward = a == (keys // n_vertices)  # the face runs the edge from its smaller vertex
+    order = np.argsort(keys, kind="stable")
+    keys_sorted = keys[order]
+    pair = np.flatnonzero(keys_sorted[1:] == keys_sorted[:-1])
+    # keep only edges with exactly two faces (manifold)
+    _, counts = np.unique(keys_sorted, return_counts=True)
+    count_per = np.repeat(counts, counts)
+    pair = pair[count_per[pair] == 2]
+    f, g = face_of[order[pair]], face_of[order[pair + 1]]
+    # same direction on the shared edge ⇒ the two faces must end up with opposite flip states
+    same = forward[order[pair]] == forward[order[pair + 1]]
+    graph = sparse.coo_matrix(
+        (np.r_[same, same].astype(np.int8) + 1, (np.r_[f, g], np.r_[g, f])), (n_faces, n_faces)
+    ).tocsr()
+    # Propagate flip states along a breadth-first spanning tree of each piece: a child flips
+    # relative to its parent when they run their shared edge the same way.
+    flip = [False] * n_faces
+    seen = np.zeros(n_faces, bool)
+    for root in range(n_faces):
+        if seen[root]:
+            continue
+        visit, predecessors = breadth_first_order(graph, root, directed=False)
+        seen[visit] = True
+        children = visit[1:]
+        parents = predecessors[children]
+        same_way = (np.asarray(graph[children, parents]).ravel() == 2).tolist()
+        for node, parent, toggle in zip(children.tolist(), parents.tolist(), same_way, strict=True):
+            flip[node] = flip[parent] ^ toggle
+    flip = np.array(flip, dtype=bool)
+    # keep the majority's winding in each piece (fewest flips)
+    _, label = _face_components(faces, n_vertices)
+    flipped_share = np.bincount(label, weights=flip) / np.bincount(label)
+    flip ^= (flipped_share > 0.5)[label]
+    out = faces.copy()
+    out[flip] = out[flip][:, ::-1]
+    return out, int(np.count_nonzero(flip))
+
+
+def _boundary_loops(faces: np.ndarray, n_vertices: int) -> list[list[int]]:
+    """Closed loops of boundary edges, ordered so a patch with these edges fits the hole.
+
+    A boundary edge a→b (used by one face) needs a patch face using b→a, so the loops follow
+    the reversed edges. Loops through a vertex with several boundary edges are split
+    arbitrarily; such loops may repeat a vertex and are then left open.
+    """
+    keys, _ = _edge_keys(faces, n_vertices)
+    und, _ = _undirected(faces, n_vertices)
+    _, inverse, counts = np.unique(und, return_inverse=True, return_counts=True)
+    boundary = counts[inverse] == 1
+    a, b = np.divmod(keys[boundary], n_vertices)
+    successors: dict[int, list[int]] = {}
+    for start, end in zip(b.tolist(), a.tolist(), strict=True):  # reversed edges b→a
+        successors.setdefault(start, []).append(end)
+    loops = []
+    while successors:
+        start = next(iter(successors))
+        loop = [start]
+        current = start
+        while True:
+            nexts = successors.get(current)
+            if not nexts:
+                break
+            nxt = nexts.pop()
+            if not nexts:
+                del successors[current]
+            if nxt == start:
+                loops.append(loop)
+                break
+            loop.append(nxt)
+            current = nxt
+    return loops
+
+
+def _fill_hole(vertices: np.ndarray, loop: list[int]) -> tuple[np.ndarray, np.ndarray | None]:
+    """Triangles closing a hole (indices into vertices, maybe one new vertex at the end)."""
+    points = vertices[loop]
+    center = points.mean(axis=0)
+    # Best-fit plane by SVD; its normal is the direction of least spread.
+    _, _, vt = np.linalg.svd(points - center)
+    u, v = vt[0], vt[1]
+    xy = np.column_stack([(points - center) @ u, (points - center) @ v])
+    loop_array = np.asarray(loop)
+    signed = 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+    try:
+        triangles = triangulate_polygon(xy)
+    except GeometryError:
+        # Not a simple polygon in projection: fan around the centroid (a new vertex).
+        n = len(loop)
+        new_index = len(vertices)
+        i = np.arange(n)
+        fan = np.column_stack([loop_array[i], loop_array[(i + 1) % n], np.full(n, new_index)])
+        return fan, center
+    # triangulate_polygon returns triangles counter-clockwise in (u, v); the patch must run
+    # along the loop's direction, so reverse them when the loop is clockwise in (u, v).
+    tris = loop_array[triangles]
+    return (tris if signed > 0 else tris[:, ::-1]), None
+
+
+def _close_holes(vertices, faces, keep_attrs, n_vertices, max_size_m):
+    loops = _boundary_loops(faces, n_vertices)
+    closed = 0
+    new_faces, new_attrs, new_vertices = [], [], []
+    if max_size_m <= 0:
+        return vertices, faces, keep_attrs, len(loops), 0, 0
+    # adjacency from vertex to faces, to inherit attributes from the faces around a hole
+    vertex_face = sparse.coo_matrix(
+        (np.ones(faces.size, bool), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
+        shape=(n_vertices, len(faces)),
+    ).tocsr()
+    extra = len(vertices)
+    for loop in loops:
+        if len(loop) < 3 or len(set(loop)) != len(loop):
+            continue
+        points = vertices[loop]
+        if np.linalg.norm(points.max(axis=0) - points.min(axis=0)) > max_size_m:
+            continue
+        tris, new_vertex = _fill_hole(vertices, loop)
+        if new_vertex is not None:
+            tris = np.where(tris == len(vertices), extra, tris)
+            new_vertices.append(new_vertex)
+            extra += 1
+        neighbours = np.unique(vertex_face[loop].indices)
+        values, counts = np.unique(keep_attrs[neighbours], return_counts=True)
+        new_faces.append(tris)
+        new_attrs.append(np.full(len(tris), values[np.argmax(counts)]))
+        closed += 1
+    if not new_faces:
+        return vertices, faces, keep_attrs, len(loops), 0, 0
+    added = np.concatenate(new_faces)
+    if new_vertices:
+        vertices = np.concatenate([vertices, np.array(new_vertices)])
+    return (
+        vertices,
+        np.concatenate([faces, added]),
+        np.concatenate([keep_attrs, np.concatenate(new_attrs)]),
+        len(loops),
+        closed,
+        len(added),
+    )
+
+
+def _ray_intersector(vertices: np.ndarray, faces: np.ndarray):
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+    return mesh.ray
+
+
+def _orient_to_air(vertices, faces, n_vertices):
+    """Flip each connected piece whose normals point out of the air (ray-parity vote)."""
+    n, label = _face_components(faces, n_vertices)
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    cross = np.cross(b - a, c - a)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    normal = cross / np.maximum(2 * area, 1e-300)[:, None]
+    centroid = (a + b + c) / 3
+    extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    offset = 1e-4 * extent
+    intersector = _ray_intersector(vertices, faces)
+    probes, owners = [], []
+    for k in range(n):
+        members = np.flatnonzero(label == k)
+        # the largest faces of the piece: their centroids are far from edges
+        chosen = members[np.argsort(-area[members], kind="stable")[:7]]
+        probes.append(centroid[chosen] + offset * normal[chosen])
+        owners.append(np.full(len(chosen), k))
+    probes, owners = np.concatenate(probes), np.concatenate(owners)
+    origins = np.repeat(probes, len(_PARITY_DIRECTIONS), axis=0)
+    directions = np.tile(_PARITY_DIRECTIONS, (len(probes), 1))
+    _, ray_index, _ = intersector.intersects_location(origins, directions, multiple_hits=True)
+    crossings = np.bincount(ray_index, minlength=len(origins))
+    in_air = (crossings % 2 == 1).astype(int) * 2 - 1  # +1 vote: normal side is air
+    votes = np.bincount(np.repeat(owners, len(_PARITY_DIRECTIONS)), weights=in_air, minlength=n)
+    flip_piece = votes < 0
+    out = faces.copy()
+    flip = flip_piece[label]
+    out[flip] = out[flip][:, ::-1]
+    return out, int(np.count_nonzero(flip_piece))
+
+
+def repair_mesh(
+    mesh: SceneMesh, settings: RepairSettings | None = None
+) -> tuple[SceneMesh, RepairReport]:
+    """Repair a scanned scene so that it is closed with normals into the air.
+
+    Parameters
+    ----------
+    mesh : SceneMesh
+        The imported scene (any orientation, any damage).
+    settings : RepairSettings
+        Tolerances and policy; defaults if None.
+
+    Returns
+    -------
+    (SceneMesh, RepairReport)
+        The repaired mesh (unused vertices dropped; per-face material, label and object kept)
+        and the counts of what changed.
+
+    Raises
+    ------
+    GeometryError
+        The mesh has no faces, or the result is not watertight and
+        ``settings.if_not_watertight == "error"``.
+
+    Warns
+    -----
+    SonicspecWarning
+        The result is not watertight and ``settings.if_not_watertight == "warn"``.
+    """
+    settings = settings or RepairSettings()
+    mesh.validate()
+    if mesh.n_faces == 0:
+        raise GeometryError("repair_mesh: expected a mesh with faces, got an empty mesh")
+    vertices = np.array(mesh.vertices)
+    faces = np.array(mesh.faces)
+    n_vertices = len(vertices)
+    before = mesh_stats(faces, n_vertices)
+    scale_m = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    keep = np.arange(len(faces))  # original face id of every current face (carries attributes)
+
+    vertices, faces, merged = _merge_vertices(vertices, faces, settings.merge_distance_m)
+    n_vertices = len(vertices)
+    faces, keep, degenerate = _drop_degenerate(vertices, faces, keep, scale_m)
+    faces, keep, duplicates = _drop_duplicates(faces, keep, n_vertices)
+    faces, keep, non_manifold = _fix_non_manifold(vertices, faces, keep, n_vertices)
+    faces, keep, debris_pieces, debris_faces = _drop_debris(
+        vertices, faces, keep, n_vertices, settings.min_component_area_m2
+    )
+    if len(faces) == 0:
+        raise GeometryError(
+            "repair_mesh: expected faces to remain after cleaning, got none; "
+            "is min_component_area_m2 larger than the scene?"
+        )
+    flipped = 0
+    if settings.orient:
+        faces, flipped = _orient_coherently(faces, n_vertices)
+    vertices, faces, keep, holes, closed, added = _close_holes(
+        vertices, faces, keep, n_vertices, settings.max_hole_size_m
+    )
+    n_vertices = len(vertices)
+    pieces_flipped = 0
+    if settings.orient:
+        faces, pieces_flipped = _orient_to_air(vertices, faces, n_vertices)
+
+    used, inverse = np.unique(faces.ravel(), return_inverse=True)
+    repaired = SceneMesh(
+        vertices=vertices[used],
+        faces=inverse.reshape(-1, 3),
+        face_material=mesh.face_material[keep],
+        materials=mesh.materials,
+        face_label=None if mesh.face_label is None else mesh.face_label[keep],
+        labels=mesh.labels,
+        face_object=None if mesh.face_object is None else mesh.face_object[keep],
+    ).validate()
+    after = mesh_stats(repaired.faces, repaired.vertices.shape[0])
+    report = RepairReport(
+        before=before,
+        after=after,
+        merged_vertices=merged,
+        degenerate_faces_removed=degenerate,
+        duplicate_faces_removed=duplicates,
+        non_manifold_faces_removed=non_manifold,
+        debris_components_removed=debris_pieces,
+        debris_faces_removed=debris_faces,
+        faces_flipped_coherent=flipped,
+        holes_found=holes,
+        holes_closed=closed,
+        hole_faces_added=added,
+        components_flipped=pieces_flipped,
+    )
+    if not after.watertight:
+        message = (
+            f"repair_mesh: expected a watertight mesh after repair, got {after.boundary_edges} "
+            f"open and {after.non_manifold_edges} non-manifold edges "
+            f"({holes - closed} holes left open); raise max_hole_size_m "
+            f"(now {settings.max_hole_size_m} m) or merge_distance_m, or fix the scan"
+        )
+        if settings.if_not_watertight == "error":
+            raise GeometryError(message)
+        warnings.warn(message, SonicspecWarning, stacklevel=2)
+    return repaired, report
+
+
+# --------------------------------------------------------------------------- leak test
+@dataclass(frozen=True)
+class LeakReport:
+    """Rays cast from points in the air: how many left it.
+
+    ``escaped`` rays hit nothing (gone to infinity); ``backface`` rays first hit a face from
+    behind (they passed through a hole into the space behind a surface).
+    """
+
+    rays: int
+    escaped: int
+    backface: int
+
+    @property
+    def leak_fraction(self) -> float:
+        """Share of rays that left the air, escaped or through to a back face."""
+        return (self.escaped + self.backface) / self.rays if self.rays else 0.0
+
+
+def leak_test(
+    mesh: SceneMesh,
+    rng: np.random.Generator,
+    n_rays: int = 10_000,
+    interior_points: np.ndarray | None = None,
+    offset_m: float = 0.01,
+) -> LeakReport:
+    """Cast random rays from points in the air and count those that leave it.
+
+    Parameters
+    ----------
+    mesh : SceneMesh
+        The scene, normals into the air.
+    rng : numpy.random.Generator
+        Source of the ray origins and directions.
+    n_rays : int
+        Number of rays.
+    interior_points : (P, 3) array, optional
+        Points known to be in the air, used in turn as ray origins. Without them, origins are
+        random points on the faces (area-weighted) moved ``offset_m`` along the normal, i.e.
+        just in front of the surface, which trusts the orientation.
+    offset_m : float
+        Distance of the sampled origins from the surface, metres.
+
+    Returns
+    -------
+    LeakReport
+    """
+    if n_rays <= 0:
+        raise GeometryError(f"leak_test.n_rays: expected a positive count, got {n_rays!r}")
+    mesh.validate()
+    if mesh.n_faces == 0:
+        raise GeometryError("leak_test: expected a mesh with faces, got an empty mesh")
+    if interior_points is None:
+        area = mesh.face_areas
+        face = rng.choice(mesh.n_faces, size=n_rays, p=area / area.sum())
+        r1, r2 = rng.random(n_rays), rng.random(n_rays)
+        s = np.sqrt(r1)
+        tri = mesh.vertices[mesh.faces[face]]
+        # uniform point in a triangle: (1 - √r1) a + √r1 (1 - r2) b + √r1 r2 c
+        points = (
+            (1 - s)[:, None] * tri[:, 0]
+            + (s * (1 - r2))[:, None] * tri[:, 1]
+            + (s * r2)[:, None] * tri[:, 2]
+        )
+        origins = points + offset_m * mesh.face_normals[face]
+    else:
+        interior = np.asarray(interior_points, dtype=np.float64)
+        if interior.ndim != 2 or interior.shape[1] != 3 or len(interior) == 0:
+            raise GeometryError(
+                "leak_test.interior_points: expected an array of shape (P, 3) with P > 0, "
+                f"got shape {interior.shape}"
+            )
+        origins = interior[np.arange(n_rays) % len(interior)]
+    directions = rng.normal(size=(n_rays, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    intersector = _ray_intersector(np.array(mesh.vertices), np.array(mesh.faces))
+    first = intersector.intersects_first(origins, directions)
+    escaped = first < 0
+    hit = np.flatnonzero(~escaped)
+    backface = np.einsum("ij,ij->i", directions[hit], mesh.face_normals[first[hit]]) > 0
+    return LeakReport(
+        rays=int(n_rays), escaped=int(np.count_nonzero(escaped)), backface=int(backface.sum())
+    )

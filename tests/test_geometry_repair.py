@@ -1,0 +1,165 @@
+"""Mesh repair and the leak test, on a synthetic scanned house and small hand-made defects."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sonicspec.errors import GeometryError, SonicspecWarning
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
+from sonicspec.geometry.repair import RepairSettings, leak_test, mesh_stats, repair_mesh
+from sonicspec.testing.meshes import ScannedHouse, scanned_house
+
+HOUSE_SETTINGS = RepairSettings(max_hole_size_m=1.5, if_not_watertight="error")
+
+
+@pytest.fixture(scope="module")
+def house():
+    return scanned_house(np.random.default_rng(7))
+
+
+@pytest.fixture(scope="module")
+def repaired(house):
+    return repair_mesh(house.damaged, HOUSE_SETTINGS)
+
+
+def test_scanned_house_is_damaged_and_leaks(house):
+    stats = mesh_stats(house.damaged.faces, house.damaged.vertices.shape[0])
+    assert not stats.watertight
+    assert stats.boundary_edges > 0 and stats.inconsistent_edges > 0
+    assert leak_test(house.clean, np.random.default_rng(1), 20_000).leak_fraction == 0.0
+    leaks = leak_test(house.damaged, np.random.default_rng(1), 20_000)
+    assert leaks.escaped > 0  # through the missing panel and the cracks
+
+
+def test_repair_makes_the_house_watertight(house, repaired):
+    mesh, report = repaired
+    assert report.watertight and report.after.inconsistent_edges == 0
+    assert mesh.to_trimesh().is_watertight
+    assert report.holes_closed == 1 and report.hole_faces_added >= 2
+    assert report.duplicate_faces_removed == house.n_duplicated_faces
+    assert report.debris_components_removed == 1 and report.debris_faces_removed == 2
+    assert report.merged_vertices == house.n_split_vertices  # every crack closed
+    assert report.after.components == 1
+    # the repaired surface is the house's: same vertex count, volume within the scan noise
+    assert mesh.vertices.shape == house.clean.vertices.shape
+    assert mesh.air_volume() == pytest.approx(house.clean.air_volume(), rel=2e-3)
+    leaks = leak_test(mesh, np.random.default_rng(2), 20_000)
+    assert leaks.leak_fraction == 0.0
+
+
+def test_repaired_normals_point_into_the_air(repaired):
+    mesh, _ = repaired
+    # 2 cm in front of every face is in a room or door (the noise is 3 mm), 2 cm behind is not
+    assert np.all(ScannedHouse.contains_air(mesh.face_centroids + 0.02 * mesh.face_normals))
+    assert not np.any(ScannedHouse.contains_air(mesh.face_centroids - 0.02 * mesh.face_normals))
+
+
+def test_repair_keeps_labels_and_patches_with_the_neighbours_label(house, repaired):
+    mesh, _ = repaired
+    labels = np.array(mesh.labels)[mesh.face_label]
+    normals = mesh.face_normals
+    assert np.all(normals[labels == "floor"][:, 2] > 0.99)
+    assert np.all(normals[labels == "ceiling"][:, 2] < -0.99)
+    y0, y1, z0, z1 = house.missing_panel_m
+    c = mesh.face_centroids
+    patch = (
+        (np.abs(c[:, 0]) < 0.05) & (c[:, 1] > y0) & (c[:, 1] < y1) & (c[:, 2] > z0) & (c[:, 2] < z1)
+    )
+    assert patch.sum() >= 2 and set(labels[patch]) == {"wall"}
+
+
+def test_inverted_room_with_obstacles_is_turned_to_the_air():
+    room = shoebox((5.0, 4.0, 3.0))
+    table = box_obstacle((2.0, 2.0, 0.5), (1.0, 1.0, 1.0))
+    pillar = box_obstacle((4.0, 1.0, 1.5), (0.4, 0.4, 1.0))
+    scene = add_obstacles(room, [table, pillar])
+    # everything inverted, plus one obstacle inverted back: pieces disagree
+    faces = np.array(scene.faces)[:, ::-1]
+    faces[scene.face_object == 1] = faces[scene.face_object == 1][:, ::-1]
+    broken = scene.replace(faces=faces)
+    fixed, report = repair_mesh(broken, RepairSettings(if_not_watertight="error"))
+    assert report.components_flipped == 2  # the room and the table
+    assert fixed.air_volume() == pytest.approx(scene.air_volume())
+    np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
+    np.testing.assert_array_equal(fixed.face_object, scene.face_object)
+
+
+def test_degenerate_duplicate_and_non_manifold_faces():
+    room = shoebox((3.0, 3.0, 3.0))
+    v = np.array(room.vertices)
+    # a fin: one small triangle hanging off the floor edge from vertex 0 to vertex 1
+    v = np.vstack([v, [[1.5, 0.0, 0.2]]])
+    fin = [0, 1, 8]
+    extra = np.array([fin, [0, 0, 1], [2, 2, 2], list(room.faces[3][::-1])])
+    faces = np.vstack([room.faces, extra])
+    broken = SceneMesh(v, faces, 0, ("x",))
+    stats = mesh_stats(broken.faces, len(v))
+    assert stats.non_manifold_edges >= 1
+    fixed, report = repair_mesh(broken, RepairSettings(min_component_area_m2=0.0))
+    assert report.degenerate_faces_removed == 2
+    assert report.duplicate_faces_removed == 1  # the reversed copy of face 3
+    assert report.non_manifold_faces_removed == 1  # the fin, the smallest on the shared edge
+    assert report.watertight and fixed.n_faces == 12
+    assert fixed.air_volume() == pytest.approx(27.0)
+
+
+def test_not_watertight_is_a_warning_or_an_error(house):
+    small_holes_only = RepairSettings(max_hole_size_m=0.5)
+    with pytest.warns(SonicspecWarning, match="expected a watertight mesh after repair"):
+        mesh, report = repair_mesh(house.damaged, small_holes_only)
+    assert report.holes_closed == 0 and not report.watertight
+    assert leak_test(mesh, np.random.default_rng(3), 20_000).leak_fraction > 0
+    strict = RepairSettings(max_hole_size_m=0.5, if_not_watertight="error")
+    with pytest.raises(GeometryError, match=r"1 holes left open\); raise max_hole_size_m"):
+        repair_mesh(house.damaged, strict)
+
+
+def test_leak_test_with_given_interior_points():
+    room = shoebox((2.0, 2.0, 2.0))
+    inside = np.array([[1.0, 1.0, 1.0], [0.5, 1.5, 0.3]])
+    assert (
+        leak_test(room, np.random.default_rng(0), 2000, interior_points=inside).leak_fraction == 0
+    )
+    open_room = room.subset(np.arange(room.n_faces) != 0)  # one wall triangle missing
+    report = leak_test(open_room, np.random.default_rng(0), 4000, interior_points=inside)
+    # one of the 12 triangles gone: a sizeable share of rays escape, none hit a back face
+    assert 0.01 < report.escaped / report.rays < 0.3 and report.backface == 0
+    outside = np.array([[5.0, 5.0, 5.0]])
+    # from outside, rays toward the room see its back faces
+    assert leak_test(room, np.random.default_rng(0), 4000, interior_points=outside).backface > 0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"merge_distance_m": -1.0}, "merge_distance_m: expected a finite value >= 0"),
+        ({"if_not_watertight": "ignore"}, "expected 'warn' or 'error', got 'ignore'"),
+    ],
+)
+def test_bad_settings(kwargs, message):
+    with pytest.raises(GeometryError, match=message):
+        RepairSettings(**kwargs)
+
+
+def test_bad_calls():
+    room = shoebox((1.0, 1.0, 1.0))
+    with pytest.raises(GeometryError, match="n_rays: expected a positive count"):
+        leak_test(room, np.random.default_rng(0), 0)
+    with pytest.raises(
+        GeometryError, match=r"interior_points: expected an array of shape \(P, 3\)"
+    ):
+        leak_test(room, np.random.default_rng(0), 10, interior_points=np.zeros((0, 3)))
+    with pytest.raises(GeometryError, match="expected faces to remain after cleaning"):
+        repair_mesh(room, RepairSettings(min_component_area_m2=100.0))
+    empty = SceneMesh(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros(0, int), ("x",))
+    with pytest.raises(GeometryError, match="repair_mesh: expected a mesh with faces"):
+        repair_mesh(empty)
+
+
+def test_report_to_dict(repaired):
+    _, report = repaired
+    data = report.to_dict()
+    assert data["watertight"] is True and data["before"]["watertight"] is False
+    assert data["holes_closed"] == 1
