@@ -74,7 +74,7 @@ def summarize(spec: DatasetSpec) -> SpecSummary:
         per_source = 1
     else:
         travel = sum(spec.placement.source_travel_distance_m) / 2
-        per_source = int(math.ceil(travel / traj.rir_spacing_m)) + 1
+        per_source = math.ceil(travel / traj.rir_spacing_m) + 1
     static_points = int(spec.corpora.noise is not None) + int(spec.corpora.music is not None)
     splits = []
     for name, split in spec.splits.items():

@@ -1,0 +1,222 @@
+"""The content-hashed artifact store: one Zarr v3 group per job, written atomically.
+
+Layout: ``<root>/<stage>/<key[:2]>/<key>.zarr``. An artifact is written into a temporary
+folder beside its final place and renamed into place, so a reader (or a build resumed after a
+crash) sees either the whole artifact or none. Its attributes hold provenance under
+``"sonicspec"`` (stage, key, parameters, input keys, package version, array digest) and the
+stage's own JSON-able result under ``"data"``. Because the key is the content hash of what the
+job computes, two writers racing on one key write the same thing, and the loser discards its copy.
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec import __version__
+from sonicspec.errors import StoreError
+from sonicspec.plan.hashing import KEY_LENGTH, canonical_json
+
+TEMP_PREFIX = ".tmp-"
+_ONE_CHUNK_BYTES = 64 * 2**20
+
+
+def array_digest(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(a.dtype.str.encode())
+        h.update(repr(tuple(a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class Artifact:
+    """A stored job result: its arrays, its stage data and its provenance."""
+
+    stage: str
+    key: str
+    arrays: Mapping[str, np.ndarray]
+    data: Any
+    provenance: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class VerifyProblem:
+    stage: str
+    key: str
+    problem: str
+
+    def format(self) -> str:
+        return f"{self.stage} {self.key}: {self.problem}"
+
+
+def _check_key(key: str) -> None:
+    if len(key) != KEY_LENGTH or any(c not in "0123456789abcdef" for c in key):
+        raise StoreError(f"artifact key: expected {KEY_LENGTH} lowercase hex digits, got {key!r}")
+
+
+class ArtifactStore:
+    """Content-addressed Zarr artifacts under ``root`` (see the module docstring)."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+
+    def path(self, stage: str, key: str) -> Path:
+        _check_key(key)
+        return self.root / stage / key[:2] / f"{key}.zarr"
+
+    def exists(self, stage: str, key: str) -> bool:
+        return (self.path(stage, key) / "zarr.json").is_file()
+
+    def write(self, stage: str, key: str, arrays: Mapping[str, np.ndarray], *,
+              data: Any = None, params: Mapping[str, Any] | None = None,
+              input_keys: tuple[str, ...] = (), stage_version: int = 1) -> Path:
+        """Write an artifact atomically; a no-op if it already exists (same key, same bytes)."""
+        import zarr
+
+        final = self.path(stage, key)
+        if self.exists(stage, key):
+            return final
+        arrays = {name: np.asarray(a) for name, a in arrays.items()}
+        for name, a in arrays.items():
+            if a.dtype == object or a.dtype.kind in "USV":
+                raise StoreError(f"{stage} {key[:12]}: array {name!r} has dtype {a.dtype}; "
+                                 "store text in data, numbers in arrays")
+        provenance = {
+            "stage": stage,
+            "key": key,
+            "stage_version": stage_version,
+            "params": params or {},
+            "input_keys": list(input_keys),
+            "package_version": __version__,
+            "digest": array_digest(arrays),
+            "arrays": {n: {"dtype": a.dtype.str, "shape": list(a.shape)}
+                       for n, a in sorted(arrays.items())},
+        }
+        attrs = json.loads(canonical_json({"sonicspec": provenance, "data": data}))
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = final.parent / f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}.zarr"
+        try:
+            group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
+            for name in sorted(arrays):
+                a = arrays[name]
+                chunks = a.shape if a.nbytes <= _ONE_CHUNK_BYTES and a.size else "auto"
+                if a.size == 0:
+                    chunks = tuple(max(1, s) for s in a.shape) or ()
+                arr = group.create_array(
+                    name, shape=a.shape, dtype=a.dtype, chunks=chunks,
+                    compressors=zarr.codecs.ZstdCodec(level=3), fill_value=0,
+                )
+                if a.size:
+                    arr[...] = a
+            group.attrs.update(attrs)
+            try:
+                os.rename(tmp, final)
+            except OSError as exc:
+                if exc.errno in (errno.ENOTEMPTY, errno.EEXIST) and self.exists(stage, key):
+                    shutil.rmtree(tmp, ignore_errors=True)  # another writer won the race
+                else:
+                    raise
+        except OSError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
+            raise StoreError(f"{stage} {key[:12]}: cannot write {final}: "
+                             f"{exc.strerror or exc}{hint}") from exc
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return final
+
+    def read(self, stage: str, key: str) -> Artifact:
+        """Read a whole artifact; :class:`StoreError` if missing or unreadable."""
+        import zarr
+
+        path = self.path(stage, key)
+        if not self.exists(stage, key):
+            raise StoreError(f"{stage} {key[:12]}: no artifact at {path}")
+        try:
+            group = zarr.open_group(store=str(path), mode="r")
+            attrs = dict(group.attrs)
+            arrays = {name: np.asarray(group[name][...]) for name in sorted(group.array_keys())}
+        except Exception as exc:  # zarr raises many kinds on damaged files
+            raise StoreError(f"{stage} {key[:12]}: unreadable artifact at {path}: {exc}") from exc
+        if "sonicspec" not in attrs:
+            raise StoreError(f"{stage} {key[:12]}: {path} has no provenance attributes")
+        return Artifact(stage, key, arrays, attrs.get("data"), attrs["sonicspec"])
+
+    def read_data(self, stage: str, key: str) -> Any:
+        """Only the stage's JSON data (cheap: no arrays are read)."""
+        path = self.path(stage, key) / "zarr.json"
+        try:
+            return json.loads(path.read_text())["attributes"]["data"]
+        except FileNotFoundError:
+            raise StoreError(f"{stage} {key[:12]}: no artifact at {path.parent}") from None
+        except (KeyError, ValueError) as exc:
+            raise StoreError(f"{stage} {key[:12]}: unreadable metadata in {path}") from exc
+
+    def artifacts(self) -> Iterator[tuple[str, str]]:
+        """Every (stage, key) present, in a stable order."""
+        if not self.root.is_dir():
+            return
+        for stage_dir in sorted(p for p in self.root.iterdir() if p.is_dir()):
+            for prefix in sorted(p for p in stage_dir.iterdir() if p.is_dir()):
+                for item in sorted(prefix.glob("*.zarr")):
+                    if not item.name.startswith(TEMP_PREFIX):
+                        yield stage_dir.name, item.name[: -len(".zarr")]
+
+    def temp_folders(self) -> list[Path]:
+        """Leftovers of writers that died before their rename."""
+        if not self.root.is_dir():
+            return []
+        return sorted(self.root.glob(f"*/*/{TEMP_PREFIX}*"))
+
+    def verify_one(self, stage: str, key: str) -> VerifyProblem | None:
+        """Re-read an artifact and recompute its digest."""
+        try:
+            art = self.read(stage, key)
+        except StoreError as exc:
+            return VerifyProblem(stage, key, str(exc).split(": ", 1)[-1])
+        prov = art.provenance
+        if prov.get("key") != key or prov.get("stage") != stage:
+            return VerifyProblem(stage, key, "provenance names another artifact "
+                                 f"({prov.get('stage')} {str(prov.get('key'))[:12]})")
+        expected = {n: (m["dtype"], tuple(m["shape"])) for n, m in prov.get("arrays", {}).items()}
+        found = {n: (a.dtype.str, a.shape) for n, a in art.arrays.items()}
+        if expected != found:
+            return VerifyProblem(stage, key, f"arrays differ from provenance: expected "
+                                 f"{sorted(expected)}, found {sorted(found)}")
+        if array_digest(art.arrays) != prov.get("digest"):
+            return VerifyProblem(stage, key, "array contents do not match the recorded digest")
+        return None
+
+    def verify(self, expected: Mapping[str, str] | None = None) -> list[VerifyProblem]:
+        """Check every artifact; with ``expected`` (key -> stage), also report missing ones."""
+        problems = []
+        present = set()
+        for stage, key in self.artifacts():
+            present.add(key)
+            problem = self.verify_one(stage, key)
+            if problem is not None:
+                problems.append(problem)
+        for key, stage in sorted((expected or {}).items()):
+            if key not in present:
+                problems.append(VerifyProblem(stage, key, "missing"))
+        for tmp in self.temp_folders():
+            problems.append(VerifyProblem(tmp.parent.parent.name, tmp.name,
+                                          "unfinished temporary folder (a writer died); "
+                                          "safe to delete"))
+        return problems
