@@ -9,7 +9,7 @@ from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 from sonicspec.geometry.repair import RepairSettings, leak_test, mesh_stats, repair_mesh
-from sonicspec.testing.meshes import ScannedHouse, scanned_house
+from sonicspec.testing.meshes import ScannedHouse, house_contains_air, house_mesh, scanned_house
 
 HOUSE_SETTINGS = RepairSettings(max_hole_size_m=1.5, if_not_watertight="error")
 
@@ -163,3 +163,16 @@ def test_report_to_dict(repaired):
     data = report.to_dict()
     assert data["watertight"] is True and data["before"]["watertight"] is False
     assert data["holes_closed"] == 1
+
+
+def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():
+    mesh = house_mesh(floors=2)
+    one_floor = house_mesh()
+    assert mesh.to_trimesh().is_watertight
+    assert mesh.air_volume() == pytest.approx(2 * one_floor.air_volume())
+    assert np.all(house_contains_air(mesh.face_centroids + 1e-3 * mesh.face_normals, floors=2))
+    # a clean mesh passes repair unchanged (two storeys: two closed pieces)
+    fixed, report = repair_mesh(mesh, RepairSettings(if_not_watertight="error"))
+    assert report.after.components == 2 and report.components_flipped == 0
+    assert report.faces_flipped_coherent == 0 and report.merged_vertices == 0
+    np.testing.assert_array_equal(fixed.faces, mesh.faces)

@@ -14,8 +14,9 @@ A scene ``<id>`` comes as ``<id>.glb`` (textured render mesh), ``<id>_semantic.p
 surface with an ``object_id`` per face, written by habitat-sim) and ``<id>.house`` (the ASCII
 annotation file whose ``O`` lines give each object's category and whose ``C`` lines give each
 category's mpcat40 index and name). All three are in the scan's own frame, z up, metres —
-including the glb, which breaks the glTF y-up convention (Habitat's MP3D dataset config declares
-``up = +z`` for it), so :func:`load_matterport` reads them with ``up_axis="z"``.
+including the glb, which breaks the glTF y-up convention (habitat-sim loads ``.glb`` stages
+assuming "MP3D glb with gravity = -Z", and writes the semantic PLY without rotating the scan's
+vertices), so :func:`load_matterport` reads them with ``up_axis="z"``.
 
 :func:`load_matterport` uses **the semantic mesh as the acoustic geometry**: its faces carry
 the object ids, which map through the house file to mpcat40 categories, and it is the same

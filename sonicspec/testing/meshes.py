@@ -21,9 +21,11 @@ __all__ = [
     "HOUSE_DOOR_HEIGHT_M",
     "HOUSE_HEIGHT_M",
     "HOUSE_ROOMS",
+    "HOUSE_SLAB_M",
     "MatterportFixture",
     "PlainMeshFixture",
     "ScannedHouse",
+    "house_contains_air",
     "house_mesh",
     "scanned_house",
     "voxel_air_surface",
@@ -311,6 +313,8 @@ HOUSE_ROOMS = ((0.0, 4.0, 0.0, 5.0), (4.2, 8.0, 0.0, 5.0), (0.0, 8.0, 5.2, 8.0))
 HOUSE_DOORS = ((4.0, 4.2, 2.0, 3.0), (1.0, 2.0, 5.0, 5.2), (6.0, 7.0, 5.0, 5.2))
 HOUSE_HEIGHT_M = 2.6
 HOUSE_DOOR_HEIGHT_M = 2.1
+#: Thickness of the slab between the floors of a multi-storey house, metres.
+HOUSE_SLAB_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -333,16 +337,32 @@ class ScannedHouse:
     @staticmethod
     def contains_air(points: np.ndarray) -> np.ndarray:
         """True for points in a room or a door opening (the oracle for 'inside the air')."""
-        points = np.atleast_2d(points)
-        x, y, z = points[:, 0], points[:, 1], points[:, 2]
-        inside = np.zeros(len(points), bool)
+        return house_contains_air(points)
+
+
+def house_contains_air(
+    points: np.ndarray, floors: int = 1, slab_m: float = HOUSE_SLAB_M
+) -> np.ndarray:
+    """True for points in a room or door opening of the synthetic house (any of its floors)."""
+    points = np.atleast_2d(points)
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    inside = np.zeros(len(points), bool)
+    for floor in range(floors):
+        z0 = floor * (HOUSE_HEIGHT_M + slab_m)
         for x0, x1, y0, y1 in HOUSE_ROOMS:
-            inside |= (x > x0) & (x < x1) & (y > y0) & (y < y1) & (z > 0) & (z < HOUSE_HEIGHT_M)
+            inside |= (
+                (x > x0) & (x < x1) & (y > y0) & (y < y1) & (z > z0) & (z < z0 + HOUSE_HEIGHT_M)
+            )
         for x0, x1, y0, y1 in HOUSE_DOORS:
             inside |= (
-                (x > x0) & (x < x1) & (y > y0) & (y < y1) & (z > 0) & (z < HOUSE_DOOR_HEIGHT_M)
+                (x > x0)
+                & (x < x1)
+                & (y > y0)
+                & (y < y1)
+                & (z > z0)
+                & (z < z0 + HOUSE_DOOR_HEIGHT_M)
             )
-        return inside
+    return inside
 
 
 def _grid(breaks: list[float], max_step_m: float) -> np.ndarray:
@@ -402,19 +422,28 @@ def voxel_air_surface(xs: np.ndarray, ys: np.ndarray, zs: np.ndarray, air: np.nd
     return mesh.replace(face_label=label, labels=("wall", "floor", "ceiling"))
 
 
-def house_mesh(max_step_m: float = 1.0) -> SceneMesh:
-    """The intact synthetic house (:data:`HOUSE_ROOMS`, :data:`HOUSE_DOORS`) as a voxel surface."""
+def house_mesh(max_step_m: float = 1.0, floors: int = 1, slab_m: float = HOUSE_SLAB_M) -> SceneMesh:
+    """The intact synthetic house (:data:`HOUSE_ROOMS`, :data:`HOUSE_DOORS`) as a voxel surface.
+
+    With ``floors > 1`` the same plan is stacked, each storey ``HOUSE_HEIGHT_M`` high with a
+    ``slab_m`` slab in between (no stairs: the storeys are separate closed air volumes). Grid
+    cells are at most ``max_step_m`` across, which sets the triangle count.
+    """
     boxes = HOUSE_ROOMS + HOUSE_DOORS
     xs = _grid(sorted({v for b in boxes for v in b[:2]}), max_step_m)
     ys = _grid(sorted({v for b in boxes for v in b[2:]}), max_step_m)
-    zs = _grid([0.0, HOUSE_DOOR_HEIGHT_M, HOUSE_HEIGHT_M], max_step_m)
+    z_breaks = []
+    for floor in range(floors):
+        z0 = floor * (HOUSE_HEIGHT_M + slab_m)
+        z_breaks += [z0, z0 + HOUSE_DOOR_HEIGHT_M, z0 + HOUSE_HEIGHT_M]
+    zs = _grid(z_breaks, max_step_m)
     centers = np.stack(
         np.meshgrid(
             (xs[:-1] + xs[1:]) / 2, (ys[:-1] + ys[1:]) / 2, (zs[:-1] + zs[1:]) / 2, indexing="ij"
         ),
         axis=-1,
     )
-    air = ScannedHouse.contains_air(centers.reshape(-1, 3)).reshape(centers.shape[:3])
+    air = house_contains_air(centers.reshape(-1, 3), floors, slab_m).reshape(centers.shape[:3])
     return voxel_air_surface(xs, ys, zs, air)
 
 
