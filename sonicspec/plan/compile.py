@@ -1,0 +1,318 @@
+"""Spec -> Plan: expand scenes and splits, assign groups to scenes, cut shards, key every job.
+
+Everything here is deterministic: the same spec and the same input files give the same plan,
+so ``sonicspec plan`` twice prints the same keys. Files enter keys by content (SHA-256 of a mesh,
+a listing of names and sizes for a corpus folder), never by path or modification time, so a
+spec moved to another machine with the same data keeps its keys.
+
+Groups are the unit of content: every random draw about a group is seeded by the spec seed and
+the group id (``<split>/<index>``), not by the shard it lands in, so changing
+``groups_per_shard`` regroups work without changing a single sample.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import glob
+import hashlib
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sonicspec.errors import CompileError
+from sonicspec.plan.hashing import canonical_json, rng_for, sha256_hex
+from sonicspec.plan.model import Job, Plan
+from sonicspec.spec.dataset import DatasetSpec
+from sonicspec.spec.load import LoadedSpec
+from sonicspec.spec.scene import MeshObstacleSpec, MeshSceneSpec
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    """One concrete scene after glob expansion."""
+
+    id: str
+    index: int  # position in spec.scenes
+    file: Path | None  # the mesh file of a mesh scene
+
+
+def _dump(model: Any) -> Any:
+    return model.model_dump(mode="json")
+
+
+class FileDigests:
+    """SHA-256 of files, cached by (path, size, mtime) so re-planning does not re-read them."""
+
+    def __init__(self, cache_file: Path | None = None) -> None:
+        self.cache_file = cache_file
+        self._cache: dict[str, str] = {}
+        self._dirty = False
+        if cache_file is not None and cache_file.is_file():
+            try:
+                self._cache = json.loads(cache_file.read_text())
+            except ValueError:
+                self._cache = {}
+
+    def file(self, path: Path) -> str:
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            raise CompileError(f"{path}: file does not exist") from None
+        token = f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}"
+        if token not in self._cache:
+            h = hashlib.sha256()
+            with open(path, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+            self._cache[token] = h.hexdigest()
+            self._dirty = True
+        return self._cache[token]
+
+    @staticmethod
+    def folder(path: Path) -> str:
+        """Digest of a folder's file names and sizes (portable across copies)."""
+        if not path.is_dir():
+            raise CompileError(f"{path}: corpus folder does not exist")
+        entries = []
+        for root, dirs, files in os.walk(path):
+            dirs.sort()
+            for name in sorted(files):
+                full = Path(root) / name
+                entries.append(f"{full.relative_to(path).as_posix()}|{full.stat().st_size}")
+        return sha256_hex("\n".join(entries))
+
+    def save(self) -> None:
+        if self.cache_file is None or not self._dirty:
+            return
+        self.cache_file.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.cache_file.with_name(f".{self.cache_file.name}.tmp-{os.getpid()}")
+        tmp.write_text(json.dumps(self._cache, sort_keys=True))
+        os.replace(tmp, self.cache_file)
+
+
+def expand_scenes(spec: DatasetSpec, base_dir: Path) -> list[SceneEntry]:
+    """Concrete scenes: one per procedural scene, one per file a mesh glob matches."""
+    out: list[SceneEntry] = []
+    for i, scene in enumerate(spec.scenes):
+        if isinstance(scene, MeshSceneSpec):
+            pattern = str(base_dir / scene.path)
+            if glob.has_magic(scene.path):
+                files = sorted(Path(p) for p in glob.glob(pattern) if Path(p).is_file())
+                if not files:
+                    raise CompileError(f"scenes[{i}].path: glob {scene.path!r} matches no file "
+                                       f"under {base_dir}")
+                out.extend(SceneEntry(f"{scene.id}/{f.stem}", i, f) for f in files)
+            else:
+                f = Path(pattern)
+                if not f.is_file():
+                    raise CompileError(f"scenes[{i}].path: mesh file {f} does not exist")
+                out.append(SceneEntry(scene.id, i, f))
+        else:
+            out.append(SceneEntry(scene.id, i, None))
+    ids = [e.id for e in out]
+    dupes = sorted({x for x in ids if ids.count(x) > 1})
+    if dupes:
+        raise CompileError(f"scenes: ids {dupes} occur twice after expanding globs")
+    return out
+
+
+def assign_split_scenes(spec: DatasetSpec, entries: list[SceneEntry]) -> dict[str, list[str]]:
+    """Which concrete scenes each split uses (disjoint; ``scene_count`` draws from a pool)."""
+    ids = [e.id for e in entries]
+    taken: set[str] = set()
+    out: dict[str, list[str]] = {}
+    for name, split in spec.splits.items():
+        matched: list[str] = []
+        for k, pattern in enumerate(split.scenes):
+            hits = [i for i in ids if fnmatch.fnmatchcase(i, pattern)
+                    or (pattern == i.split("/")[0] and "/" in i)]
+            if not hits:
+                raise CompileError(f"splits.{name}.scenes[{k}]: {pattern!r} matches no scene")
+            matched.extend(h for h in hits if h not in matched)
+        if split.scene_count is not None:
+            pool = sorted(m for m in matched if m not in taken)
+            if len(pool) < split.scene_count:
+                raise CompileError(
+                    f"splits.{name}.scene_count: asks for {split.scene_count} scenes but only "
+                    f"{len(pool)} matched scenes are not used by earlier splits")
+            order = rng_for(spec.seed, "split-scenes", name).permutation(len(pool))
+            chosen = sorted(pool[i] for i in order[: split.scene_count])
+        else:
+            chosen = sorted(matched)
+            shared = sorted(set(chosen) & taken)
+            if shared:
+                raise CompileError(f"splits.{name}.scenes: scenes {shared} are used by another "
+                                   "split; splits must be disjoint")
+        taken.update(chosen)
+        out[name] = chosen
+    return out
+
+
+def group_scenes(spec: DatasetSpec, split: str, scenes: list[str]) -> list[str]:
+    """The scene of every group of ``split``: a seeded permutation, repeated (balanced).
+
+    Group ``i`` keeps its scene when the split's group count changes.
+    """
+    order = rng_for(spec.seed, "group-scenes", split).permutation(len(scenes))
+    n = spec.splits[split].groups
+    return [scenes[order[i % len(scenes)]] for i in range(n)]
+
+
+def _mesh_params(spec: DatasetSpec, entry: SceneEntry, digests: FileDigests,
+                 base_dir: Path) -> dict[str, Any]:
+    scene = spec.scenes[entry.index]
+    dumped = _dump(scene)
+    dumped.pop("id", None)
+    files: dict[str, str] = {}
+    if isinstance(scene, MeshSceneSpec) and entry.file is not None:
+        dumped.pop("path", None)
+        files["mesh"] = digests.file(entry.file)
+        stem = entry.file.with_suffix("")
+        for role, extra in (("semantic", Path(f"{stem}_semantic.ply")),
+                            ("house", stem.with_suffix(".house"))):
+            if scene.format != "plain" and extra.is_file():
+                files[role] = digests.file(extra)
+        if scene.format == "matterport" and "semantic" not in files:
+            raise CompileError(f"scenes[{entry.index}]: format 'matterport' needs "
+                               f"{stem.name}_semantic.ply beside {entry.file.name}")
+    for j, ob in enumerate(scene.obstacles):
+        if isinstance(ob, MeshObstacleSpec):
+            files[f"obstacle{j}"] = digests.file(base_dir / ob.path)
+    return {"scene": dumped, "files": files}
+
+
+def _corpus_params(spec: DatasetSpec, role: str, base_dir: Path) -> dict[str, Any] | None:
+    corpus = getattr(spec.corpora, role)
+    if corpus is None:
+        return None
+    dumped = _dump(corpus)
+    params: dict[str, Any] = {"role": role, "corpus": dumped, "sample_rate_hz": spec.sample_rate_hz,
+                              "seed": spec.seed, "splits": list(spec.splits)}
+    if "root" in dumped:
+        root = base_dir / corpus.root
+        dumped.pop("root")
+        if not root.is_dir():
+            raise CompileError(f"corpora.{role}.root: corpus folder {root} does not exist")
+        params["listing"] = FileDigests.folder(root)
+    return params
+
+
+def _shards(groups: list[str], size: int) -> list[list[str]]:
+    return [groups[i:i + size] for i in range(0, len(groups), size)]
+
+
+def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
+    """The plan of ``loaded``; :class:`CompileError` when the data it needs is not there."""
+    spec: DatasetSpec = loaded.spec
+    base = loaded.base_dir.resolve()
+    store_dir = (base / spec.outputs.store_dir).resolve()
+    output_dir = (base / spec.outputs.dir).resolve()
+    digests = FileDigests(store_dir / "cache" / "file-digests.json" if cache else None)
+
+    jobs: list[Job] = []
+
+    corpus_keys: dict[str, str] = {}
+    for role in ("speech", "noise", "music"):
+        params = _corpus_params(spec, role, base)
+        if params is not None:
+            job = Job("corpus", params, (), f"corpus {role}")
+            jobs.append(job)
+            corpus_keys[role] = job.key
+
+    entries = expand_scenes(spec, base)
+    mesh_keys: dict[str, str] = {}
+    nav_keys: dict[str, str] = {}
+    for entry in entries:
+        mesh = Job("mesh", _mesh_params(spec, entry, digests, base), (), f"mesh {entry.id}")
+        nav = Job("navigation", {
+            "walker_radius_m": spec.placement.walker_radius_m,
+            "walker_height_m": spec.placement.walker_height_m,
+        }, (mesh.key,), f"navigation {entry.id}")
+        jobs.extend([mesh, nav])
+        mesh_keys[entry.id], nav_keys[entry.id] = mesh.key, nav.key
+    digests.save()
+
+    split_scenes = assign_split_scenes(spec, entries)
+    mic = _dump(spec.microphone)
+    mixture = _dump(spec.mixture)
+    arrangement = {k: mixture[k] for k in (
+        "duration_s", "speakers", "utterances_per_speaker", "utterance_gap_s", "noise_clips",
+        "noise_gap_s", "music_clips", "music_gap_s")}
+    corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
+    scene_materials = {e.id: getattr(spec.scenes[e.index], "label_materials", {}) for e in entries}
+    export_keys: list[str] = []
+    outputs = _dump(spec.outputs)
+    for k in ("dir", "store_dir", "groups_per_shard"):
+        outputs.pop(k)
+
+    for split, scenes in split_scenes.items():
+        per_group = group_scenes(spec, split, scenes)
+        for scene_id in sorted(set(per_group)):
+            groups = [f"{split}/{i:06d}" for i, s in enumerate(per_group) if s == scene_id]
+            for n, shard in enumerate(_shards(groups, spec.outputs.groups_per_shard)):
+                tag = f"{split}/{scene_id}#{n}"
+                common = {"groups": shard, "split": split, "seed": spec.seed}
+                placement = Job("placement", {
+                    **common, "scene_id": scene_id,
+                    "placement": _dump(spec.placement), "trajectory": _dump(spec.trajectory),
+                    "microphone": mic, "speakers": spec.mixture.speakers,
+                    "noise": "noise" in corpus_keys, "music": "music" in corpus_keys,
+                }, (nav_keys[scene_id],), f"placement {tag}")
+                arrange = Job("arrange", {
+                    **common, "mixture": arrangement, "sample_rate_hz": spec.sample_rate_hz,
+                }, corpus_inputs, f"arrange {tag}")
+                rir = Job("rir", {
+                    **common, "acoustics": _dump(spec.acoustics),
+                    "materials": _dump(spec.materials),
+                    "scene_label_materials": scene_materials[scene_id],
+                    "microphone": mic, "speed_of_sound_m_s": spec.speed_of_sound_m_s,
+                    "sample_rate_hz": spec.sample_rate_hz,
+                }, (mesh_keys[scene_id], placement.key), f"rir {tag}")
+                render = Job("render", {
+                    **common, "interpolation": spec.mixture.interpolation,
+                    "targets": list(spec.mixture.targets),
+                    "sample_rate_hz": spec.sample_rate_hz,
+                    "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
+                }, (rir.key, arrange.key, placement.key, *corpus_inputs), f"render {tag}")
+                mix = Job("mix", {
+                    **common, "loudness": mixture["loudness"], "tasks": mixture["tasks"],
+                    "speakers": spec.mixture.speakers,
+                }, (render.key,), f"mix {tag}")
+                export = Job("export", {
+                    **common, "outputs": outputs, "output_dir": str(output_dir),
+                    "sample_rate_hz": spec.sample_rate_hz, "scene_id": scene_id,
+                }, (mix.key, render.key, rir.key, arrange.key, placement.key), f"export {tag}")
+                jobs.extend([placement, arrange, rir, render, mix, export])
+                export_keys.append(export.key)
+
+    spec_json = json.loads(loaded.spec.model_dump_json())
+    jobs.append(Job("dataset", {
+        "spec": spec_json, "output_dir": str(output_dir),
+        "manifests": list(spec.outputs.manifests),
+        "splits": {s: spec.splits[s].groups for s in spec.splits},
+    }, tuple(export_keys), "dataset"))
+    return Plan(
+        name=spec.name,
+        seed=spec.seed,
+        store_dir=str(store_dir),
+        output_dir=str(output_dir),
+        spec_digest=sha256_hex(canonical_json(spec_json)),
+        jobs=tuple(jobs),
+    )
+
+
+def plan_changes(old: Plan | None, new: Plan) -> dict[str, dict[str, int]]:
+    """Per step: jobs kept, added and dropped relative to ``old`` (the last build's plan)."""
+    old_keys: Mapping[str, set[str]] = {}
+    if old is not None:
+        old_keys = {step: {j.key for j in jobs} for step, jobs in old.by_step().items()}
+    out = {}
+    for step, jobs in new.by_step().items():
+        keys = {j.key for j in jobs}
+        before = old_keys.get(step, set())
+        out[step] = {"kept": len(keys & before), "added": len(keys - before),
+                     "dropped": len(before - keys)}
+    return out

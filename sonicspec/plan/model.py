@@ -1,0 +1,148 @@
+"""The plan: every job a build runs, with its content key, in dependency order."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sonicspec.errors import CompileError
+from sonicspec.plan.hashing import canonical_json, content_key, sha256_hex
+
+
+@dataclass(frozen=True)
+class Step:
+    """A pipeline step: its name, output version, and the resources one of its jobs needs."""
+
+    name: str
+    version: int
+    threads: int
+    mem_mb: int
+    runtime_min: int
+    description: str
+
+
+STEPS: tuple[Step, ...] = (
+    Step("corpus", 1, 1, 2000, 60, "index (or generate) a corpus"),
+    Step("mesh", 1, 1, 4000, 30, "build or import a scene, repair it"),
+    Step("navigation", 1, 1, 4000, 30, "walkable area of each floor"),
+    Step("placement", 1, 1, 2000, 10, "mic, sources and trajectories per group"),
+    Step("arrange", 1, 1, 2000, 10, "utterances and clips per track"),
+    Step("rir", 1, 2, 4000, 60, "room impulse responses along every trajectory"),
+    Step("render", 1, 1, 4000, 30, "moving-source convolution of every track"),
+    Step("mix", 1, 1, 4000, 10, "loudness normalisation and task mixtures"),
+    Step("export", 1, 1, 2000, 10, "audio files and metadata per group"),
+    Step("dataset", 1, 1, 2000, 10, "dataset.json and manifests"),
+)
+STEP_BY_NAME: Mapping[str, Step] = {s.name: s for s in STEPS}
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: a step applied to parameters and to the artifacts of other jobs."""
+
+    step: str
+    params: Mapping[str, Any]
+    inputs: tuple[str, ...] = ()
+    label: str = ""
+    key: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        if self.step not in STEP_BY_NAME:
+            raise CompileError(f"job step: expected one of {', '.join(STEP_BY_NAME)}, "
+                               f"got {self.step!r}")
+        # Params are normalised to plain JSON data so the key and the stored copy agree.
+        object.__setattr__(self, "params", json.loads(canonical_json(self.params)))
+        key = content_key(self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs)
+        object.__setattr__(self, "key", key)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "key": self.key, "label": self.label,
+                "inputs": list(self.inputs), "params": self.params}
+
+
+@dataclass(frozen=True)
+class Plan:
+    """All jobs of a build in dependency order (a job's inputs come before it)."""
+
+    name: str
+    seed: int
+    store_dir: str
+    output_dir: str
+    spec_digest: str
+    jobs: tuple[Job, ...]
+
+    def __post_init__(self) -> None:
+        seen: set[str] = set()
+        for job in self.jobs:
+            missing = [k for k in job.inputs if k not in seen]
+            if missing:
+                raise CompileError(f"plan: job {job.label or job.key[:12]} needs "
+                                   f"{missing[0][:12]}, which no earlier job makes")
+            seen.add(job.key)
+
+    @property
+    def digest(self) -> str:
+        """Identifies the plan (its jobs and locations); names the plan file."""
+        return sha256_hex(canonical_json([self.store_dir, self.output_dir,
+                                          [j.key for j in self.jobs]]))
+
+    def by_key(self) -> dict[str, Job]:
+        return {j.key: j for j in self.jobs}
+
+    def by_step(self) -> dict[str, list[Job]]:
+        out: dict[str, list[Job]] = {s.name: [] for s in STEPS}
+        for job in self.jobs:
+            out[job.step].append(job)
+        return out
+
+    def __iter__(self) -> Iterator[Job]:
+        return iter(self.jobs)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": "sonicspec-plan",
+            "version": 1,
+            "name": self.name,
+            "seed": self.seed,
+            "store_dir": self.store_dir,
+            "output_dir": self.output_dir,
+            "spec_digest": self.spec_digest,
+            "jobs": [j.to_dict() for j in self.jobs],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+        if data.get("format") != "sonicspec-plan" or data.get("version") != 1:
+            raise CompileError("plan file: not a sonicspec plan (version 1)")
+        jobs = []
+        for item in data["jobs"]:
+            job = Job(item["step"], item["params"], tuple(item["inputs"]), item.get("label", ""))
+            if job.key != item["key"]:
+                raise CompileError(f"plan file: job {item.get('label')} has key {item['key'][:12]}"
+                                   f" but its parameters hash to {job.key[:12]} (edited or made "
+                                   "by another sonicspec version); compile the spec again")
+            jobs.append(job)
+        return cls(data["name"], data["seed"], data["store_dir"], data["output_dir"],
+                   data["spec_digest"], tuple(jobs))
+
+    def write(self, path: Path) -> Path:
+        """Write the plan as JSON, atomically."""
+        import os
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        tmp.write_text(json.dumps(self.to_dict(), indent=1, sort_keys=True) + "\n")
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def read(cls, path: Path) -> Plan:
+        try:
+            return cls.from_dict(json.loads(Path(path).read_text()))
+        except FileNotFoundError:
+            raise CompileError(f"plan file {path}: does not exist") from None
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CompileError(f"plan file {path}: unreadable ({exc})") from exc
