@@ -88,27 +88,44 @@ def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
     return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
 
 
-def _segments_touch(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, eps: float) -> bool:
-    """True if closed segments pq and rs intersect or touch (within eps, in m²)."""
-    d1, d2 = _orient(r, s, p), _orient(r, s, q)
-    d3, d4 = _orient(p, q, r), _orient(p, q, s)
-    if ((d1 > eps and d2 < -eps) or (d1 < -eps and d2 > eps)) and (
-        (d3 > eps and d4 < -eps) or (d3 < -eps and d4 > eps)
-    ):
-        return True
+def _crossing_pairs(xy: np.ndarray, eps: float) -> np.ndarray:
+    """Index pairs (i, k), i < k, of non-adjacent polygon edges that cross or touch.
 
-    def on_segment(a: np.ndarray, b: np.ndarray, point: np.ndarray, d: float) -> bool:
-        if abs(d) > eps:
-            return False
+    Edge i runs from vertex i to i + 1. Two closed segments meet when each straddles the
+    other's line (a proper crossing) or when an endpoint lies on the other segment (touching);
+    ``eps`` is the tolerance on twice-areas. Vectorised over all pairs: O(n²) memory.
+    """
+    n = xy.shape[0]
+    p, q = xy, np.roll(xy, -1, axis=0)
+
+    def orient(a, b, c):
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+            c[..., 0] - a[..., 0]
+        )
+
+    pi, qi = p[:, None, :], q[:, None, :]
+    rk, sk = p[None, :, :], q[None, :, :]
+    d1, d2 = orient(rk, sk, pi), orient(rk, sk, qi)
+    d3, d4 = orient(pi, qi, rk), orient(pi, qi, sk)
+
+    def straddles(u, v):
+        return ((u > eps) & (v < -eps)) | ((u < -eps) & (v > eps))
+
+    def on_segment(a, b, point, d):
         lo, hi = np.minimum(a, b) - 1e-12, np.maximum(a, b) + 1e-12
-        return bool(np.all(point >= lo) and np.all(point <= hi))
+        return (np.abs(d) <= eps) & np.all((point >= lo) & (point <= hi), axis=-1)
 
-    return (
-        on_segment(r, s, p, d1)
-        or on_segment(r, s, q, d2)
-        or on_segment(p, q, r, d3)
-        or on_segment(p, q, s, d4)
+    meet = (straddles(d1, d2) & straddles(d3, d4)) | (
+        on_segment(rk, sk, pi, d1)
+        | on_segment(rk, sk, qi, d2)
+        | on_segment(pi, qi, rk, d3)
+        | on_segment(pi, qi, sk, d4)
     )
+    i, k = np.triu_indices(n, 2)
+    keep = ~((i == 0) & (k == n - 1))  # edges n-1 and 0 share vertex 0
+    i, k = i[keep], k[keep]
+    hits = meet[i, k]
+    return np.column_stack([i[hits], k[hits]])
 
 
 def _check_simple_polygon(name: str, xy: np.ndarray) -> None:
@@ -124,21 +141,22 @@ def _check_simple_polygon(name: str, xy: np.ndarray) -> None:
             f"{name}: expected distinct consecutive vertices, got vertex {i} and "
             f"{(i + 1) % n} at the same point {xy[i].tolist()}"
         )
-    for i in range(n):
-        # Adjacent edges meet only at their shared vertex unless the boundary folds back.
-        j = (i + 1) % n
-        if abs(_orient(xy[i], xy[j], xy[(j + 1) % n])) <= eps and np.dot(edge[i], edge[j]) < 0:
-            raise GeometryError(
-                f"{name}: expected a simple polygon, got a spike folding back at vertex {j}"
-            )
-        for k in range(i + 2, n):
-            if i == 0 and k == n - 1:
-                continue  # edges n-1 and 0 are adjacent
-            if _segments_touch(xy[i], xy[j], xy[k], xy[(k + 1) % n], eps):
-                raise GeometryError(
-                    f"{name}: expected a simple polygon, got edges {i}-{j} and "
-                    f"{k}-{(k + 1) % n} intersecting; the polygon is self-intersecting"
-                )
+    following = np.roll(edge, -1, axis=0)
+    cross = edge[:, 0] * following[:, 1] - edge[:, 1] * following[:, 0]
+    # Adjacent edges meet only at their shared vertex unless the boundary folds back on itself.
+    spikes = np.flatnonzero((np.abs(cross) <= eps) & (np.einsum("ij,ij->i", edge, following) < 0))
+    if len(spikes):
+        raise GeometryError(
+            f"{name}: expected a simple polygon, got a spike folding back at vertex "
+            f"{(int(spikes[0]) + 1) % n}"
+        )
+    pairs = _crossing_pairs(xy, eps)
+    if len(pairs):
+        i, k = (int(v) for v in pairs[0])
+        raise GeometryError(
+            f"{name}: expected a simple polygon, got edges {i}-{(i + 1) % n} and "
+            f"{k}-{(k + 1) % n} intersecting; the polygon is self-intersecting"
+        )
     area = _signed_area(xy)
     if abs(area) <= 1e-9 * scale * scale:
         raise GeometryError(f"{name}: expected a polygon with non-zero area, got area {area:g} m²")
