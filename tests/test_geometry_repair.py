@@ -176,3 +176,25 @@ def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():
     assert report.after.components == 2 and report.components_flipped == 0
     assert report.faces_flipped_coherent == 0 and report.merged_vertices == 0
     np.testing.assert_array_equal(fixed.faces, mesh.faces)
+
+
+def _pymeshlab_measures(mesh: SceneMesh) -> dict:
+    pymeshlab = pytest.importorskip("pymeshlab")
+    meshset = pymeshlab.MeshSet()
+    meshset.add_mesh(
+        pymeshlab.Mesh(
+            vertex_matrix=np.array(mesh.vertices), face_matrix=np.array(mesh.faces, np.int32)
+        )
+    )
+    return meshset.get_topological_measures()
+
+
+def test_mesh_stats_agree_with_pymeshlab(house, repaired):
+    # pymeshlab (MeshLab's topology) as a peer for the before/after counts in the report
+    for mesh in (house.damaged, repaired[0]):
+        peer = _pymeshlab_measures(mesh)
+        ours = mesh_stats(mesh.faces, mesh.vertices.shape[0])
+        assert ours.boundary_edges == peer["boundary_edges"]
+        assert ours.non_manifold_edges == peer["non_two_manifold_edges"]
+        assert ours.components == peer["connected_components_number"]
+    assert _pymeshlab_measures(repaired[0])["is_mesh_two_manifold"]
