@@ -151,16 +151,18 @@ class RepairSpec(SpecModel):
 
     enabled: bool = Field(True, description="Run the repair steps at all.")
     merge_distance_m: float = Field(
-        1e-4, ge=0, description="Vertices closer than this are merged, metres."
+        1e-3, ge=0, description="Vertices closer than this are merged, metres."
     )
-    min_component_fraction: float = Field(
-        0.01, ge=0, le=1,
-        description="Disconnected pieces with fewer faces than this fraction of the largest are "
-        "removed as debris (unitless).",
+    min_component_area_m2: float = Field(
+        0.01, ge=0,
+        description="Disconnected pieces with less total area are removed as debris, m².",
     )
-    max_hole_edges: int = Field(
-        200, ge=0, description="Holes bounded by up to this many edges are closed (0: none)."
+    max_hole_size_m: float = Field(
+        1.0, ge=0,
+        description="Holes whose boundary fits in a box of this diagonal are closed, metres "
+        "(0: none).",
     )
+    orient: bool = Field(True, description="Re-orient faces so normals point into the air.")
     leak_test_rays: int = Field(
         10000, ge=0, description="Random rays from interior points used to measure leakage (0: skip)."
     )
@@ -168,7 +170,9 @@ class RepairSpec(SpecModel):
         1e-4, ge=0, le=1, description="Largest acceptable fraction of rays escaping to infinity."
     )
     on_leak: Literal["error", "warn"] = Field(
-        "error", description="What a leak above max_leak_fraction does: stop, or warn and go on."
+        "error",
+        description="What a scene that stays open (not watertight, or leaking more than "
+        "max_leak_fraction) does: stop with an error, or warn and go on.",
     )
 
 
