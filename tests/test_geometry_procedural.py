@@ -326,7 +326,12 @@ def test_with_materials_and_concatenate():
         bare.with_materials({"wall": "glass"})
     merged = SceneMesh.concatenate([room, bare])
     assert merged.labels == ("wall", "floor", "ceiling", "unlabeled")
-    assert merged.materials == ("plaster", "concrete", "x")
+    assert merged.materials == (
+        "plaster_on_brick",
+        "parquet_on_concrete",
+        "plaster_on_concrete",
+        "x",
+    )
     assert merged.n_faces == 24 and merged.faces.max() == 15
     with pytest.raises(GeometryError, match="at least one mesh"):
         SceneMesh.concatenate([])

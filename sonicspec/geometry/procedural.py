@@ -32,11 +32,13 @@ __all__ = [
     "triangulate_polygon",
 ]
 
-#: Default materials; names of the built-in material library (override per call).
-DEFAULT_WALL_MATERIAL = "plaster"
-DEFAULT_FLOOR_MATERIAL = "concrete"
-DEFAULT_CEILING_MATERIAL = "plaster"
-DEFAULT_OBSTACLE_MATERIAL = "wood"
+#: Default materials: names in the built-in material library, the same defaults as the spec's
+#: ``SurfaceMaterialsSpec`` and obstacle specs (override per call).
+DEFAULT_WALL_MATERIAL = "plaster_on_brick"
+DEFAULT_FLOOR_MATERIAL = "parquet_on_concrete"
+DEFAULT_CEILING_MATERIAL = "plaster_on_concrete"
+DEFAULT_OBSTACLE_MATERIAL = "wood_panel"
+DEFAULT_COLUMN_MATERIAL = "concrete_painted"
 
 _WALL, _FLOOR, _CEILING = 0, 1, 2
 _ROOM_LABELS = ("wall", "floor", "ceiling")
@@ -457,7 +459,7 @@ def box_obstacle(
     yaw_deg: float = 0.0,
     *,
     material: str = DEFAULT_OBSTACLE_MATERIAL,
-    label: str = "obstacle",
+    label: str = "furniture",
 ) -> SceneMesh:
     """A closed box with outward normals.
 
@@ -486,8 +488,8 @@ def cylinder_obstacle(
     base_z_m: float = 0.0,
     segments: int = 24,
     *,
-    material: str = DEFAULT_OBSTACLE_MATERIAL,
-    label: str = "obstacle",
+    material: str = DEFAULT_COLUMN_MATERIAL,
+    label: str = "column",
 ) -> SceneMesh:
     """A closed upright cylinder (a column, a person, a pot) with outward normals.
 
