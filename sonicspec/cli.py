@@ -33,27 +33,39 @@ def cmd_validate(args: argparse.Namespace) -> int:
         errors = [p for p in problems if p.severity == "error"]
         warnings = [p for p in problems if p.severity == "warning"]
         if args.json:
-            report.append({
-                "spec": path,
-                "valid": loaded is not None,
-                "problems": [
-                    {"severity": p.severity, "path": list(p.path), "line": p.line,
-                     "column": p.column, "message": p.message, "text": p.format(path)}
-                    for p in problems
-                ],
-            })
+            report.append(
+                {
+                    "spec": path,
+                    "valid": loaded is not None,
+                    "problems": [
+                        {
+                            "severity": p.severity,
+                            "path": list(p.path),
+                            "line": p.line,
+                            "column": p.column,
+                            "message": p.message,
+                            "text": p.format(path),
+                        }
+                        for p in problems
+                    ],
+                }
+            )
         else:
             _print_problems(problems, path)
             if loaded is None:
-                print(f"{path}: invalid ({len(errors)} error{'s' * (len(errors) != 1)})",
-                      file=sys.stderr)
+                print(
+                    f"{path}: invalid ({len(errors)} error{'s' * (len(errors) != 1)})",
+                    file=sys.stderr,
+                )
             elif not args.quiet:
                 from sonicspec.plan.summary import summarize
 
                 s = summarize(loaded.spec)
                 extra = f", {len(warnings)} warning{'s' * (len(warnings) != 1)}" if warnings else ""
-                print(f"{path}: valid ({len(loaded.spec.scenes)} scene entries, "
-                      f"{len(s.splits)} splits, {s.groups} groups{extra})")
+                print(
+                    f"{path}: valid ({len(loaded.spec.scenes)} scene entries, "
+                    f"{len(s.splits)} splits, {s.groups} groups{extra})"
+                )
         if loaded is None:
             worst = EXIT_INVALID
     if args.json:
@@ -85,25 +97,130 @@ def cmd_init(args: argparse.Namespace) -> int:
         print(f"sonicspec: error: {out} exists; pass --force to overwrite it", file=sys.stderr)
         return EXIT_FAILURE
     _write_atomic(out, text)
-    print(f"wrote {out} (preset {args.preset}); check it with: sonicspec validate {out}",
-          file=sys.stderr)
+    print(
+        f"wrote {out} (preset {args.preset}); check it with: sonicspec validate {out}",
+        file=sys.stderr,
+    )
     return EXIT_OK
+
+
+def _load_or_exit(spec: str):
+    from sonicspec.spec import validate_file
+
+    loaded, problems = validate_file(spec)
+    _print_problems(problems, spec)
+    return loaded
+
+
+def _last_plan_path(plan) -> Path:
+    return Path(plan.store_dir) / "plans" / f"last-build-{plan.name}.json"
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
+    from sonicspec.plan.compile import compile_spec, plan_changes
+    from sonicspec.plan.model import Plan
     from sonicspec.plan.summary import format_summary, summarize
-    from sonicspec.spec import validate_file
+    from sonicspec.stages.workflow import progress
+    from sonicspec.store import ArtifactStore
 
-    loaded, problems = validate_file(args.spec)
-    _print_problems(problems, args.spec)
+    loaded = _load_or_exit(args.spec)
     if loaded is None:
         return EXIT_INVALID
     summary = summarize(loaded.spec)
+    if args.summary:
+        print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
+        return EXIT_OK
+    plan = compile_spec(loaded)
+    last = _last_plan_path(plan)
+    old = Plan.read(last) if last.is_file() else None
+    changes = plan_changes(old, plan)
+    done = {p.step: p.done for p in progress(plan, ArtifactStore(plan.store_dir))}
+    steps = {
+        step: {"jobs": len(jobs), "in_store": done.get(step, 0), **changes[step]}
+        for step, jobs in plan.by_step().items()
+        if jobs
+    }
     if args.json:
-        print(json.dumps(summary.to_dict(), indent=2))
-    else:
-        print(format_summary(summary))
+        print(
+            json.dumps(
+                {
+                    "summary": summary.to_dict(),
+                    "store_dir": plan.store_dir,
+                    "output_dir": plan.output_dir,
+                    "plan_digest": plan.digest,
+                    "steps": steps,
+                    "jobs": [j.to_dict() for j in plan.jobs],
+                },
+                indent=2,
+            )
+        )
+        return EXIT_OK
+    print(format_summary(summary))
+    print(f"\nstore {plan.store_dir}\noutput {plan.output_dir}")
+    since = "since the last build" if old is not None else "(no earlier build)"
+    print(f"{'step':<11} {'jobs':>6} {'in store':>9} {'new':>6} {'dropped':>8}  {since}")
+    for step, c in steps.items():
+        print(f"{step:<11} {c['jobs']:>6} {c['in_store']:>9} {c['added']:>6} {c['dropped']:>8}")
+    if args.keys:
+        for job in plan.jobs:
+            print(f"{job.key}  {job.label}")
     return EXIT_OK
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.stages.workflow import run_build
+
+    loaded = _load_or_exit(args.spec)
+    if loaded is None:
+        return EXIT_INVALID
+    plan = compile_spec(loaded)
+    profile = Path(args.profile) if args.profile else None
+    code = run_build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run)
+    if code == 0 and not args.dry_run:
+        plan.write(_last_plan_path(plan))
+        print(f"dataset written to {plan.output_dir}", file=sys.stderr)
+    return EXIT_OK if code == 0 else EXIT_FAILURE
+
+
+def cmd_job(args: argparse.Namespace) -> int:
+    import logging
+
+    from sonicspec.plan.model import Plan
+    from sonicspec.stages import run_job
+
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr
+    )
+    run_job(Plan.read(Path(args.plan)), args.key)
+    return EXIT_OK
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    from sonicspec.store import ArtifactStore
+
+    store = ArtifactStore(args.store)
+    if not store.root.is_dir():
+        print(f"sonicspec: error: {args.store}: no such store folder", file=sys.stderr)
+        return EXIT_FAILURE
+    expected = None
+    if args.spec:
+        from sonicspec.plan.compile import compile_spec
+
+        loaded = _load_or_exit(args.spec)
+        if loaded is None:
+            return EXIT_INVALID
+        expected = {j.key: j.step for j in compile_spec(loaded).jobs}
+    problems = store.verify(expected)
+    count = sum(1 for _ in store.artifacts())
+    for p in problems:
+        print(p.format(), file=sys.stderr)
+    print(
+        f"{args.store}: {count} artifacts checked, {len(problems)} problem"
+        f"{'s' * (len(problems) != 1)}",
+        file=sys.stderr if problems else sys.stdout,
+    )
+    return EXIT_FAILURE if problems else EXIT_OK
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -129,8 +246,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("validate", help="check spec files; exit 0 if valid, 2 if not")
     p.add_argument("specs", nargs="+", metavar="SPEC", help="spec files (YAML or JSON)")
-    p.add_argument("--check-files", action="store_true",
-                   help="also check that referenced meshes, SOFA files and corpus folders exist")
+    p.add_argument(
+        "--check-files",
+        action="store_true",
+        help="also check that referenced meshes, SOFA files and corpus folders exist",
+    )
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print only problems")
     p.set_defaults(func=cmd_validate)
@@ -142,16 +262,53 @@ def build_parser() -> argparse.ArgumentParser:
     from sonicspec.spec.templates import PRESETS
 
     p = sub.add_parser("init", help="write a commented starting spec that validates as written")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="demo",
-                   help="starting point (default: demo)")
+    p.add_argument(
+        "--preset", choices=sorted(PRESETS), default="demo", help="starting point (default: demo)"
+    )
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     p.set_defaults(func=cmd_init)
 
-    p = sub.add_parser("plan", help="show what a spec will build: splits, groups, hours, RIRs")
+    p = sub.add_parser(
+        "plan",
+        help="show the jobs a spec compiles to, what is already built "
+        "and what changed since the last build",
+    )
     p.add_argument("spec", metavar="SPEC")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--json", action="store_true", help="print everything, jobs included, as JSON")
+    p.add_argument(
+        "--summary",
+        action="store_true",
+        help="only the counts the spec fixes (no data needed: nothing is read)",
+    )
+    p.add_argument("--keys", action="store_true", help="also list every job's key and label")
     p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser("build", help="build the dataset through Snakemake")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument(
+        "--cores",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="CPU cores to use locally (default: all)",
+    )
+    p.add_argument(
+        "--profile", metavar="DIR", help="Snakemake profile, e.g. workflow/profiles/slurm"
+    )
+    p.add_argument("--dry-run", action="store_true", help="show the jobs that would run")
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")
+    p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")
+    p.add_argument("key", metavar="KEY", help="the job's content key")
+    p.set_defaults(func=cmd_job)
+
+    p = sub.add_parser("verify", help="re-check every artifact in a store")
+    p.add_argument("store", metavar="DIR", help="the store folder (outputs.store_dir)")
+    p.add_argument(
+        "--spec", metavar="SPEC", help="also report artifacts this spec needs but the store lacks"
+    )
+    p.set_defaults(func=cmd_verify)
     return parser
 
 
@@ -171,11 +328,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if isinstance(exc, SpecError):
             print(str(exc), file=sys.stderr)
             return EXIT_INVALID
-        kind = "error" if isinstance(exc, SonicspecError) else f"internal error ({type(exc).__name__})"
+        kind = (
+            "error" if isinstance(exc, SonicspecError) else f"internal error ({type(exc).__name__})"
+        )
         print(f"sonicspec: {kind}: {exc}", file=sys.stderr)
         if not isinstance(exc, SonicspecError):
-            print("run again with SONICSPEC_DEBUG=1 for the traceback, and please report it",
-                  file=sys.stderr)
+            print(
+                "run again with SONICSPEC_DEBUG=1 for the traceback, and please report it",
+                file=sys.stderr,
+            )
         return EXIT_FAILURE
 
 

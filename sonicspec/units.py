@@ -25,10 +25,12 @@ def seconds_to_samples(seconds: Seconds, sample_rate_hz: float) -> int:
     """
     if sample_rate_hz <= 0:
         raise ValueError(f"sample_rate_hz: expected > 0, got {sample_rate_hz}")
-    return int(math.floor(seconds * sample_rate_hz + 0.5))
+    return math.floor(seconds * sample_rate_hz + 0.5)
 
 
-def bands_below_nyquist(sample_rate_hz: float, bands_hz: tuple[float, ...] = OCTAVE_BANDS_HZ) -> tuple[float, ...]:
+def bands_below_nyquist(
+    sample_rate_hz: float, bands_hz: tuple[float, ...] = OCTAVE_BANDS_HZ
+) -> tuple[float, ...]:
     """Octave bands whose upper edge (centre * sqrt 2) lies below Nyquist.
 
     A band straddling Nyquist cannot be represented, so it is dropped (DESIGN.md §5).

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from spec_cases import BASE
 
 from sonicspec.cli import main
 from sonicspec.spec import validate_file
 from sonicspec.spec.templates import PRESETS
-from spec_cases import BASE
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -52,7 +52,7 @@ def test_valid_examples_exit_zero() -> None:
         ("version0.yaml", "sonicspec: 0\nname: x\n", "unknown spec version 0"),
         ("noversion.yaml", "name: x\n", "put 'sonicspec: 1' at the top"),
         ("twodocs.yaml", "sonicspec: 1\n---\nsonicspec: 1\n", "found several"),
-        ("dupkey.yaml", "sonicspec: 1\nname: a\nname: b\n", "duplicate key (first given on line 2)"),
+        ("dupkey.yaml", "sonicspec: 1\nname: a\nname: b\n", "duplicate key (first given on line 2"),
         ("badjson.json", '{"sonicspec": 1,,}', "malformed JSON"),
         ("latin1.yaml", b"sonicspec: 1\nname: caf\xe9\n", "not UTF-8"),
     ],
@@ -148,13 +148,25 @@ def test_schema_command_prints_the_checked_in_schema() -> None:
 
 
 def test_plan_summary_of_the_demo() -> None:
-    result = run_cli("plan", str(ROOT / "specs" / "demo.yaml"))
+    result = run_cli("plan", "--summary", str(ROOT / "specs" / "demo.yaml"))
     assert result.returncode == 0, result.stderr
     assert "dataset demo: 6 groups" in result.stdout
-    result = run_cli("plan", "--json", str(ROOT / "specs" / "demo.yaml"))
+    result = run_cli("plan", "--summary", "--json", str(ROOT / "specs" / "demo.yaml"))
     summary = json.loads(result.stdout)
     assert summary["groups"] == 6
     assert [s["name"] for s in summary["splits"]] == ["train", "val", "test"]
+
+
+def test_full_plan_of_the_demo(tmp_path: Path) -> None:
+    spec = write(tmp_path, "demo.yaml", (ROOT / "specs" / "demo.yaml").read_text())
+    result = run_cli("plan", str(spec))
+    assert result.returncode == 0, result.stderr
+    assert "(no earlier build)" in result.stdout
+    assert any(line.split()[:3] == ["rir", "4", "0"] for line in result.stdout.splitlines())
+    plan = json.loads(run_cli("plan", "--json", str(spec)).stdout)
+    assert plan["steps"]["mesh"] == {"jobs": 3, "in_store": 0, "kept": 0, "added": 3,
+                                     "dropped": 0}
+    assert plan["store_dir"] == str(tmp_path / "out" / "store")
 
 
 def test_plan_on_invalid_spec_exits_2(tmp_path: Path) -> None:

@@ -8,11 +8,11 @@ from functools import lru_cache
 import jsonschema
 import pytest
 import yaml
+from spec_cases import BASE, CASES, apply
 
 from sonicspec.spec import validate_text
 from sonicspec.spec.load import format_path
 from sonicspec.spec.schema import json_schema
-from spec_cases import BASE, CASES, apply
 
 
 @lru_cache(maxsize=1)

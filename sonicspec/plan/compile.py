@@ -102,8 +102,9 @@ def expand_scenes(spec: DatasetSpec, base_dir: Path) -> list[SceneEntry]:
             if glob.has_magic(scene.path):
                 files = sorted(Path(p) for p in glob.glob(pattern) if Path(p).is_file())
                 if not files:
-                    raise CompileError(f"scenes[{i}].path: glob {scene.path!r} matches no file "
-                                       f"under {base_dir}")
+                    raise CompileError(
+                        f"scenes[{i}].path: glob {scene.path!r} matches no file under {base_dir}"
+                    )
                 out.extend(SceneEntry(f"{scene.id}/{f.stem}", i, f) for f in files)
             else:
                 f = Path(pattern)
@@ -127,8 +128,11 @@ def assign_split_scenes(spec: DatasetSpec, entries: list[SceneEntry]) -> dict[st
     for name, split in spec.splits.items():
         matched: list[str] = []
         for k, pattern in enumerate(split.scenes):
-            hits = [i for i in ids if fnmatch.fnmatchcase(i, pattern)
-                    or (pattern == i.split("/")[0] and "/" in i)]
+            hits = [
+                i
+                for i in ids
+                if fnmatch.fnmatchcase(i, pattern) or (pattern == i.split("/")[0] and "/" in i)
+            ]
             if not hits:
                 raise CompileError(f"splits.{name}.scenes[{k}]: {pattern!r} matches no scene")
             matched.extend(h for h in hits if h not in matched)
@@ -137,15 +141,18 @@ def assign_split_scenes(spec: DatasetSpec, entries: list[SceneEntry]) -> dict[st
             if len(pool) < split.scene_count:
                 raise CompileError(
                     f"splits.{name}.scene_count: asks for {split.scene_count} scenes but only "
-                    f"{len(pool)} matched scenes are not used by earlier splits")
+                    f"{len(pool)} matched scenes are not used by earlier splits"
+                )
             order = rng_for(spec.seed, "split-scenes", name).permutation(len(pool))
             chosen = sorted(pool[i] for i in order[: split.scene_count])
         else:
             chosen = sorted(matched)
             shared = sorted(set(chosen) & taken)
             if shared:
-                raise CompileError(f"splits.{name}.scenes: scenes {shared} are used by another "
-                                   "split; splits must be disjoint")
+                raise CompileError(
+                    f"splits.{name}.scenes: scenes {shared} are used by another "
+                    "split; splits must be disjoint"
+                )
         taken.update(chosen)
         out[name] = chosen
     return out
@@ -161,47 +168,65 @@ def group_scenes(spec: DatasetSpec, split: str, scenes: list[str]) -> list[str]:
     return [scenes[order[i % len(scenes)]] for i in range(n)]
 
 
-def _mesh_params(spec: DatasetSpec, entry: SceneEntry, digests: FileDigests,
-                 base_dir: Path) -> dict[str, Any]:
+def _mesh_params(
+    spec: DatasetSpec, entry: SceneEntry, digests: FileDigests, base_dir: Path
+) -> tuple[dict[str, Any], dict[str, str]]:
     scene = spec.scenes[entry.index]
     dumped = _dump(scene)
     dumped.pop("id", None)
     files: dict[str, str] = {}
+    paths: dict[str, str] = {}
     if isinstance(scene, MeshSceneSpec) and entry.file is not None:
         dumped.pop("path", None)
         files["mesh"] = digests.file(entry.file)
+        paths["mesh"] = str(entry.file)
         stem = entry.file.with_suffix("")
-        for role, extra in (("semantic", Path(f"{stem}_semantic.ply")),
-                            ("house", stem.with_suffix(".house"))):
+        for role, extra in (
+            ("semantic", Path(f"{stem}_semantic.ply")),
+            ("house", stem.with_suffix(".house")),
+        ):
             if scene.format != "plain" and extra.is_file():
                 files[role] = digests.file(extra)
+                paths[role] = str(extra)
         if scene.format == "matterport" and "semantic" not in files:
-            raise CompileError(f"scenes[{entry.index}]: format 'matterport' needs "
-                               f"{stem.name}_semantic.ply beside {entry.file.name}")
+            raise CompileError(
+                f"scenes[{entry.index}]: format 'matterport' needs "
+                f"{stem.name}_semantic.ply beside {entry.file.name}"
+            )
     for j, ob in enumerate(scene.obstacles):
         if isinstance(ob, MeshObstacleSpec):
             files[f"obstacle{j}"] = digests.file(base_dir / ob.path)
-    return {"scene": dumped, "files": files}
+            paths[f"obstacle{j}"] = str(base_dir / ob.path)
+    return {"scene": dumped, "files": files, "scene_id": entry.id}, paths
 
 
-def _corpus_params(spec: DatasetSpec, role: str, base_dir: Path) -> dict[str, Any] | None:
+def _corpus_params(
+    spec: DatasetSpec, role: str, base_dir: Path
+) -> tuple[dict[str, Any], dict[str, str]] | None:
     corpus = getattr(spec.corpora, role)
     if corpus is None:
         return None
+    paths = {"cache": str((base_dir / spec.corpora.cache_dir).resolve())}
     dumped = _dump(corpus)
-    params: dict[str, Any] = {"role": role, "corpus": dumped, "sample_rate_hz": spec.sample_rate_hz,
-                              "seed": spec.seed, "splits": list(spec.splits)}
+    params: dict[str, Any] = {
+        "role": role,
+        "corpus": dumped,
+        "sample_rate_hz": spec.sample_rate_hz,
+        "seed": spec.seed,
+        "splits": list(spec.splits),
+    }
     if "root" in dumped:
         root = base_dir / corpus.root
         dumped.pop("root")
         if not root.is_dir():
             raise CompileError(f"corpora.{role}.root: corpus folder {root} does not exist")
         params["listing"] = FileDigests.folder(root)
-    return params
+        paths["root"] = str(root.resolve())
+    return params, paths
 
 
 def _shards(groups: list[str], size: int) -> list[list[str]]:
-    return [groups[i:i + size] for i in range(0, len(groups), size)]
+    return [groups[i : i + size] for i in range(0, len(groups), size)]
 
 
 def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
@@ -216,9 +241,9 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
 
     corpus_keys: dict[str, str] = {}
     for role in ("speech", "noise", "music"):
-        params = _corpus_params(spec, role, base)
-        if params is not None:
-            job = Job("corpus", params, (), f"corpus {role}")
+        found = _corpus_params(spec, role, base)
+        if found is not None:
+            job = Job("corpus", found[0], (), f"corpus {role}", found[1])
             jobs.append(job)
             corpus_keys[role] = job.key
 
@@ -226,11 +251,17 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     mesh_keys: dict[str, str] = {}
     nav_keys: dict[str, str] = {}
     for entry in entries:
-        mesh = Job("mesh", _mesh_params(spec, entry, digests, base), (), f"mesh {entry.id}")
-        nav = Job("navigation", {
-            "walker_radius_m": spec.placement.walker_radius_m,
-            "walker_height_m": spec.placement.walker_height_m,
-        }, (mesh.key,), f"navigation {entry.id}")
+        params, paths = _mesh_params(spec, entry, digests, base)
+        mesh = Job("mesh", params, (), f"mesh {entry.id}", paths)
+        nav = Job(
+            "navigation",
+            {
+                "walker_radius_m": spec.placement.walker_radius_m,
+                "walker_height_m": spec.placement.walker_height_m,
+            },
+            (mesh.key,),
+            f"navigation {entry.id}",
+        )
         jobs.extend([mesh, nav])
         mesh_keys[entry.id], nav_keys[entry.id] = mesh.key, nav.key
     digests.save()
@@ -238,9 +269,19 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     split_scenes = assign_split_scenes(spec, entries)
     mic = _dump(spec.microphone)
     mixture = _dump(spec.mixture)
-    arrangement = {k: mixture[k] for k in (
-        "duration_s", "speakers", "utterances_per_speaker", "utterance_gap_s", "noise_clips",
-        "noise_gap_s", "music_clips", "music_gap_s")}
+    arrangement = {
+        k: mixture[k]
+        for k in (
+            "duration_s",
+            "speakers",
+            "utterances_per_speaker",
+            "utterance_gap_s",
+            "noise_clips",
+            "noise_gap_s",
+            "music_clips",
+            "music_gap_s",
+        )
+    }
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     scene_materials = {e.id: getattr(spec.scenes[e.index], "label_materials", {}) for e in entries}
     export_keys: list[str] = []
@@ -255,45 +296,97 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
             for n, shard in enumerate(_shards(groups, spec.outputs.groups_per_shard)):
                 tag = f"{split}/{scene_id}#{n}"
                 common = {"groups": shard, "split": split, "seed": spec.seed}
-                placement = Job("placement", {
-                    **common, "scene_id": scene_id,
-                    "placement": _dump(spec.placement), "trajectory": _dump(spec.trajectory),
-                    "microphone": mic, "speakers": spec.mixture.speakers,
-                    "noise": "noise" in corpus_keys, "music": "music" in corpus_keys,
-                }, (nav_keys[scene_id],), f"placement {tag}")
-                arrange = Job("arrange", {
-                    **common, "mixture": arrangement, "sample_rate_hz": spec.sample_rate_hz,
-                }, corpus_inputs, f"arrange {tag}")
-                rir = Job("rir", {
-                    **common, "acoustics": _dump(spec.acoustics),
-                    "materials": _dump(spec.materials),
-                    "scene_label_materials": scene_materials[scene_id],
-                    "microphone": mic, "speed_of_sound_m_s": spec.speed_of_sound_m_s,
-                    "sample_rate_hz": spec.sample_rate_hz,
-                }, (mesh_keys[scene_id], placement.key), f"rir {tag}")
-                render = Job("render", {
-                    **common, "interpolation": spec.mixture.interpolation,
-                    "targets": list(spec.mixture.targets),
-                    "sample_rate_hz": spec.sample_rate_hz,
-                    "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
-                }, (rir.key, arrange.key, placement.key, *corpus_inputs), f"render {tag}")
-                mix = Job("mix", {
-                    **common, "loudness": mixture["loudness"], "tasks": mixture["tasks"],
-                    "speakers": spec.mixture.speakers,
-                }, (render.key,), f"mix {tag}")
-                export = Job("export", {
-                    **common, "outputs": outputs, "output_dir": str(output_dir),
-                    "sample_rate_hz": spec.sample_rate_hz, "scene_id": scene_id,
-                }, (mix.key, render.key, rir.key, arrange.key, placement.key), f"export {tag}")
+                placement = Job(
+                    "placement",
+                    {
+                        **common,
+                        "scene_id": scene_id,
+                        "placement": _dump(spec.placement),
+                        "trajectory": _dump(spec.trajectory),
+                        "microphone": mic,
+                        "speakers": spec.mixture.speakers,
+                        "noise": "noise" in corpus_keys,
+                        "music": "music" in corpus_keys,
+                    },
+                    (nav_keys[scene_id],),
+                    f"placement {tag}",
+                )
+                arrange = Job(
+                    "arrange",
+                    {
+                        **common,
+                        "mixture": arrangement,
+                        "sample_rate_hz": spec.sample_rate_hz,
+                    },
+                    corpus_inputs,
+                    f"arrange {tag}",
+                )
+                rir = Job(
+                    "rir",
+                    {
+                        **common,
+                        "acoustics": _dump(spec.acoustics),
+                        "materials": _dump(spec.materials),
+                        "scene_label_materials": scene_materials[scene_id],
+                        "microphone": mic,
+                        "speed_of_sound_m_s": spec.speed_of_sound_m_s,
+                        "sample_rate_hz": spec.sample_rate_hz,
+                    },
+                    (mesh_keys[scene_id], placement.key),
+                    f"rir {tag}",
+                )
+                render = Job(
+                    "render",
+                    {
+                        **common,
+                        "interpolation": spec.mixture.interpolation,
+                        "targets": list(spec.mixture.targets),
+                        "sample_rate_hz": spec.sample_rate_hz,
+                        "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
+                    },
+                    (rir.key, arrange.key, placement.key, *corpus_inputs),
+                    f"render {tag}",
+                )
+                mix = Job(
+                    "mix",
+                    {
+                        **common,
+                        "loudness": mixture["loudness"],
+                        "tasks": mixture["tasks"],
+                        "speakers": spec.mixture.speakers,
+                    },
+                    (render.key,),
+                    f"mix {tag}",
+                )
+                export = Job(
+                    "export",
+                    {
+                        **common,
+                        "outputs": outputs,
+                        "output_dir": str(output_dir),
+                        "sample_rate_hz": spec.sample_rate_hz,
+                        "scene_id": scene_id,
+                    },
+                    (mix.key, render.key, rir.key, arrange.key, placement.key),
+                    f"export {tag}",
+                )
                 jobs.extend([placement, arrange, rir, render, mix, export])
                 export_keys.append(export.key)
 
     spec_json = json.loads(loaded.spec.model_dump_json())
-    jobs.append(Job("dataset", {
-        "spec": spec_json, "output_dir": str(output_dir),
-        "manifests": list(spec.outputs.manifests),
-        "splits": {s: spec.splits[s].groups for s in spec.splits},
-    }, tuple(export_keys), "dataset"))
+    jobs.append(
+        Job(
+            "dataset",
+            {
+                "spec": spec_json,
+                "output_dir": str(output_dir),
+                "manifests": list(spec.outputs.manifests),
+                "splits": {s: spec.splits[s].groups for s in spec.splits},
+            },
+            tuple(export_keys),
+            "dataset",
+        )
+    )
     return Plan(
         name=spec.name,
         seed=spec.seed,
@@ -313,6 +406,9 @@ def plan_changes(old: Plan | None, new: Plan) -> dict[str, dict[str, int]]:
     for step, jobs in new.by_step().items():
         keys = {j.key for j in jobs}
         before = old_keys.get(step, set())
-        out[step] = {"kept": len(keys & before), "added": len(keys - before),
-                     "dropped": len(before - keys)}
+        out[step] = {
+            "kept": len(keys & before),
+            "added": len(keys - before),
+            "dropped": len(before - keys),
+        }
     return out

@@ -46,8 +46,9 @@ def _canonical(value: Any, where: str = "params") -> Any:
 
 def canonical_json(value: Any) -> str:
     """Stable JSON text of plain data (the input of every content key)."""
-    return json.dumps(_canonical(value), sort_keys=True, separators=(",", ":"),
-                      ensure_ascii=True, allow_nan=False)
+    return json.dumps(
+        _canonical(value), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
 
 
 def sha256_hex(text: str | bytes) -> str:
@@ -55,21 +56,26 @@ def sha256_hex(text: str | bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def content_key(stage: str, stage_version: int, params: Mapping[str, Any],
-                input_keys: Sequence[str] = ()) -> str:
+def content_key(
+    stage: str, stage_version: int, params: Mapping[str, Any], input_keys: Sequence[str] = ()
+) -> str:
     """The content key of a job: what it computes (stage, version, params) and from what."""
-    return sha256_hex(canonical_json({
-        "stage": stage,
-        "stage_version": stage_version,
-        "params": params,
-        "input_keys": list(input_keys),
-    }))
+    return sha256_hex(
+        canonical_json(
+            {
+                "stage": stage,
+                "stage_version": stage_version,
+                "params": params,
+                "input_keys": list(input_keys),
+            }
+        )
+    )
 
 
 def _words(text: str) -> list[int]:
     """32-bit words of the SHA-256 of ``text`` (keys are hashed again so any text works)."""
     digest = hashlib.sha256(text.encode("utf-8")).digest()
-    return [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 32, 4)]
+    return [int.from_bytes(digest[i : i + 4], "little") for i in range(0, 32, 4)]
 
 
 def rng_for(seed: int, *names: str) -> np.random.Generator:

@@ -47,20 +47,30 @@ class Job:
     params: Mapping[str, Any]
     inputs: tuple[str, ...] = ()
     label: str = ""
+    paths: Mapping[str, str] = field(default_factory=dict)
+    """Where the job's input files are on this machine; not part of the key (files enter the
+    key by content through ``params``)."""
     key: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         if self.step not in STEP_BY_NAME:
-            raise CompileError(f"job step: expected one of {', '.join(STEP_BY_NAME)}, "
-                               f"got {self.step!r}")
+            raise CompileError(
+                f"job step: expected one of {', '.join(STEP_BY_NAME)}, got {self.step!r}"
+            )
         # Params are normalised to plain JSON data so the key and the stored copy agree.
         object.__setattr__(self, "params", json.loads(canonical_json(self.params)))
         key = content_key(self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs)
         object.__setattr__(self, "key", key)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"step": self.step, "key": self.key, "label": self.label,
-                "inputs": list(self.inputs), "params": self.params}
+        return {
+            "step": self.step,
+            "key": self.key,
+            "label": self.label,
+            "inputs": list(self.inputs),
+            "params": self.params,
+            "paths": dict(self.paths),
+        }
 
 
 @dataclass(frozen=True)
@@ -79,15 +89,18 @@ class Plan:
         for job in self.jobs:
             missing = [k for k in job.inputs if k not in seen]
             if missing:
-                raise CompileError(f"plan: job {job.label or job.key[:12]} needs "
-                                   f"{missing[0][:12]}, which no earlier job makes")
+                raise CompileError(
+                    f"plan: job {job.label or job.key[:12]} needs "
+                    f"{missing[0][:12]}, which no earlier job makes"
+                )
             seen.add(job.key)
 
     @property
     def digest(self) -> str:
         """Identifies the plan (its jobs and locations); names the plan file."""
-        return sha256_hex(canonical_json([self.store_dir, self.output_dir,
-                                          [j.key for j in self.jobs]]))
+        return sha256_hex(
+            canonical_json([self.store_dir, self.output_dir, [j.key for j in self.jobs]])
+        )
 
     def by_key(self) -> dict[str, Job]:
         return {j.key: j for j in self.jobs}
@@ -119,14 +132,28 @@ class Plan:
             raise CompileError("plan file: not a sonicspec plan (version 1)")
         jobs = []
         for item in data["jobs"]:
-            job = Job(item["step"], item["params"], tuple(item["inputs"]), item.get("label", ""))
+            job = Job(
+                item["step"],
+                item["params"],
+                tuple(item["inputs"]),
+                item.get("label", ""),
+                item.get("paths", {}),
+            )
             if job.key != item["key"]:
-                raise CompileError(f"plan file: job {item.get('label')} has key {item['key'][:12]}"
-                                   f" but its parameters hash to {job.key[:12]} (edited or made "
-                                   "by another sonicspec version); compile the spec again")
+                raise CompileError(
+                    f"plan file: job {item.get('label')} has key {item['key'][:12]}"
+                    f" but its parameters hash to {job.key[:12]} (edited or made "
+                    "by another sonicspec version); compile the spec again"
+                )
             jobs.append(job)
-        return cls(data["name"], data["seed"], data["store_dir"], data["output_dir"],
-                   data["spec_digest"], tuple(jobs))
+        return cls(
+            data["name"],
+            data["seed"],
+            data["store_dir"],
+            data["output_dir"],
+            data["spec_digest"],
+            tuple(jobs),
+        )
 
     def write(self, path: Path) -> Path:
         """Write the plan as JSON, atomically."""

@@ -52,8 +52,11 @@ class SpecSummary:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d.update(groups=self.groups, audio_hours=self.audio_hours,
-                 rir_points_estimate=self.rir_points_estimate)
+        d.update(
+            groups=self.groups,
+            audio_hours=self.audio_hours,
+            rir_points_estimate=self.rir_points_estimate,
+        )
         return d
 
 
@@ -80,15 +83,17 @@ def summarize(spec: DatasetSpec) -> SpecSummary:
     for name, split in spec.splits.items():
         scenes = sorted({m for p in split.scenes for m in scene_matches(p, spec)})
         tracks = split.groups * spec.mixture.speakers
-        splits.append(SplitSummary(
-            name=name,
-            groups=split.groups,
-            scenes=tuple(scenes),
-            scene_count=split.scene_count,
-            speech_tracks=tracks,
-            audio_hours=split.groups * spec.mixture.duration_s / 3600.0,
-            rir_points_estimate=tracks * per_source + split.groups * static_points,
-        ))
+        splits.append(
+            SplitSummary(
+                name=name,
+                groups=split.groups,
+                scenes=tuple(scenes),
+                scene_count=split.scene_count,
+                speech_tracks=tracks,
+                audio_hours=split.groups * spec.mixture.duration_s / 3600.0,
+                rir_points_estimate=tracks * per_source + split.groups * static_points,
+            )
+        )
     return SpecSummary(
         name=spec.name,
         sample_rate_hz=spec.sample_rate_hz,
@@ -114,8 +119,12 @@ def format_summary(s: SpecSummary) -> str:
         scenes = ", ".join(sp.scenes)
         if sp.scene_count is not None:
             scenes = f"{sp.scene_count} of {scenes}"
-        lines.append(f"{sp.name:<10} {sp.groups:>7} {sp.speech_tracks:>7} "
-                     f"{sp.audio_hours:>8.2f} {sp.rir_points_estimate:>12}  {scenes}")
-    lines.append(f"{'total':<10} {s.groups:>7} {sum(x.speech_tracks for x in s.splits):>7} "
-                 f"{s.audio_hours:>8.2f} {s.rir_points_estimate:>12}")
+        lines.append(
+            f"{sp.name:<10} {sp.groups:>7} {sp.speech_tracks:>7} "
+            f"{sp.audio_hours:>8.2f} {sp.rir_points_estimate:>12}  {scenes}"
+        )
+    lines.append(
+        f"{'total':<10} {s.groups:>7} {sum(x.speech_tracks for x in s.splits):>7} "
+        f"{s.audio_hours:>8.2f} {s.rir_points_estimate:>12}"
+    )
     return "\n".join(lines)

@@ -21,12 +21,16 @@ class AcousticsSpec(SpecModel):
         3, ge=0, le=8, description="Highest reflection order found exactly by image sources."
     )
     max_rir_length_s: float = Field(
-        2.0, gt=0, le=20.0,
+        2.0,
+        gt=0,
+        le=20.0,
         description="Longest RIR kept, seconds; tracing stops earlier once the energy is below "
         "the threshold.",
     )
     energy_threshold_db: float = Field(
-        80.0, gt=0, le=200.0,
+        80.0,
+        gt=0,
+        le=200.0,
         description="Decay below the direct sound at which a ray is terminated, dB.",
     )
     bands_hz: list[OctaveBand] | Literal["auto"] = Field(
@@ -43,8 +47,9 @@ class AcousticsSpec(SpecModel):
         True, description="Let sound pass through surfaces by their transmission coefficient."
     )
     diffraction: bool = Field(
-        False, description="Add edge-diffracted sound around occluders (not yet supported: "
-        "must be false)."
+        False,
+        description="Add edge-diffracted sound around occluders (not yet supported: "
+        "must be false).",
     )
     detection: Literal["diffuse_rain", "receiver_volume"] = Field(
         "diffuse_rain",

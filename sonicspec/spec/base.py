@@ -73,7 +73,8 @@ def _length_check(n: int, shape: str | None = None) -> Any:
     def check(v: Any) -> Any:
         if isinstance(v, (list, tuple)) and len(v) != n:
             raise PydanticCustomError(
-                "vector_length", "expected {n} values {shape}, got {k}: {got}",
+                "vector_length",
+                "expected {n} values {shape}, got {k}: {got}",
                 {"n": n, "shape": shape, "k": len(v), "got": _fmt(v)},
             )
         return v
@@ -105,8 +106,13 @@ def vector(
         BeforeValidator(_length_check(n)),
         AfterValidator(check),
         WithJsonSchema(
-            {"type": "array", "prefixItems": [item] * n, "items": False,
-             "minItems": n, "maxItems": n}
+            {
+                "type": "array",
+                "prefixItems": [item] * n,
+                "items": False,
+                "minItems": n,
+                "maxItems": n,
+            }
         ),
     ]
 
@@ -145,8 +151,13 @@ def value_range(
         BeforeValidator(_length_check(2, "[min, max]")),
         AfterValidator(check),
         WithJsonSchema(
-            {"type": "array", "prefixItems": [item, item], "items": False,
-             "minItems": 2, "maxItems": 2}
+            {
+                "type": "array",
+                "prefixItems": [item, item],
+                "items": False,
+                "minItems": 2,
+                "maxItems": 2,
+            }
         ),
     ]
 

@@ -13,16 +13,6 @@ import math
 from collections.abc import Iterator
 from pathlib import Path
 
-from sonicspec.spec.dataset import DatasetSpec
-from sonicspec.spec.load import Problem, did_you_mean
-from sonicspec.spec.microphone import channel_count
-from sonicspec.spec.scene import (
-    BoxObstacleSpec,
-    CylinderObstacleSpec,
-    MeshObstacleSpec,
-    MeshSceneSpec,
-    PolygonSceneSpec,
-)
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
     FolderCorpusSpec,
@@ -30,7 +20,17 @@ from sonicspec.spec.corpora import (
     GeneratedSpeechSpec,
     LibriSpeechCorpusSpec,
 )
+from sonicspec.spec.dataset import DatasetSpec
+from sonicspec.spec.load import Problem, did_you_mean
+from sonicspec.spec.microphone import channel_count
 from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec
+from sonicspec.spec.scene import (
+    BoxObstacleSpec,
+    CylinderObstacleSpec,
+    MeshObstacleSpec,
+    MeshSceneSpec,
+    PolygonSceneSpec,
+)
 from sonicspec.spec.trajectory import (
     LineTrajectorySpec,
     StaticTrajectorySpec,
@@ -53,6 +53,7 @@ def _warn(path: tuple, message: str) -> Problem:
 
 # --- small plane geometry (pure Python: the spec must not need numpy to validate) ----------
 
+
 def _cross(o: Point2, a: Point2, b: Point2) -> float:
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
@@ -65,19 +66,25 @@ def _segments_cross(p1: Point2, p2: Point2, q1: Point2, q2: Point2) -> bool:
         return True
 
     def on_seg(a: Point2, b: Point2, c: Point2) -> bool:
-        return (min(a[0], b[0]) - 1e-12 <= c[0] <= max(a[0], b[0]) + 1e-12
-                and min(a[1], b[1]) - 1e-12 <= c[1] <= max(a[1], b[1]) + 1e-12)
+        return (
+            min(a[0], b[0]) - 1e-12 <= c[0] <= max(a[0], b[0]) + 1e-12
+            and min(a[1], b[1]) - 1e-12 <= c[1] <= max(a[1], b[1]) + 1e-12
+        )
 
-    return ((abs(d1) < 1e-12 and on_seg(q1, q2, p1)) or (abs(d2) < 1e-12 and on_seg(q1, q2, p2))
-            or (abs(d3) < 1e-12 and on_seg(p1, p2, q1))
-            or (abs(d4) < 1e-12 and on_seg(p1, p2, q2)))
+    return (
+        (abs(d1) < 1e-12 and on_seg(q1, q2, p1))
+        or (abs(d2) < 1e-12 and on_seg(q1, q2, p2))
+        or (abs(d3) < 1e-12 and on_seg(p1, p2, q1))
+        or (abs(d4) < 1e-12 and on_seg(p1, p2, q2))
+    )
 
 
 def polygon_area(poly: list[Point2]) -> float:
     """Signed area (positive for counter-clockwise)."""
     n = len(poly)
-    return 0.5 * sum(poly[i][0] * poly[(i + 1) % n][1] - poly[(i + 1) % n][0] * poly[i][1]
-                     for i in range(n))
+    return 0.5 * sum(
+        poly[i][0] * poly[(i + 1) % n][1] - poly[(i + 1) % n][0] * poly[i][1] for i in range(n)
+    )
 
 
 def polygon_self_intersection(poly: list[Point2]) -> tuple[int, int] | None:
@@ -111,8 +118,11 @@ def distance_to_boundary(p: Point2, poly: list[Point2]) -> float:
         a, b = poly[i], poly[(i + 1) % n]
         dx, dy = b[0] - a[0], b[1] - a[1]
         length2 = dx * dx + dy * dy
-        t = 0.0 if length2 == 0 else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy)
-                                                  / length2))
+        t = (
+            0.0
+            if length2 == 0
+            else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
+        )
         best = min(best, math.hypot(p[0] - a[0] - t * dx, p[1] - a[1] - t * dy))
     return best
 
@@ -125,18 +135,32 @@ def _box_corners(ob: BoxObstacleSpec) -> list[tuple[float, float, float]]:
     cx, cy, cz = ob.center_m
     hx, hy, hz = (s / 2 for s in ob.size_m)
     c, s = math.cos(math.radians(ob.yaw_deg)), math.sin(math.radians(ob.yaw_deg))
-    return [(cx + c * dx - s * dy, cy + s * dx + c * dy, cz + dz)
-            for dx in (-hx, hx) for dy in (-hy, hy) for dz in (-hz, hz)]
+    return [
+        (cx + c * dx - s * dy, cy + s * dx + c * dy, cz + dz)
+        for dx in (-hx, hx)
+        for dy in (-hy, hy)
+        for dz in (-hz, hz)
+    ]
 
 
 # --- the checks --------------------------------------------------------------------------
 
+
 def check_spec(spec: DatasetSpec) -> list[Problem]:
     """Every semantic error and warning in ``spec``."""
     problems: list[Problem] = []
-    for check in (_check_scenes, _check_materials, _check_positions, _check_splits,
-                  _check_corpora, _check_mixture, _check_acoustics, _check_outputs,
-                  _check_trajectory, _check_heights_and_distances):
+    for check in (
+        _check_scenes,
+        _check_materials,
+        _check_positions,
+        _check_splits,
+        _check_corpora,
+        _check_mixture,
+        _check_acoustics,
+        _check_outputs,
+        _check_trajectory,
+        _check_heights_and_distances,
+    ):
         problems.extend(check(spec))
     return problems
 
@@ -145,26 +169,32 @@ def _check_scenes(spec: DatasetSpec) -> Iterator[Problem]:
     first: dict[str, int] = {}
     for i, scene in enumerate(spec.scenes):
         if scene.id in first:
-            yield _err(("scenes", i, "id"),
-                       f"scene id {scene.id!r} is already used by scenes[{first[scene.id]}]; "
-                       "ids must be unique")
+            yield _err(
+                ("scenes", i, "id"),
+                f"scene id {scene.id!r} is already used by scenes[{first[scene.id]}]; "
+                "ids must be unique",
+            )
         else:
             first[scene.id] = i
         if scene.kind == "l_shape":
             x, y, _ = scene.size_m
             cx, cy = scene.cutout_m
             if cx >= x or cy >= y:
-                yield _err(("scenes", i, "cutout_m"),
-                           f"the cutout must be smaller than the room's floor ({x:g} x {y:g} m), "
-                           f"got [{cx:g}, {cy:g}]")
+                yield _err(
+                    ("scenes", i, "cutout_m"),
+                    f"the cutout must be smaller than the room's floor ({x:g} x {y:g} m), "
+                    f"got [{cx:g}, {cy:g}]",
+                )
         if isinstance(scene, PolygonSceneSpec):
             poly = scene.floor_polygon()
             crossing = polygon_self_intersection(poly)
             if crossing is not None:
                 a, b = crossing
-                yield _err(("scenes", i, "floor_m"),
-                           f"the floor polygon crosses itself (edge {a}-{a + 1} meets edge "
-                           f"{b}-{(b + 1) % len(poly)}); list the corners in walking order")
+                yield _err(
+                    ("scenes", i, "floor_m"),
+                    f"the floor polygon crosses itself (edge {a}-{a + 1} meets edge "
+                    f"{b}-{(b + 1) % len(poly)}); list the corners in walking order",
+                )
             elif abs(polygon_area(poly)) < 1e-6:
                 yield _err(("scenes", i, "floor_m"), "the floor polygon has no area")
         if not isinstance(scene, MeshSceneSpec):
@@ -173,19 +203,28 @@ def _check_scenes(spec: DatasetSpec) -> Iterator[Problem]:
                 where = ("scenes", i, "obstacles", j)
                 if isinstance(ob, BoxObstacleSpec):
                     if not all(_inside_room(c, poly, height + 1e-9) for c in _box_corners(ob)):
-                        yield _err((*where, "center_m"),
-                                   f"the box does not fit inside scene {scene.id!r}")
+                        yield _err(
+                            (*where, "center_m"), f"the box does not fit inside scene {scene.id!r}"
+                        )
                 elif isinstance(ob, CylinderObstacleSpec):
                     c = ob.center_xy_m
-                    if (not point_in_polygon(c, poly)
-                            or distance_to_boundary(c, poly) < ob.radius_m - 1e-9
-                            or ob.base_z_m < 0 or ob.base_z_m + ob.height_m > height + 1e-9):
-                        yield _err((*where, "center_xy_m"),
-                                   f"the cylinder does not fit inside scene {scene.id!r}")
-                elif isinstance(ob, MeshObstacleSpec) and not _inside_room(ob.position_m, poly,
-                                                                         height):
-                    yield _err((*where, "position_m"),
-                               f"position {list(ob.position_m)} is outside scene {scene.id!r}")
+                    if (
+                        not point_in_polygon(c, poly)
+                        or distance_to_boundary(c, poly) < ob.radius_m - 1e-9
+                        or ob.base_z_m < 0
+                        or ob.base_z_m + ob.height_m > height + 1e-9
+                    ):
+                        yield _err(
+                            (*where, "center_xy_m"),
+                            f"the cylinder does not fit inside scene {scene.id!r}",
+                        )
+                elif isinstance(ob, MeshObstacleSpec) and not _inside_room(
+                    ob.position_m, poly, height
+                ):
+                    yield _err(
+                        (*where, "position_m"),
+                        f"position {list(ob.position_m)} is outside scene {scene.id!r}",
+                    )
 
 
 def _material_refs(spec: DatasetSpec) -> Iterator[tuple[tuple, str]]:
@@ -210,10 +249,17 @@ def _check_materials(spec: DatasetSpec) -> Iterator[Problem]:
     known = set(material_names(spec.materials.library)) | set(spec.materials.custom)
     for path, name in _material_refs(spec):
         if name not in known:
-            yield _err(path, f"unknown material {name!r} in library "
-                             f"{spec.materials.library!r}" + did_you_mean(name, sorted(known))
-                       + (" (or define it under materials.custom)"
-                          if not did_you_mean(name, sorted(known)) else ""))
+            yield _err(
+                path,
+                f"unknown material {name!r} in library "
+                f"{spec.materials.library!r}"
+                + did_you_mean(name, sorted(known))
+                + (
+                    " (or define it under materials.custom)"
+                    if not did_you_mean(name, sorted(known))
+                    else ""
+                ),
+            )
 
 
 def _procedural(spec: DatasetSpec) -> list[tuple[int, object]]:
@@ -224,8 +270,10 @@ def _check_positions(spec: DatasetSpec) -> Iterator[Problem]:
     points: list[tuple[tuple, tuple[float, float, float]]] = []
     if spec.placement.mic_position_m is not None:
         points.append((("placement", "mic_position_m"), spec.placement.mic_position_m))
-    for prefix, traj in (("trajectory",), spec.trajectory), (("microphone", "trajectory"),
-                                                            spec.microphone.trajectory):
+    for prefix, traj in (
+        (("trajectory",), spec.trajectory),
+        (("microphone", "trajectory"), spec.microphone.trajectory),
+    ):
         if isinstance(traj, LineTrajectorySpec):
             for end in ("start_m", "end_m"):
                 if getattr(traj, end) is not None:
@@ -246,8 +294,11 @@ def scene_matches(pattern: str, spec: DatasetSpec) -> list[str]:
         if isinstance(scene, MeshSceneSpec) and glob.has_magic(scene.path):
             # The files are unknown until compile time; a pattern selects this scene family
             # if it names the family or could match one of its members.
-            if pattern == scene.id or fnmatch.fnmatchcase(scene.id + "/x", pattern) or \
-                    pattern.startswith(scene.id + "/"):
+            if (
+                pattern == scene.id
+                or fnmatch.fnmatchcase(scene.id + "/x", pattern)
+                or pattern.startswith(scene.id + "/")
+            ):
                 out.append(scene.id + "/*")
         elif fnmatch.fnmatchcase(scene.id, pattern):
             out.append(scene.id)
@@ -262,24 +313,32 @@ def _check_splits(spec: DatasetSpec) -> Iterator[Problem]:
             hits = scene_matches(pattern, spec)
             if not hits:
                 ids = [s.id for s in spec.scenes]
-                yield _err(("splits", name, "scenes", k),
-                           f"{pattern!r} matches no scene id" + did_you_mean(pattern, ids))
+                yield _err(
+                    ("splits", name, "scenes", k),
+                    f"{pattern!r} matches no scene id" + did_you_mean(pattern, ids),
+                )
             matched.extend(hits)
         matched = sorted(set(matched))
         concrete = [m for m in matched if not m.endswith("/*")]
-        if split.scene_count is not None and len(concrete) == len(matched) \
-                and split.scene_count > len(concrete):
-            yield _err(("splits", name, "scene_count"),
-                       f"asks for {split.scene_count} scenes but its patterns match only "
-                       f"{len(concrete)}")
+        if (
+            split.scene_count is not None
+            and len(concrete) == len(matched)
+            and split.scene_count > len(concrete)
+        ):
+            yield _err(
+                ("splits", name, "scene_count"),
+                f"asks for {split.scene_count} scenes but its patterns match only {len(concrete)}",
+            )
         for sid in matched:
             if sid in owner and owner[sid] != name:
                 other = spec.splits[owner[sid]]
                 if split.scene_count is None or other.scene_count is None:
-                    yield _err(("splits", name, "scenes"),
-                               f"splits {owner[sid]!r} and {name!r} share scene {sid!r}; splits "
-                               "must use disjoint scenes (or give both a scene_count to "
-                               "partition a shared pool)")
+                    yield _err(
+                        ("splits", name, "scenes"),
+                        f"splits {owner[sid]!r} and {name!r} share scene {sid!r}; splits "
+                        "must use disjoint scenes (or give both a scene_count to "
+                        "partition a shared pool)",
+                    )
             else:
                 owner.setdefault(sid, name)
 
@@ -288,24 +347,30 @@ def _corpus_split_problems(path: tuple, corpus: object, splits: list[str]) -> It
     if isinstance(corpus, LibriSpeechCorpusSpec):
         for s in splits:
             if s not in corpus.subsets:
-                yield _err((*path, "subsets"), f"no subset feeds split {s!r}"
-                           + did_you_mean(s, list(corpus.subsets)))
+                yield _err(
+                    (*path, "subsets"),
+                    f"no subset feeds split {s!r}" + did_you_mean(s, list(corpus.subsets)),
+                )
         used: dict[str, str] = {}
         for s, subsets in corpus.subsets.items():
             if not subsets:
                 yield _err((*path, "subsets", s), "lists no subset")
             for sub in subsets:
                 if sub in used and used[sub] != s:
-                    yield _err((*path, "subsets", s),
-                               f"subset {sub!r} also feeds split {used[sub]!r}; speakers would "
-                               "cross splits")
+                    yield _err(
+                        (*path, "subsets", s),
+                        f"subset {sub!r} also feeds split {used[sub]!r}; speakers would "
+                        "cross splits",
+                    )
                 used.setdefault(sub, s)
     elif isinstance(corpus, (FolderCorpusSpec, Fsd50kCorpusSpec, FmaCorpusSpec)):
         ratios = corpus.split_ratios
         for s in splits:
             if s not in ratios:
-                yield _err((*path, "split_ratios"), f"no share given for split {s!r}"
-                           + did_you_mean(s, list(ratios)))
+                yield _err(
+                    (*path, "split_ratios"),
+                    f"no share given for split {s!r}" + did_you_mean(s, list(ratios)),
+                )
         for s, r in ratios.items():
             if not 0 < r <= 1:
                 yield _err((*path, "split_ratios", s), f"shares must lie in (0, 1], got {r:g}")
@@ -322,11 +387,15 @@ def _check_corpora(spec: DatasetSpec) -> Iterator[Problem]:
         corpus = getattr(c, kind)
         if corpus is not None:
             yield from _corpus_split_problems(("corpora", kind), corpus, splits)
-    if isinstance(c.speech, GeneratedSpeechSpec) and \
-            c.speech.speakers_per_split < spec.mixture.speakers:
-        yield _err(("corpora", "speech", "speakers_per_split"),
-                   f"each group needs {spec.mixture.speakers} different speakers but a split has "
-                   f"only {c.speech.speakers_per_split}")
+    if (
+        isinstance(c.speech, GeneratedSpeechSpec)
+        and c.speech.speakers_per_split < spec.mixture.speakers
+    ):
+        yield _err(
+            ("corpora", "speech", "speakers_per_split"),
+            f"each group needs {spec.mixture.speakers} different speakers but a split has "
+            f"only {c.speech.speakers_per_split}",
+        )
 
 
 def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
@@ -334,28 +403,40 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
     for k, task in enumerate(m.tasks):
         path = ("mixture", "tasks", k)
         if isinstance(task, SeparationTaskSpec) and task.speakers > m.speakers:
-            yield _err((*path, "speakers"),
-                       f"needs {task.speakers} speakers but a group has mixture.speakers = "
-                       f"{m.speakers}")
+            yield _err(
+                (*path, "speakers"),
+                f"needs {task.speakers} speakers but a group has mixture.speakers = {m.speakers}",
+            )
         if isinstance(task, EnhancementTaskSpec | SeparationTaskSpec):
-            needs = {"noise": ["noise"], "music": ["music"], "both": ["noise", "music"],
-                     "none": []}[task.background]
+            needs = {
+                "noise": ["noise"],
+                "music": ["music"],
+                "both": ["noise", "music"],
+                "none": [],
+            }[task.background]
             for kind in needs:
                 if getattr(spec.corpora, kind) is None:
-                    yield _err((*path, "background"),
-                               f"{task.background!r} needs a {kind} corpus: add corpora.{kind}")
+                    yield _err(
+                        (*path, "background"),
+                        f"{task.background!r} needs a {kind} corpus: add corpora.{kind}",
+                    )
                 elif getattr(m, f"{kind}_clips")[1] == 0:
-                    yield _err((*path, "background"),
-                               f"{task.background!r} needs {kind} but mixture.{kind}_clips is 0")
+                    yield _err(
+                        (*path, "background"),
+                        f"{task.background!r} needs {kind} but mixture.{kind}_clips is 0",
+                    )
     shortest_speech = m.utterances_per_speaker[0] * m.utterance_gap_s[0]
     if shortest_speech >= m.duration_s:
-        yield _err(("mixture", "utterance_gap_s"),
-                   f"{m.utterances_per_speaker[0]} utterances with at least "
-                   f"{m.utterance_gap_s[0]:g} s of silence each cannot fit in "
-                   f"{m.duration_s:g} s")
+        yield _err(
+            ("mixture", "utterance_gap_s"),
+            f"{m.utterances_per_speaker[0]} utterances with at least "
+            f"{m.utterance_gap_s[0]:g} s of silence each cannot fit in "
+            f"{m.duration_s:g} s",
+        )
     if m.interpolation != "sample_crossfade" and isinstance(spec.trajectory, StaticTrajectorySpec):
-        yield _warn(("mixture", "interpolation"),
-                    f"{m.interpolation!r} has no effect: sources are static")
+        yield _warn(
+            ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
+        )
 
 
 def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
@@ -364,44 +445,62 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
         allowed = bands_below_nyquist(spec.sample_rate_hz)
         for k, band in enumerate(a.bands_hz):
             if float(band) not in allowed:
-                yield _err(("acoustics", "bands_hz", k),
-                           f"the {band} Hz band reaches above Nyquist "
-                           f"({spec.sample_rate_hz / 2:g} Hz at sample_rate_hz = "
-                           f"{spec.sample_rate_hz}); remove it or raise the sample rate")
+                yield _err(
+                    ("acoustics", "bands_hz", k),
+                    f"the {band} Hz band reaches above Nyquist "
+                    f"({spec.sample_rate_hz / 2:g} Hz at sample_rate_hz = "
+                    f"{spec.sample_rate_hz}); remove it or raise the sample rate",
+                )
         if len(set(a.bands_hz)) != len(a.bands_hz):
             yield _err(("acoustics", "bands_hz"), "bands are listed more than once")
     if a.diffraction:
-        yield _err(("acoustics", "diffraction"),
-                   "edge diffraction is not supported by this version's tracer; set it to false")
+        yield _err(
+            ("acoustics", "diffraction"),
+            "edge diffraction is not supported by this version's tracer; set it to false",
+        )
     if a.rays < MIN_RAYS_WITHOUT_WARNING:
-        yield _warn(("acoustics", "rays"),
-                    f"{a.rays} rays leave audible Monte-Carlo noise in the late reverberation; "
-                    f"use at least {MIN_RAYS_WITHOUT_WARNING}")
+        yield _warn(
+            ("acoustics", "rays"),
+            f"{a.rays} rays leave audible Monte-Carlo noise in the late reverberation; "
+            f"use at least {MIN_RAYS_WITHOUT_WARNING}",
+        )
 
 
 def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
     o = spec.outputs
     if o.audio_format == "flac" and o.subtype == "FLOAT":
-        yield _err(("outputs", "subtype"),
-                   "FLAC cannot store FLOAT samples; use PCM_16 or PCM_24, or audio_format: wav")
+        yield _err(
+            ("outputs", "subtype"),
+            "FLAC cannot store FLOAT samples; use PCM_16 or PCM_24, or audio_format: wav",
+        )
     if Path(o.dir) == Path(o.store_dir):
         yield _err(("outputs", "store_dir"), "must differ from outputs.dir")
     if channel_count(spec.microphone) > 8 and o.audio_format == "flac":
-        yield _err(("outputs", "audio_format"),
-                   f"FLAC holds at most 8 channels and the microphone renders "
-                   f"{channel_count(spec.microphone)}; use audio_format: wav")
+        yield _err(
+            ("outputs", "audio_format"),
+            f"FLAC holds at most 8 channels and the microphone renders "
+            f"{channel_count(spec.microphone)}; use audio_format: wav",
+        )
 
 
 def _check_trajectory(spec: DatasetSpec) -> Iterator[Problem]:
-    for prefix, traj in ((("trajectory",), spec.trajectory),
-                         (("microphone", "trajectory"), spec.microphone.trajectory)):
+    for prefix, traj in (
+        (("trajectory",), spec.trajectory),
+        (("microphone", "trajectory"), spec.microphone.trajectory),
+    ):
         if isinstance(traj, WaypointsTrajectorySpec):
             for k in range(1, len(traj.points_m)):
                 if math.dist(traj.points_m[k - 1], traj.points_m[k]) < 1e-6:
-                    yield _err((*prefix, "points_m", k),
-                               f"repeats waypoint {k - 1}; consecutive points must differ")
-        if isinstance(traj, LineTrajectorySpec) and traj.start_m is not None \
-                and traj.end_m is not None and math.dist(traj.start_m, traj.end_m) < 1e-6:
+                    yield _err(
+                        (*prefix, "points_m", k),
+                        f"repeats waypoint {k - 1}; consecutive points must differ",
+                    )
+        if (
+            isinstance(traj, LineTrajectorySpec)
+            and traj.start_m is not None
+            and traj.end_m is not None
+            and math.dist(traj.start_m, traj.end_m) < 1e-6
+        ):
             yield _err((*prefix, "end_m"), "equals start_m; a line needs two distinct points")
 
 
@@ -411,24 +510,35 @@ def _check_heights_and_distances(spec: DatasetSpec) -> Iterator[Problem]:
         h = scene.height()
         poly = scene.floor_polygon()
         if spec.microphone.height_m >= h:
-            yield _err(("microphone", "height_m"),
-                       f"{spec.microphone.height_m:g} m is not below the ceiling of scene "
-                       f"{scene.id!r} ({h:g} m)")
+            yield _err(
+                ("microphone", "height_m"),
+                f"{spec.microphone.height_m:g} m is not below the ceiling of scene "
+                f"{scene.id!r} ({h:g} m)",
+            )
         for name in ("source_height_m", "noise_height_m"):
             if getattr(p, name)[1] >= h:
-                yield _err(("placement", name),
-                           f"up to {getattr(p, name)[1]:g} m is not below the ceiling of scene "
-                           f"{scene.id!r} ({h:g} m)")
+                yield _err(
+                    ("placement", name),
+                    f"up to {getattr(p, name)[1]:g} m is not below the ceiling of scene "
+                    f"{scene.id!r} ({h:g} m)",
+                )
         xs, ys = [q[0] for q in poly], [q[1] for q in poly]
         reach = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
         reach = math.hypot(reach, h)
-        for name in ("source_start_distance_m", "source_end_distance_m",
-                     "source_travel_distance_m", "noise_distance_m", "music_distance_m"):
+        for name in (
+            "source_start_distance_m",
+            "source_end_distance_m",
+            "source_travel_distance_m",
+            "noise_distance_m",
+            "music_distance_m",
+        ):
             low = getattr(p, name)[0]
             if low > reach:
-                yield _err(("placement", name),
-                           f"at least {low:g} m cannot fit in scene {scene.id!r}, whose largest "
-                           f"distance is {reach:.2f} m")
+                yield _err(
+                    ("placement", name),
+                    f"at least {low:g} m cannot fit in scene {scene.id!r}, whose largest "
+                    f"distance is {reach:.2f} m",
+                )
 
 
 def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
@@ -446,9 +556,12 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
         if isinstance(scene, MeshSceneSpec):
             if glob.has_magic(scene.path):
                 if not glob.glob(str(base_dir / scene.path)):
-                    problems.append(_err(("scenes", i, "path"),
-                                         f"glob {scene.path!r} matches no file under "
-                                         f"{str(base_dir)!r}"))
+                    problems.append(
+                        _err(
+                            ("scenes", i, "path"),
+                            f"glob {scene.path!r} matches no file under {str(base_dir)!r}",
+                        )
+                    )
             else:
                 exists(("scenes", i, "path"), scene.path, "mesh file")
         for j, ob in enumerate(scene.obstacles):
@@ -468,8 +581,12 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
         if isinstance(corpus, LibriSpeechCorpusSpec):
             for split, subsets in corpus.subsets.items():
                 for sub in subsets:
-                    exists((*path, "subsets", split), f"{root}/{sub}", "LibriSpeech subset",
-                           folder=True)
+                    exists(
+                        (*path, "subsets", split),
+                        f"{root}/{sub}",
+                        "LibriSpeech subset",
+                        folder=True,
+                    )
         elif isinstance(corpus, Fsd50kCorpusSpec):
             for part in ("FSD50K.dev_audio", "FSD50K.eval_audio", "FSD50K.ground_truth"):
                 exists((*path, "root"), f"{root}/{part}", "FSD50K folder", folder=True)

@@ -15,10 +15,14 @@ class LibriSpeechCorpusSpec(SpecModel):
     """LibriSpeech layout: ``<root>/<subset>/<speaker>/<chapter>/*.flac`` + ``*.trans.txt``."""
 
     kind: Literal["librispeech"] = Field(description="Corpus type.")
-    root: str = Field(min_length=1, description="Folder holding the subsets, relative to the spec file.")
+    root: str = Field(
+        min_length=1, description="Folder holding the subsets, relative to the spec file."
+    )
     subsets: dict[SplitName, list[str]] = Field(
         default_factory=lambda: {
-            "train": ["train-clean-360"], "val": ["dev-clean"], "test": ["test-clean"],
+            "train": ["train-clean-360"],
+            "val": ["dev-clean"],
+            "test": ["test-clean"],
         },
         description="Subsets (folder names) that feed each split; speakers never cross splits.",
     )
@@ -107,5 +111,6 @@ class CorporaSpec(SpecModel):
     music: MusicCorpusSpec | None = Field(None, description="Music corpus.")
     cache_dir: str = Field(
         ".sonicspec-cache",
-        description="Where corpus indexes and generated corpora are kept, relative to the spec file.",
+        description="Where corpus indexes and generated corpora are kept, relative to the "
+        "spec file.",
     )

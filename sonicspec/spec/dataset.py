@@ -50,4 +50,6 @@ class DatasetSpec(SpecModel):
     splits: dict[SplitName, SplitSpec] = Field(
         min_length=1, description="Splits by name (e.g. train, val, test)."
     )
-    outputs: OutputsSpec = Field(default_factory=OutputsSpec, description="Output locations and formats.")
+    outputs: OutputsSpec = Field(
+        default_factory=OutputsSpec, description="Output locations and formats."
+    )

@@ -24,7 +24,7 @@ from pydantic import BaseModel, ValidationError
 
 from sonicspec.errors import SpecError
 
-PathT = tuple[Union[str, int], ...]
+PathT = tuple[str | int, ...]
 
 
 @dataclass(frozen=True)
@@ -93,8 +93,9 @@ def _mark(node: yaml.Node) -> tuple[int, int]:
     return node.start_mark.line + 1, node.start_mark.column + 1
 
 
-def _build(loader: yaml.SafeLoader, node: yaml.Node, path: PathT, smap: SourceMap,
-           problems: list[Problem]) -> Any:
+def _build(
+    loader: yaml.SafeLoader, node: yaml.Node, path: PathT, smap: SourceMap, problems: list[Problem]
+) -> Any:
     smap.values[path] = _mark(node)
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)
@@ -109,15 +110,19 @@ def _build(loader: yaml.SafeLoader, node: yaml.Node, path: PathT, smap: SourceMa
             if key in out:
                 line, col = _mark(key_node)
                 first = smap.keys[(*path, key)]
-                problems.append(Problem((*path, key),
-                                        f"duplicate key (first given on line {first[0]})",
-                                        line, col))
+                problems.append(
+                    Problem(
+                        (*path, key), f"duplicate key (first given on line {first[0]})", line, col
+                    )
+                )
                 continue
             smap.keys[(*path, key)] = _mark(key_node)
             out[key] = _build(loader, value_node, (*path, key), smap, problems)
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_build(loader, item, (*path, i), smap, problems) for i, item in enumerate(node.value)]
+        return [
+            _build(loader, item, (*path, i), smap, problems) for i, item in enumerate(node.value)
+        ]
     return loader.construct_object(node, deep=True)
 
 
@@ -173,9 +178,13 @@ def parse_text(text: str, source: str) -> tuple[Any, SourceMap]:
         raise SpecError("\n".join(p.format(source) for p in problems), problems)
     if not isinstance(data, dict):
         line, col = smap.values.get((), (1, 1))
-        problem = Problem((), f"expected a mapping of sections at the top level "
-                              f"(sonicspec: 1, name: ..., scenes: ...), got {_kind_of(data)}",
-                          line, col)
+        problem = Problem(
+            (),
+            f"expected a mapping of sections at the top level "
+            f"(sonicspec: 1, name: ..., scenes: ...), got {_kind_of(data)}",
+            line,
+            col,
+        )
         raise SpecError(problem.format(source), [problem])
     return data, smap
 
@@ -195,6 +204,7 @@ def _kind_of(value: Any) -> str:
 
 
 # --- mapping pydantic error locations back to the document ---------------------------------
+
 
 def _unwrap(tp: Any) -> Any:
     while True:
@@ -235,8 +245,12 @@ def kinds_at(tp: Any) -> list[str]:
     return [t for m in _union_members(tp) for t in _tag_of(m)]
 
 
-def walk_location(root: type[BaseModel], loc: Sequence[str | int], data: Any,
-                  branches: list[tuple[tuple, str]] | None = None) -> tuple[PathT, Any]:
+def walk_location(
+    root: type[BaseModel],
+    loc: Sequence[str | int],
+    data: Any,
+    branches: list[tuple[tuple, str]] | None = None,
+) -> tuple[PathT, Any]:
     """Translate a pydantic error ``loc`` into a path in the document.
 
     Returns the document path (with union tags dropped) and the type found at the end of
@@ -260,8 +274,9 @@ def walk_location(root: type[BaseModel], loc: Sequence[str | int], data: Any,
                 if branches is not None:
                     branches.append((tuple(loc[: loc.index(elem)]), elem))
                 continue
-            tp_u = next((m for m in members if isinstance(m, type) and issubclass(m, BaseModel)),
-                        tp_u)
+            tp_u = next(
+                (m for m in members if isinstance(m, type) and issubclass(m, BaseModel)), tp_u
+            )
         if isinstance(elem, str) and elem.startswith(("function-", "[key]")):
             continue
         path.append(elem)
@@ -280,8 +295,11 @@ def walk_location(root: type[BaseModel], loc: Sequence[str | int], data: Any,
             if origin in (list, Sequence) and args:
                 tp = args[0]
             elif origin is tuple and args:
-                tp = args[0] if len(args) == 2 and args[1] is Ellipsis else (
-                    args[elem] if isinstance(elem, int) and elem < len(args) else None)
+                tp = (
+                    args[0]
+                    if len(args) == 2 and args[1] is Ellipsis
+                    else (args[elem] if isinstance(elem, int) and elem < len(args) else None)
+                )
             elif origin in (dict, Mapping) and len(args) == 2:
                 tp = args[1]
             else:
@@ -319,8 +337,9 @@ def _show(value: Any) -> str:
     return repr(value) if isinstance(value, str) else str(value)
 
 
-def problems_from_validation(exc: ValidationError, root: type[BaseModel], data: Any,
-                             smap: SourceMap) -> list[Problem]:
+def problems_from_validation(
+    exc: ValidationError, root: type[BaseModel], data: Any, smap: SourceMap
+) -> list[Problem]:
     """One :class:`Problem` per pydantic error, located in the document."""
     problems: list[Problem] = []
     seen: set[tuple[PathT, str]] = set()
@@ -346,8 +365,10 @@ def problems_from_validation(exc: ValidationError, root: type[BaseModel], data: 
             tags = re.findall(r"'([^']*)'", str(ctx.get("expected_tags", "")))
             got = ctx.get("tag")
             path = (*path, "kind")
-            message = (f"unknown kind {got!r}; expected one of {', '.join(map(repr, tags))}"
-                       + did_you_mean(str(got), tags))
+            message = (
+                f"unknown kind {got!r}; expected one of {', '.join(map(repr, tags))}"
+                + did_you_mean(str(got), tags)
+            )
             where = smap.locate(path)
         elif kind == "union_tag_not_found":
             tags = kinds_at_parent(root, (*loc, "kind"), data)
@@ -356,8 +377,10 @@ def problems_from_validation(exc: ValidationError, root: type[BaseModel], data: 
         elif kind == "literal_error":
             options = re.findall(r"'([^']*)'|(\d+)", str(ctx.get("expected", "")))
             flat = [a or b for a, b in options]
-            message = (f"expected {ctx.get('expected')}, got {_show(err.get('input'))}"
-                       + did_you_mean(str(err.get("input")), flat))
+            message = (
+                f"expected {ctx.get('expected')}, got {_show(err.get('input'))}"
+                + did_you_mean(str(err.get("input")), flat)
+            )
             where = smap.locate(path)
         elif kind in ("model_type", "model_attributes_type", "dict_type"):
             message = f"expected a mapping of fields, got {_kind_of(err.get('input'))}"
@@ -365,15 +388,15 @@ def problems_from_validation(exc: ValidationError, root: type[BaseModel], data: 
         else:
             msg = err["msg"]
             if msg.startswith("Value error, "):
-                msg = msg[len("Value error, "):]
+                msg = msg[len("Value error, ") :]
             if msg.startswith("Input should be "):
-                msg = "must be " + msg[len("Input should be "):]
+                msg = "must be " + msg[len("Input should be ") :]
             elif msg.startswith("String should "):
-                msg = "text must " + msg[len("String should "):]
+                msg = "text must " + msg[len("String should ") :]
             elif msg.startswith("List should "):
-                msg = "list must " + msg[len("List should "):]
+                msg = "list must " + msg[len("List should ") :]
             elif msg.startswith("Dictionary should "):
-                msg = "mapping must " + msg[len("Dictionary should "):]
+                msg = "mapping must " + msg[len("Dictionary should ") :]
             if "(got " not in msg:
                 msg = f"{msg} (got {_show(err.get('input'))})"
             message = msg
@@ -400,8 +423,11 @@ def _best_union_branches(errors: list[dict], root: type[BaseModel], data: Any) -
         tagged.append((err, branches))
         for prefix, _ in branches:
             depth[prefix] = max(depth.get(prefix, 0), len(err["loc"]))
-    return [err for err, branches in tagged
-            if all(len(err["loc"]) == depth[prefix] for prefix, _ in branches)]
+    return [
+        err
+        for err, branches in tagged
+        if all(len(err["loc"]) == depth[prefix] for prefix, _ in branches)
+    ]
 
 
 def kinds_at_parent(root: type[BaseModel], loc: Sequence[str | int], data: Any) -> list[str]:

@@ -34,9 +34,11 @@ class MaterialsSpec(SpecModel):
     )
     custom: dict[str, CustomMaterialSpec] = Field(
         default_factory=dict,
-        description="User-defined materials by name; a name equal to a library material replaces it.",
+        description="User-defined materials by name; a name equal to a library material "
+        "replaces it.",
     )
     label_materials: dict[str, str] = Field(
         default_factory=dict,
-        description="Semantic label -> material name for every mesh scene (a scene's own map wins).",
+        description="Semantic label -> material name for every mesh scene (a scene's own "
+        "map wins).",
     )

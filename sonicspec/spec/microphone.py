@@ -17,7 +17,9 @@ class _MicBase(SpecModel):
     yaw_deg: float = Field(
         0.0, description="Orientation about the vertical axis (0: facing +x), degrees."
     )
-    pitch_deg: float = Field(0.0, ge=-90, le=90, description="Elevation of the look direction, degrees.")
+    pitch_deg: float = Field(
+        0.0, ge=-90, le=90, description="Elevation of the look direction, degrees."
+    )
     trajectory: MicrophoneTrajectorySpec = Field(
         default_factory=lambda: StaticTrajectorySpec(kind="static"),
         description="How the microphone moves (default: it stays where placement puts it).",
@@ -68,7 +70,7 @@ class AmbisonicsMicSpec(_MicBase):
 
 
 class LinearArrayMicSpec(_MicBase):
-    """Omnidirectional capsules on a line through the centre, along the look direction's left axis."""
+    """Omnidirectional capsules on a line through the centre, along the left axis."""
 
     kind: Literal["linear_array"] = Field(description="Microphone type.")
     n: int = Field(ge=2, le=64, description="Number of capsules.")
@@ -88,7 +90,9 @@ class CustomArrayMicSpec(_MicBase):
 
     kind: Literal["custom"] = Field(description="Microphone type.")
     positions_m: list[vector(3)] = Field(  # type: ignore[valid-type]
-        min_length=1, max_length=64, description="Capsule offsets [x, y, z] from the centre, metres."
+        min_length=1,
+        max_length=64,
+        description="Capsule offsets [x, y, z] from the centre, metres.",
     )
 
 
@@ -103,8 +107,14 @@ MicrophoneSpec = Annotated[
 ]
 
 
-def channel_count(mic: MonoMicSpec | BinauralMicSpec | AmbisonicsMicSpec | LinearArrayMicSpec
-                  | CircularArrayMicSpec | CustomArrayMicSpec) -> int:
+def channel_count(
+    mic: MonoMicSpec
+    | BinauralMicSpec
+    | AmbisonicsMicSpec
+    | LinearArrayMicSpec
+    | CircularArrayMicSpec
+    | CustomArrayMicSpec,
+) -> int:
     """Number of output channels the microphone renders."""
     if isinstance(mic, MonoMicSpec):
         return 1

@@ -18,7 +18,9 @@ class LoudnessSpec(SpecModel):
     noise_lufs: float = Field(-21.0, ge=-70, le=0, description="The noise track, LUFS.")
     music_lufs: float = Field(-24.0, ge=-70, le=0, description="The music track, LUFS.")
     jitter_lu: float = Field(
-        0.0, ge=0, le=20,
+        0.0,
+        ge=0,
+        le=20,
         description="Each target is drawn uniformly in target ± jitter, LU (SonicSet's "
         "released scripts: 2).",
     )
@@ -28,7 +30,8 @@ class LoudnessSpec(SpecModel):
         "level heard) or the dry source before rendering (the gain then carries over).",
     )
     peak_limit_dbfs: float = Field(
-        -1.0, le=0,
+        -1.0,
+        le=0,
         description="If any mixture peak exceeds this, the whole group is scaled down and the "
         "gain recorded, dBFS.",
     )
@@ -90,7 +93,8 @@ class MixtureSpec(SpecModel):
     )
     tasks: list[TaskSpec] = Field(
         default_factory=lambda: [
-            SeparationTaskSpec(kind="separation"), EnhancementTaskSpec(kind="enhancement")
+            SeparationTaskSpec(kind="separation"),
+            EnhancementTaskSpec(kind="enhancement"),
         ],
         description="Mixtures exported for each group.",
     )

@@ -14,7 +14,8 @@ class OutputsSpec(SpecModel):
 
     dir: str = Field("out", min_length=1, description="Dataset folder, relative to the spec file.")
     store_dir: str = Field(
-        "store", min_length=1,
+        "store",
+        min_length=1,
         description="Content-hashed artifact store, relative to the spec file; may be shared "
         "between specs.",
     )

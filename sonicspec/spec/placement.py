@@ -38,7 +38,9 @@ class PlacementSpec(SpecModel):
         0.3, ge=0, description="Smallest horizontal distance of any position from a wall, metres."
     )
     obstacle_clearance_m: float = Field(
-        0.2, ge=0, description="Smallest horizontal distance of any position from an obstacle, metres."
+        0.2,
+        ge=0,
+        description="Smallest horizontal distance of any position from an obstacle, metres.",
     )
     source_height_m: HeightRange = Field(
         (1.5, 1.8), description="Height of speech sources (mouth) above the floor, metres."
@@ -50,8 +52,11 @@ class PlacementSpec(SpecModel):
         None, description="Fixed microphone position [x, y, z], metres (null: sampled)."
     )
     max_tries: int = Field(
-        2000, ge=1, le=10_000_000,
-        description="Draws per group before placement gives up with an error naming the constraint.",
+        2000,
+        ge=1,
+        le=10_000_000,
+        description="Draws per group before placement gives up with an error naming the "
+        "constraint.",
     )
     walker_radius_m: float = Field(
         0.25, gt=0, description="Radius of a walking person, for the walkable area, metres."

@@ -49,7 +49,9 @@ class MeshObstacleSpec(SpecModel):
     """An object loaded from a mesh file and placed in the scene."""
 
     kind: Literal["mesh"] = Field(description="Obstacle type.")
-    path: str = Field(min_length=1, description="Mesh file (glb, gltf, ply, obj), relative to the spec file.")
+    path: str = Field(
+        min_length=1, description="Mesh file (glb, gltf, ply, obj), relative to the spec file."
+    )
     position_m: Vec3 = Field(description="Where the mesh's origin is placed, metres.")
     yaw_deg: float = Field(0.0, description="Rotation about the vertical axis, degrees.")
     scale: float = Field(1.0, gt=0, description="Uniform scale applied before placing (unitless).")
@@ -102,8 +104,10 @@ class CylinderSceneSpec(_ProceduralBase):
 
         r = self.radius_m
         return [
-            (r + r * math.cos(2 * math.pi * k / self.segments),
-             r + r * math.sin(2 * math.pi * k / self.segments))
+            (
+                r + r * math.cos(2 * math.pi * k / self.segments),
+                r + r * math.sin(2 * math.pi * k / self.segments),
+            )
             for k in range(self.segments)
         ]
 
@@ -154,17 +158,21 @@ class RepairSpec(SpecModel):
         1e-3, ge=0, description="Vertices closer than this are merged, metres."
     )
     min_component_area_m2: float = Field(
-        0.01, ge=0,
+        0.01,
+        ge=0,
         description="Disconnected pieces with less total area are removed as debris, m².",
     )
     max_hole_size_m: float = Field(
-        1.0, ge=0,
+        1.0,
+        ge=0,
         description="Holes whose boundary fits in a box of this diagonal are closed, metres "
         "(0: none).",
     )
     orient: bool = Field(True, description="Re-orient faces so normals point into the air.")
     leak_test_rays: int = Field(
-        10000, ge=0, description="Random rays from interior points used to measure leakage (0: skip)."
+        10000,
+        ge=0,
+        description="Random rays from interior points used to measure leakage (0: skip).",
     )
     max_leak_fraction: float = Field(
         1e-4, ge=0, le=1, description="Largest acceptable fraction of rays escaping to infinity."

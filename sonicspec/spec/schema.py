@@ -20,7 +20,7 @@ def _constrain_keys(node: Any) -> None:
     if isinstance(node, dict):
         patterns = node.get("patternProperties")
         if isinstance(patterns, dict) and len(patterns) == 1 and "properties" not in node:
-            (pattern, value), = patterns.items()
+            ((pattern, value),) = patterns.items()
             del node["patternProperties"]
             node["additionalProperties"] = value
             node.setdefault("propertyNames", {})["pattern"] = pattern

@@ -13,10 +13,12 @@ class SplitSpec(SpecModel):
     groups: int = Field(ge=1, le=10_000_000, description="Mixture groups (clips) in this split.")
     scenes: list[str] = Field(
         min_length=1,
-        description="Scene ids or glob patterns over scene ids (e.g. 'mp3d/*') this split draws from.",
+        description="Scene ids or glob patterns over scene ids (e.g. 'mp3d/*') this split "
+        "draws from.",
     )
     scene_count: int | None = Field(
-        None, ge=1,
+        None,
+        ge=1,
         description="Take this many of the matched scenes (a seeded choice; splits are filled in "
         "the order written and never share a scene). Null: all matched scenes.",
     )

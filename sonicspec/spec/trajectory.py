@@ -19,12 +19,16 @@ class StaticTrajectorySpec(SpecModel):
 
 class _MovingBase(SpecModel):
     rir_spacing_m: float = Field(
-        0.25, gt=0, le=5.0,
+        0.25,
+        gt=0,
+        le=5.0,
         description="Distance between RIR points along the path, metres; dense points keep "
         "neighbouring RIRs alike so the crossfade does not comb-filter.",
     )
     speed_m_s: float | None = Field(
-        None, gt=0, le=10.0,
+        None,
+        gt=0,
+        le=10.0,
         description="Walking speed, m/s; null sets it so the path spans the source's active time.",
     )
 
@@ -52,7 +56,10 @@ class ShortestPathTrajectorySpec(_MovingBase):
 
 
 TrajectorySpec = Annotated[
-    StaticTrajectorySpec | LineTrajectorySpec | WaypointsTrajectorySpec | ShortestPathTrajectorySpec,
+    StaticTrajectorySpec
+    | LineTrajectorySpec
+    | WaypointsTrajectorySpec
+    | ShortestPathTrajectorySpec,
     Field(discriminator="kind"),
 ]
 MicrophoneTrajectorySpec = TrajectorySpec

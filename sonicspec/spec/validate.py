@@ -31,8 +31,9 @@ def _locate(problems: list[Problem], smap: SourceMap) -> list[Problem]:
     return out
 
 
-def validate_text(text: str, source: str, base_dir: Path | None = None, *,
-                  files: bool = False) -> tuple[LoadedSpec | None, list[Problem]]:
+def validate_text(
+    text: str, source: str, base_dir: Path | None = None, *, files: bool = False
+) -> tuple[LoadedSpec | None, list[Problem]]:
     """Validate spec text; returns the loaded spec (None if invalid) and every problem found.
 
     ``source`` names the text in messages (usually the file path); ``base_dir`` anchors the
@@ -44,9 +45,14 @@ def validate_text(text: str, source: str, base_dir: Path | None = None, *,
     except SpecError as exc:
         return None, list(exc.problems)
     if "sonicspec" not in data:
-        return None, [Problem(("sonicspec",),
-                              f"required field missing: put 'sonicspec: {SPEC_VERSION}' at the "
-                              "top of the file", 1, 1)]
+        return None, [
+            Problem(
+                ("sonicspec",),
+                f"required field missing: put 'sonicspec: {SPEC_VERSION}' at the top of the file",
+                1,
+                1,
+            )
+        ]
     why = version_problem(data["sonicspec"])
     if why is not None:
         where = smap.locate(("sonicspec",)) or (1, 1)
@@ -67,8 +73,9 @@ def validate_text(text: str, source: str, base_dir: Path | None = None, *,
     return LoadedSpec(spec=spec, source=source, base_dir=base, warnings=warnings), problems
 
 
-def validate_file(path: str | Path, *, files: bool = False) -> tuple[LoadedSpec | None,
-                                                                     list[Problem]]:
+def validate_file(
+    path: str | Path, *, files: bool = False
+) -> tuple[LoadedSpec | None, list[Problem]]:
     """Validate the spec file at ``path`` (see :func:`validate_text`)."""
     path = Path(path)
     source = str(path)

@@ -35,13 +35,17 @@ def register_migration(from_version: int) -> Callable[[Migration], Migration]:
 def version_problem(version: Any) -> str | None:
     """Why ``version`` cannot be read, or None when it can."""
     if isinstance(version, bool) or not isinstance(version, int):
-        return (f"expected the spec version as a whole number (e.g. sonicspec: {SPEC_VERSION}), "
-                f"got {version!r}")
+        return (
+            f"expected the spec version as a whole number (e.g. sonicspec: {SPEC_VERSION}), "
+            f"got {version!r}"
+        )
     if version > SPEC_VERSION:
         from sonicspec import __version__
 
-        return (f"spec version {version} is newer than this sonicspec ({__version__}) reads "
-                f"(up to {SPEC_VERSION}); upgrade sonicspec")
+        return (
+            f"spec version {version} is newer than this sonicspec ({__version__}) reads "
+            f"(up to {SPEC_VERSION}); upgrade sonicspec"
+        )
     if version < OLDEST_VERSION or any(v not in MIGRATIONS for v in range(version, SPEC_VERSION)):
         return f"unknown spec version {version}; known versions: {OLDEST_VERSION}..{SPEC_VERSION}"
     return None

@@ -15,6 +15,8 @@ import hashlib
 import json
 import os
 import shutil
+import socket
+import time
 import uuid
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -82,9 +84,17 @@ class ArtifactStore:
     def exists(self, stage: str, key: str) -> bool:
         return (self.path(stage, key) / "zarr.json").is_file()
 
-    def write(self, stage: str, key: str, arrays: Mapping[str, np.ndarray], *,
-              data: Any = None, params: Mapping[str, Any] | None = None,
-              input_keys: tuple[str, ...] = (), stage_version: int = 1) -> Path:
+    def write(
+        self,
+        stage: str,
+        key: str,
+        arrays: Mapping[str, np.ndarray],
+        *,
+        data: Any = None,
+        params: Mapping[str, Any] | None = None,
+        input_keys: tuple[str, ...] = (),
+        stage_version: int = 1,
+    ) -> Path:
         """Write an artifact atomically; a no-op if it already exists (same key, same bytes)."""
         import zarr
 
@@ -94,8 +104,10 @@ class ArtifactStore:
         arrays = {name: np.asarray(a) for name, a in arrays.items()}
         for name, a in arrays.items():
             if a.dtype == object or a.dtype.kind in "USV":
-                raise StoreError(f"{stage} {key[:12]}: array {name!r} has dtype {a.dtype}; "
-                                 "store text in data, numbers in arrays")
+                raise StoreError(
+                    f"{stage} {key[:12]}: array {name!r} has dtype {a.dtype}; "
+                    "store text in data, numbers in arrays"
+                )
         provenance = {
             "stage": stage,
             "key": key,
@@ -104,12 +116,15 @@ class ArtifactStore:
             "input_keys": list(input_keys),
             "package_version": __version__,
             "digest": array_digest(arrays),
-            "arrays": {n: {"dtype": a.dtype.str, "shape": list(a.shape)}
-                       for n, a in sorted(arrays.items())},
+            "arrays": {
+                n: {"dtype": a.dtype.str, "shape": list(a.shape)} for n, a in sorted(arrays.items())
+            },
         }
         attrs = json.loads(canonical_json({"sonicspec": provenance, "data": data}))
         final.parent.mkdir(parents=True, exist_ok=True)
-        tmp = final.parent / f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}.zarr"
+        tmp = final.parent / (
+            f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}@{socket.gethostname()}.zarr"
+        )
         try:
             group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
             for name in sorted(arrays):
@@ -118,8 +133,12 @@ class ArtifactStore:
                 if a.size == 0:
                     chunks = tuple(max(1, s) for s in a.shape) or ()
                 arr = group.create_array(
-                    name, shape=a.shape, dtype=a.dtype, chunks=chunks,
-                    compressors=zarr.codecs.ZstdCodec(level=3), fill_value=0,
+                    name,
+                    shape=a.shape,
+                    dtype=a.dtype,
+                    chunks=chunks,
+                    compressors=zarr.codecs.ZstdCodec(level=3),
+                    fill_value=0,
                 )
                 if a.size:
                     arr[...] = a
@@ -134,8 +153,9 @@ class ArtifactStore:
         except OSError as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-            raise StoreError(f"{stage} {key[:12]}: cannot write {final}: "
-                             f"{exc.strerror or exc}{hint}") from exc
+            raise StoreError(
+                f"{stage} {key[:12]}: cannot write {final}: {exc.strerror or exc}{hint}"
+            ) from exc
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -184,6 +204,35 @@ class ArtifactStore:
             return []
         return sorted(self.root.glob(f"*/*/{TEMP_PREFIX}*"))
 
+    def clean_stale_temp(self, max_age_s: float = 86400.0) -> int:
+        """Delete temporary folders of writers that are gone; returns how many.
+
+        A writer on this host is gone when its process no longer exists; one on another host
+        (a cluster node) when its folder is older than ``max_age_s``.
+        """
+        removed = 0
+        host = socket.gethostname()
+        for tmp in self.temp_folders():
+            name = tmp.name[len(TEMP_PREFIX) : -len(".zarr")]
+            stem, _, owner = name.rpartition("@")
+            try:
+                pid = int(stem.split("-")[1])
+            except (IndexError, ValueError):
+                pid = -1
+            if owner == host and pid > 0:
+                try:
+                    os.kill(pid, 0)
+                    continue  # still writing
+                except ProcessLookupError:
+                    pass
+                except PermissionError:
+                    continue
+            elif time.time() - tmp.stat().st_mtime < max_age_s:
+                continue
+            shutil.rmtree(tmp, ignore_errors=True)
+            removed += 1
+        return removed
+
     def verify_one(self, stage: str, key: str) -> VerifyProblem | None:
         """Re-read an artifact and recompute its digest."""
         try:
@@ -192,13 +241,21 @@ class ArtifactStore:
             return VerifyProblem(stage, key, str(exc).split(": ", 1)[-1])
         prov = art.provenance
         if prov.get("key") != key or prov.get("stage") != stage:
-            return VerifyProblem(stage, key, "provenance names another artifact "
-                                 f"({prov.get('stage')} {str(prov.get('key'))[:12]})")
+            return VerifyProblem(
+                stage,
+                key,
+                "provenance names another artifact "
+                f"({prov.get('stage')} {str(prov.get('key'))[:12]})",
+            )
         expected = {n: (m["dtype"], tuple(m["shape"])) for n, m in prov.get("arrays", {}).items()}
         found = {n: (a.dtype.str, a.shape) for n, a in art.arrays.items()}
         if expected != found:
-            return VerifyProblem(stage, key, f"arrays differ from provenance: expected "
-                                 f"{sorted(expected)}, found {sorted(found)}")
+            return VerifyProblem(
+                stage,
+                key,
+                f"arrays differ from provenance: expected "
+                f"{sorted(expected)}, found {sorted(found)}",
+            )
         if array_digest(art.arrays) != prov.get("digest"):
             return VerifyProblem(stage, key, "array contents do not match the recorded digest")
         return None
@@ -216,7 +273,11 @@ class ArtifactStore:
             if key not in present:
                 problems.append(VerifyProblem(stage, key, "missing"))
         for tmp in self.temp_folders():
-            problems.append(VerifyProblem(tmp.parent.parent.name, tmp.name,
-                                          "unfinished temporary folder (a writer died); "
-                                          "safe to delete"))
+            problems.append(
+                VerifyProblem(
+                    tmp.parent.parent.name,
+                    tmp.name,
+                    "unfinished temporary folder (a writer died); safe to delete",
+                )
+            )
         return problems

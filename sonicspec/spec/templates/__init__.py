@@ -21,8 +21,10 @@ def schema_line(target: str) -> str:
 def template_body(preset: str) -> str:
     """The preset's text without the schema modeline."""
     if preset not in PRESETS:
-        raise SonicspecError(f"preset: expected one of {', '.join(PRESETS)}, got {preset!r}"
-                             + did_you_mean(preset, PRESETS))
+        raise SonicspecError(
+            f"preset: expected one of {', '.join(PRESETS)}, got {preset!r}"
+            + did_you_mean(preset, PRESETS)
+        )
     return resources.files(__name__).joinpath(f"{preset}.yaml").read_text(encoding="utf-8")
 
 

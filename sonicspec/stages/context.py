@@ -1,0 +1,59 @@
+"""What a stage sees of the world: its job, its input artifacts, a seeded generator, the store."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sonicspec.errors import StageError
+from sonicspec.plan.hashing import rng_for
+from sonicspec.plan.model import STEP_BY_NAME, Job, Plan
+from sonicspec.store import Artifact, ArtifactStore
+
+
+@dataclass(frozen=True)
+class JobContext:
+    """A job in its plan, with access to the artifacts it depends on."""
+
+    job: Job
+    plan: Plan
+    store: ArtifactStore
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return dict(self.job.params)
+
+    def input_keys(self, step: str) -> list[str]:
+        """Keys of this job's inputs made by ``step``, in the order the plan lists them."""
+        jobs = self.plan.by_key()
+        return [k for k in self.job.inputs if jobs[k].step == step]
+
+    def input(self, step: str) -> Artifact:
+        """The single input artifact of ``step`` (a :class:`StageError` if not exactly one)."""
+        keys = self.input_keys(step)
+        if len(keys) != 1:
+            raise StageError(
+                f"{self.job.label}: expected one {step} input, found {len(keys)}", self.job.key
+            )
+        return self.store.read(step, keys[0])
+
+    def input_data(self, step: str) -> list[Any]:
+        """The JSON data of every ``step`` input (cheap: no arrays are read)."""
+        return [self.store.read_data(step, k) for k in self.input_keys(step)]
+
+    def rng(self, *names: str) -> np.random.Generator:
+        """A generator seeded by the spec seed and ``names`` (e.g. the step and a group id)."""
+        return rng_for(self.plan.seed, *names)
+
+    def write(self, arrays: dict[str, np.ndarray], data: Any = None) -> None:
+        self.store.write(
+            self.job.step,
+            self.job.key,
+            arrays,
+            data=data,
+            params=self.job.params,
+            input_keys=self.job.inputs,
+            stage_version=STEP_BY_NAME[self.job.step].version,
+        )
