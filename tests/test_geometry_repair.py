@@ -11,7 +11,7 @@ from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 from sonicspec.geometry.repair import RepairSettings, leak_test, mesh_stats, repair_mesh
 from sonicspec.testing.meshes import ScannedHouse, house_contains_air, house_mesh, scanned_house
 
-HOUSE_SETTINGS = RepairSettings(max_hole_size_m=1.5, if_not_watertight="error")
+HOUSE_SETTINGS = RepairSettings(max_hole_size_m=1.5, leak_test_rays=20_000)
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def house():
 
 @pytest.fixture(scope="module")
 def repaired(house):
-    return repair_mesh(house.damaged, HOUSE_SETTINGS)
+    return repair_mesh(house.damaged, HOUSE_SETTINGS, np.random.default_rng(5))
 
 
 def test_scanned_house_is_damaged_and_leaks(house):
@@ -45,6 +45,7 @@ def test_repair_makes_the_house_watertight(house, repaired):
     # the repaired surface is the house's: same vertex count, volume within the scan noise
     assert mesh.vertices.shape == house.clean.vertices.shape
     assert mesh.air_volume() == pytest.approx(house.clean.air_volume(), rel=2e-3)
+    assert report.leak.rays == 20_000 and report.leak.leak_fraction == 0.0
     leaks = leak_test(mesh, np.random.default_rng(2), 20_000)
     assert leaks.leak_fraction == 0.0
 
@@ -79,7 +80,7 @@ def test_inverted_room_with_obstacles_is_turned_to_the_air():
     faces = np.array(scene.faces)[:, ::-1]
     faces[scene.face_object == 1] = faces[scene.face_object == 1][:, ::-1]
     broken = scene.replace(faces=faces)
-    fixed, report = repair_mesh(broken, RepairSettings(if_not_watertight="error"))
+    fixed, report = repair_mesh(broken, rng=np.random.default_rng(0))
     assert report.components_flipped == 2  # the room and the table
     assert fixed.air_volume() == pytest.approx(scene.air_volume())
     np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
@@ -97,7 +98,9 @@ def test_degenerate_duplicate_and_non_manifold_faces():
     broken = SceneMesh(v, faces, 0, ("x",))
     stats = mesh_stats(broken.faces, len(v))
     assert stats.non_manifold_edges >= 1
-    fixed, report = repair_mesh(broken, RepairSettings(min_component_area_m2=0.0))
+    fixed, report = repair_mesh(
+        broken, RepairSettings(min_component_area_m2=0.0), np.random.default_rng(0)
+    )
     assert report.degenerate_faces_removed == 2
     assert report.duplicate_faces_removed == 1  # the reversed copy of face 3
     assert report.non_manifold_faces_removed == 1  # the fin, the smallest on the shared edge
@@ -106,14 +109,24 @@ def test_degenerate_duplicate_and_non_manifold_faces():
 
 
 def test_not_watertight_is_a_warning_or_an_error(house):
-    small_holes_only = RepairSettings(max_hole_size_m=0.5)
-    with pytest.warns(SonicspecWarning, match="expected a watertight mesh after repair"):
-        mesh, report = repair_mesh(house.damaged, small_holes_only)
+    small_holes_only = RepairSettings(max_hole_size_m=0.5, on_leak="warn")
+    with pytest.warns(SonicspecWarning, match="expected a watertight mesh that does not leak"):
+        _, report = repair_mesh(house.damaged, small_holes_only, np.random.default_rng(3))
     assert report.holes_closed == 0 and not report.watertight
-    assert leak_test(mesh, np.random.default_rng(3), 20_000).leak_fraction > 0
-    strict = RepairSettings(max_hole_size_m=0.5, if_not_watertight="error")
-    with pytest.raises(GeometryError, match=r"1 holes left open\); raise max_hole_size_m"):
-        repair_mesh(house.damaged, strict)
+    assert report.leak.leak_fraction > 0
+    strict = RepairSettings(max_hole_size_m=0.5)
+    with pytest.raises(GeometryError, match=r"1 holes left open\); a leak fraction of"):
+        repair_mesh(house.damaged, strict, np.random.default_rng(3))
+
+
+def test_a_closed_mesh_facing_away_from_the_air_leaks():
+    # watertight but inside out, and orientation repair switched off: every ray from the
+    # sampled origins meets a back face, so the leak test fails it
+    inverted = shoebox((3.0, 3.0, 3.0))
+    inverted = inverted.replace(faces=inverted.faces[:, ::-1])
+    settings = RepairSettings(orient=False, leak_test_rays=500)
+    with pytest.raises(GeometryError, match=r"got a leak fraction of 1\.00e\+00 > 0\.0001"):
+        repair_mesh(inverted, settings, np.random.default_rng(0))
 
 
 def test_leak_test_with_given_interior_points():
@@ -135,7 +148,9 @@ def test_leak_test_with_given_interior_points():
     ("kwargs", "message"),
     [
         ({"merge_distance_m": -1.0}, "merge_distance_m: expected a finite value >= 0"),
-        ({"if_not_watertight": "ignore"}, "expected 'warn' or 'error', got 'ignore'"),
+        ({"on_leak": "ignore"}, "on_leak: expected 'error' or 'warn', got 'ignore'"),
+        ({"leak_test_rays": -1}, "leak_test_rays: expected an integer >= 0"),
+        ({"max_leak_fraction": 2.0}, r"max_leak_fraction: expected a fraction in \[0, 1\]"),
     ],
 )
 def test_bad_settings(kwargs, message):
@@ -152,10 +167,14 @@ def test_bad_calls():
     ):
         leak_test(room, np.random.default_rng(0), 10, interior_points=np.zeros((0, 3)))
     with pytest.raises(GeometryError, match="expected faces to remain after cleaning"):
-        repair_mesh(room, RepairSettings(min_component_area_m2=100.0))
+        repair_mesh(room, RepairSettings(min_component_area_m2=100.0, leak_test_rays=0))
     empty = SceneMesh(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros(0, int), ("x",))
     with pytest.raises(GeometryError, match="repair_mesh: expected a mesh with faces"):
-        repair_mesh(empty)
+        repair_mesh(empty, RepairSettings(leak_test_rays=0))
+    with pytest.raises(
+        GeometryError, match=r"repair_mesh\.rng: expected a numpy\.random\.Generator"
+    ):
+        repair_mesh(room)
 
 
 def test_report_to_dict(repaired):
@@ -163,6 +182,7 @@ def test_report_to_dict(repaired):
     data = report.to_dict()
     assert data["watertight"] is True and data["before"]["watertight"] is False
     assert data["holes_closed"] == 1
+    assert data["leak"] == {"rays": 20_000, "escaped": 0, "backface": 0, "leak_fraction": 0.0}
 
 
 def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():
@@ -172,7 +192,7 @@ def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():
     assert mesh.air_volume() == pytest.approx(2 * one_floor.air_volume())
     assert np.all(house_contains_air(mesh.face_centroids + 1e-3 * mesh.face_normals, floors=2))
     # a clean mesh passes repair unchanged (two storeys: two closed pieces)
-    fixed, report = repair_mesh(mesh, RepairSettings(if_not_watertight="error"))
+    fixed, report = repair_mesh(mesh, rng=np.random.default_rng(0))
     assert report.after.components == 2 and report.components_flipped == 0
     assert report.faces_flipped_coherent == 0 and report.merged_vertices == 0
     np.testing.assert_array_equal(fixed.faces, mesh.faces)

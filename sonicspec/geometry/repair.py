@@ -27,6 +27,7 @@ available and its pure-numpy one otherwise.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 
@@ -59,7 +60,7 @@ _PARITY_DIRECTIONS /= np.linalg.norm(_PARITY_DIRECTIONS, axis=1, keepdims=True)
 
 @dataclass(frozen=True)
 class RepairSettings:
-    """What :func:`repair_mesh` may change.
+    """What :func:`repair_mesh` may change, and what it accepts (mirrors the spec's RepairSpec).
 
     Attributes
     ----------
@@ -72,16 +73,22 @@ class RepairSettings:
         0 closes none.
     orient : bool
         Re-orient faces so normals point into the air.
-    if_not_watertight : {"warn", "error"}
-        What to do when the result still has open or non-manifold edges: a
-        :class:`SonicspecWarning` or a :class:`GeometryError`. Never silent.
+    leak_test_rays : int
+        Rays of the leak test run on the result (:func:`leak_test`); 0 skips it.
+    max_leak_fraction : float
+        Largest acceptable share of leaking rays.
+    on_leak : {"error", "warn"}
+        What a result that is not watertight, or leaks more than ``max_leak_fraction``, does:
+        a :class:`GeometryError` or a :class:`SonicspecWarning`. Never silent.
     """
 
     merge_distance_m: float = 1e-3
     min_component_area_m2: float = 0.01
     max_hole_size_m: float = 1.0
     orient: bool = True
-    if_not_watertight: str = "warn"
+    leak_test_rays: int = 10_000
+    max_leak_fraction: float = 1e-4
+    on_leak: str = "error"
 
     def __post_init__(self) -> None:
         for name in ("merge_distance_m", "min_component_area_m2", "max_hole_size_m"):
@@ -90,10 +97,19 @@ class RepairSettings:
                 raise GeometryError(
                     f"RepairSettings.{name}: expected a finite value >= 0, got {value!r}"
                 )
-        if self.if_not_watertight not in ("warn", "error"):
+        if not isinstance(self.leak_test_rays, (int, np.integer)) or self.leak_test_rays < 0:
             raise GeometryError(
-                "RepairSettings.if_not_watertight: expected 'warn' or 'error', got "
-                f"{self.if_not_watertight!r}"
+                "RepairSettings.leak_test_rays: expected an integer >= 0, got "
+                f"{self.leak_test_rays!r}"
+            )
+        if not 0 <= self.max_leak_fraction <= 1:
+            raise GeometryError(
+                "RepairSettings.max_leak_fraction: expected a fraction in [0, 1], got "
+                f"{self.max_leak_fraction!r}"
+            )
+        if self.on_leak not in ("warn", "error"):
+            raise GeometryError(
+                f"RepairSettings.on_leak: expected 'error' or 'warn', got {self.on_leak!r}"
             )
 
 
@@ -115,6 +131,24 @@ class MeshStats:
 
 
 @dataclass(frozen=True)
+class LeakReport:
+    """Rays cast from points in the air: how many left it.
+
+    ``escaped`` rays hit nothing (gone to infinity); ``backface`` rays first hit a face from
+    behind (they passed through a hole into the space behind a surface).
+    """
+
+    rays: int
+    escaped: int
+    backface: int
+
+    @property
+    def leak_fraction(self) -> float:
+        """Share of rays that left the air, escaped or through to a back face."""
+        return (self.escaped + self.backface) / self.rays if self.rays else 0.0
+
+
+@dataclass(frozen=True)
 class RepairReport:
     """What :func:`repair_mesh` found and changed (counts)."""
 
@@ -131,6 +165,7 @@ class RepairReport:
     holes_closed: int
     hole_faces_added: int
     components_flipped: int
+    leak: LeakReport | None = None
 
     @property
     def watertight(self) -> bool:
@@ -139,10 +174,16 @@ class RepairReport:
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (for ``scene inspect --json``)."""
-        out = {k: v for k, v in self.__dict__.items() if k not in ("before", "after")}
+        skip = ("before", "after", "leak")
+        out = {k: v for k, v in self.__dict__.items() if k not in skip}
         out["before"] = dict(self.before.__dict__, watertight=self.before.watertight)
         out["after"] = dict(self.after.__dict__, watertight=self.after.watertight)
         out["watertight"] = self.watertight
+        out["leak"] = (
+            None
+            if self.leak is None
+            else dict(self.leak.__dict__, leak_fraction=self.leak.leak_fraction)
+        )
         return out
 
 
@@ -431,6 +472,17 @@ def _ray_intersector(vertices: np.ndarray, faces: np.ndarray):
     return mesh.ray
 
 
+def _parity_in_air(intersector, points: np.ndarray) -> np.ndarray:
+    """Majority vote over fixed directions: a point is in the air when rays from it cross the
+    surface an odd number of times (one envelope around it; obstacles entered and left)."""
+    origins = np.repeat(points, len(_PARITY_DIRECTIONS), axis=0)
+    directions = np.tile(_PARITY_DIRECTIONS, (len(points), 1))
+    _, ray_index, _ = intersector.intersects_location(origins, directions, multiple_hits=True)
+    crossings = np.bincount(ray_index, minlength=len(origins))
+    odd = (crossings % 2 == 1).reshape(len(points), len(_PARITY_DIRECTIONS))
+    return odd.sum(axis=1) * 2 > len(_PARITY_DIRECTIONS)
+
+
 def _orient_to_air(vertices, faces, n_vertices):
     """Flip each connected piece whose normals point out of the air (ray-parity vote)."""
     n, label = _face_components(faces, n_vertices)
@@ -442,20 +494,20 @@ def _orient_to_air(vertices, faces, n_vertices):
     extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     offset = 1e-4 * extent
     intersector = _ray_intersector(vertices, faces)
-    probes, owners = [], []
+    fronts, backs, owners = [], [], []
     for k in range(n):
         members = np.flatnonzero(label == k)
         # the largest faces of the piece: their centroids are far from edges
-        chosen = members[np.argsort(-area[members], kind="stable")[:7]]
-        probes.append(centroid[chosen] + offset * normal[chosen])
+        chosen = members[np.argsort(-area[members], kind="stable")[:15]]
+        fronts.append(centroid[chosen] + offset * normal[chosen])
+        backs.append(centroid[chosen] - offset * normal[chosen])
         owners.append(np.full(len(chosen), k))
-    probes, owners = np.concatenate(probes), np.concatenate(owners)
-    origins = np.repeat(probes, len(_PARITY_DIRECTIONS), axis=0)
-    directions = np.tile(_PARITY_DIRECTIONS, (len(probes), 1))
-    _, ray_index, _ = intersector.intersects_location(origins, directions, multiple_hits=True)
-    crossings = np.bincount(ray_index, minlength=len(origins))
-    in_air = (crossings % 2 == 1).astype(int) * 2 - 1  # +1 vote: normal side is air
-    votes = np.bincount(np.repeat(owners, len(_PARITY_DIRECTIONS)), weights=in_air, minlength=n)
+    owners = np.concatenate(owners)
+    front_air = _parity_in_air(intersector, np.concatenate(fronts))
+    back_air = _parity_in_air(intersector, np.concatenate(backs))
+    # +1: air in front only (right way); -1: air behind only; 0 abstains (a face in contact
+    # with another surface, e.g. the underside of a box on the floor, has air on neither side)
+    votes = np.bincount(owners, weights=front_air.astype(int) - back_air.astype(int), minlength=n)
     flip_piece = votes < 0
     out = faces.copy()
     flip = flip_piece[label]
@@ -464,7 +516,9 @@ def _orient_to_air(vertices, faces, n_vertices):
 
 
 def repair_mesh(
-    mesh: SceneMesh, settings: RepairSettings | None = None
+    mesh: SceneMesh,
+    settings: RepairSettings | None = None,
+    rng: np.random.Generator | None = None,
 ) -> tuple[SceneMesh, RepairReport]:
     """Repair a scanned scene so that it is closed with normals into the air.
 
@@ -474,25 +528,32 @@ def repair_mesh(
         The imported scene (any orientation, any damage).
     settings : RepairSettings
         Tolerances and policy; defaults if None.
+    rng : numpy.random.Generator
+        Source of the leak test's rays; needed when ``settings.leak_test_rays > 0``.
 
     Returns
     -------
     (SceneMesh, RepairReport)
         The repaired mesh (unused vertices dropped; per-face material, label and object kept)
-        and the counts of what changed.
+        and the counts of what changed, with the leak test's result.
 
     Raises
     ------
     GeometryError
-        The mesh has no faces, or the result is not watertight and
-        ``settings.if_not_watertight == "error"``.
+        The mesh has no faces; no ``rng`` for the leak test; or the result is not watertight
+        or leaks more than ``settings.max_leak_fraction`` and ``settings.on_leak == "error"``.
 
     Warns
     -----
     SonicspecWarning
-        The result is not watertight and ``settings.if_not_watertight == "warn"``.
+        The result is not watertight or leaks, and ``settings.on_leak == "warn"``.
     """
     settings = settings or RepairSettings()
+    if settings.leak_test_rays > 0 and rng is None:
+        raise GeometryError(
+            "repair_mesh.rng: expected a numpy.random.Generator for the leak test, got None; "
+            "pass rng= or set leak_test_rays=0"
+        )
     mesh.validate()
     if mesh.n_faces == 0:
         raise GeometryError("repair_mesh: expected a mesh with faces, got an empty mesh")
@@ -553,44 +614,42 @@ def repair_mesh(
         hole_faces_added=added,
         components_flipped=pieces_flipped,
     )
+    problems = []
+    if settings.leak_test_rays > 0 and rng is not None:
+        try:
+            report = dataclasses.replace(
+                report, leak=leak_test(repaired, rng, settings.leak_test_rays)
+            )
+        except GeometryError as exc:
+            problems.append(f"no leak test ({exc})")
     if not after.watertight:
-        message = (
-            f"repair_mesh: expected a watertight mesh after repair, got {after.boundary_edges} "
-            f"open and {after.non_manifold_edges} non-manifold edges "
-            f"({holes - closed} holes left open); raise max_hole_size_m "
-            f"(now {settings.max_hole_size_m} m) or merge_distance_m, or fix the scan"
+        problems.append(
+            f"{after.boundary_edges} open and {after.non_manifold_edges} non-manifold edges "
+            f"({holes - closed} holes left open)"
         )
-        if settings.if_not_watertight == "error":
+    if report.leak is not None and report.leak.leak_fraction > settings.max_leak_fraction:
+        problems.append(
+            f"a leak fraction of {report.leak.leak_fraction:.2e} > {settings.max_leak_fraction:g} "
+            f"({report.leak.rays} rays)"
+        )
+    if problems:
+        message = (
+            "repair_mesh: expected a watertight mesh that does not leak, got "
+            f"{'; '.join(problems)}; raise max_hole_size_m (now {settings.max_hole_size_m} m) "
+            "or merge_distance_m, or fix the scan"
+        )
+        if settings.on_leak == "error":
             raise GeometryError(message)
         warnings.warn(message, SonicspecWarning, stacklevel=2)
     return repaired, report
 
 
 # --------------------------------------------------------------------------- leak test
-@dataclass(frozen=True)
-class LeakReport:
-    """Rays cast from points in the air: how many left it.
-
-    ``escaped`` rays hit nothing (gone to infinity); ``backface`` rays first hit a face from
-    behind (they passed through a hole into the space behind a surface).
-    """
-
-    rays: int
-    escaped: int
-    backface: int
-
-    @property
-    def leak_fraction(self) -> float:
-        """Share of rays that left the air, escaped or through to a back face."""
-        return (self.escaped + self.backface) / self.rays if self.rays else 0.0
-
-
 def leak_test(
     mesh: SceneMesh,
     rng: np.random.Generator,
     n_rays: int = 10_000,
     interior_points: np.ndarray | None = None,
-    offset_m: float = 0.01,
 ) -> LeakReport:
     """Cast random rays from points in the air and count those that leave it.
 
@@ -604,33 +663,29 @@ def leak_test(
         Number of rays.
     interior_points : (P, 3) array, optional
         Points known to be in the air, used in turn as ray origins. Without them, origins are
-        random points on the faces (area-weighted) moved ``offset_m`` along the normal, i.e.
-        just in front of the surface, which trusts the orientation.
-    offset_m : float
-        Distance of the sampled origins from the surface, metres.
+        uniform random points of the bounding box kept when a ray-parity vote puts them in the
+        air (an odd number of surface crossings: inside the envelope, outside obstacles).
+
+    A ray leaks when it hits nothing (escaped to infinity) or first hits a face from behind
+    (it left the air through a hole, or the face points out of the air).
 
     Returns
     -------
     LeakReport
+
+    Raises
+    ------
+    GeometryError
+        No sampled origin lies in the air (normals pointing out of the air everywhere).
     """
     if n_rays <= 0:
         raise GeometryError(f"leak_test.n_rays: expected a positive count, got {n_rays!r}")
     mesh.validate()
     if mesh.n_faces == 0:
         raise GeometryError("leak_test: expected a mesh with faces, got an empty mesh")
+    intersector = _ray_intersector(np.array(mesh.vertices), np.array(mesh.faces))
     if interior_points is None:
-        area = mesh.face_areas
-        face = rng.choice(mesh.n_faces, size=n_rays, p=area / area.sum())
-        r1, r2 = rng.random(n_rays), rng.random(n_rays)
-        s = np.sqrt(r1)
-        tri = mesh.vertices[mesh.faces[face]]
-        # uniform point in a triangle: (1 - √r1) a + √r1 (1 - r2) b + √r1 r2 c
-        points = (
-            (1 - s)[:, None] * tri[:, 0]
-            + (s * (1 - r2))[:, None] * tri[:, 1]
-            + (s * r2)[:, None] * tri[:, 2]
-        )
-        origins = points + offset_m * mesh.face_normals[face]
+        origins = _origins_in_air(mesh, intersector, rng, n_rays)
     else:
         interior = np.asarray(interior_points, dtype=np.float64)
         if interior.ndim != 2 or interior.shape[1] != 3 or len(interior) == 0:
@@ -641,7 +696,6 @@ def leak_test(
         origins = interior[np.arange(n_rays) % len(interior)]
     directions = rng.normal(size=(n_rays, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    intersector = _ray_intersector(np.array(mesh.vertices), np.array(mesh.faces))
     first = intersector.intersects_first(origins, directions)
     escaped = first < 0
     hit = np.flatnonzero(~escaped)
@@ -649,3 +703,31 @@ def leak_test(
     return LeakReport(
         rays=int(n_rays), escaped=int(np.count_nonzero(escaped)), backface=int(backface.sum())
     )
+
+
+def _origins_in_air(mesh, intersector, rng, n_rays: int) -> np.ndarray:
+    """Uniform points of the bounding box that a ray-parity vote puts in the air.
+
+    Points in general position rather than on the surface: rays from them meet coincident
+    faces (a box standing flush on the floor) only within a small solid angle, which the
+    majority vote outvotes; the vote does not depend on the faces' orientation.
+    """
+    lo, hi = mesh.bounds
+    kept: list[np.ndarray] = []
+    n_kept = n_tried = 0
+    for _ in range(6):  # resample until enough candidates pass (a handful of rounds)
+        n_candidates = max(2 * (n_rays - n_kept), 64)
+        candidates = rng.uniform(lo, hi, size=(n_candidates, 3))
+        good = candidates[_parity_in_air(intersector, candidates)]
+        kept.append(good)
+        n_kept += len(good)
+        n_tried += n_candidates
+        if n_kept >= n_rays:
+            break
+    origins = np.concatenate(kept)
+    if len(origins) == 0:
+        raise GeometryError(
+            f"leak_test: expected random points of the bounding box inside the air, got none "
+            f"of {n_tried} by ray parity; is the mesh an open sheet rather than a room?"
+        )
+    return origins[np.arange(n_rays) % len(origins)]
