@@ -337,3 +337,11 @@ def test_with_materials_and_concatenate():
         SceneMesh.concatenate([])
     sub = merged.subset(np.arange(12))
     assert sub.n_faces == 12 and sub.vertices.shape == (8, 3)
+
+
+def test_add_obstacles_keeps_existing_object_ids():
+    room = shoebox((4.0, 4.0, 3.0))
+    scanned = room.replace(face_object=np.arange(room.n_faces) % 3 - 1)  # ids -1, 0, 1
+    scene = add_obstacles(scanned, [box_obstacle((2, 2, 0.5), (1, 1, 1))])
+    np.testing.assert_array_equal(scene.face_object[: room.n_faces], scanned.face_object)
+    assert set(scene.face_object[room.n_faces :]) == {2}

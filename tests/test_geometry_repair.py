@@ -11,7 +11,9 @@ from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 from sonicspec.geometry.repair import RepairSettings, leak_test, mesh_stats, repair_mesh
 from sonicspec.testing.meshes import ScannedHouse, house_contains_air, house_mesh, scanned_house
 
-HOUSE_SETTINGS = RepairSettings(max_hole_size_m=1.5, leak_test_rays=20_000)
+HOUSE_SETTINGS = RepairSettings(
+    max_hole_size_m=1.5, leak_test_rays=20_000, if_not_watertight="error"
+)
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +82,9 @@ def test_inverted_room_with_obstacles_is_turned_to_the_air():
     faces = np.array(scene.faces)[:, ::-1]
     faces[scene.face_object == 1] = faces[scene.face_object == 1][:, ::-1]
     broken = scene.replace(faces=faces)
-    fixed, report = repair_mesh(broken, rng=np.random.default_rng(0))
+    settings = RepairSettings(leak_test_rays=5000, if_not_watertight="error")
+    fixed, report = repair_mesh(broken, settings, np.random.default_rng(0))
+    assert report.leak.leak_fraction == 0.0  # the table stands flush on the floor
     assert report.components_flipped == 2  # the room and the table
     assert fixed.air_volume() == pytest.approx(scene.air_volume())
     np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
@@ -109,12 +113,12 @@ def test_degenerate_duplicate_and_non_manifold_faces():
 
 
 def test_not_watertight_is_a_warning_or_an_error(house):
-    small_holes_only = RepairSettings(max_hole_size_m=0.5, on_leak="warn")
+    small_holes_only = RepairSettings(max_hole_size_m=0.5, leak_test_rays=20_000)
     with pytest.warns(SonicspecWarning, match="expected a watertight mesh that does not leak"):
         _, report = repair_mesh(house.damaged, small_holes_only, np.random.default_rng(3))
     assert report.holes_closed == 0 and not report.watertight
     assert report.leak.leak_fraction > 0
-    strict = RepairSettings(max_hole_size_m=0.5)
+    strict = RepairSettings(max_hole_size_m=0.5, leak_test_rays=20_000, if_not_watertight="error")
     with pytest.raises(GeometryError, match=r"1 holes left open\); a leak fraction of"):
         repair_mesh(house.damaged, strict, np.random.default_rng(3))
 
@@ -124,7 +128,7 @@ def test_a_closed_mesh_facing_away_from_the_air_leaks():
     # sampled origins meets a back face, so the leak test fails it
     inverted = shoebox((3.0, 3.0, 3.0))
     inverted = inverted.replace(faces=inverted.faces[:, ::-1])
-    settings = RepairSettings(orient=False, leak_test_rays=500)
+    settings = RepairSettings(orient=False, leak_test_rays=500, if_not_watertight="error")
     with pytest.raises(GeometryError, match=r"got a leak fraction of 1\.00e\+00 > 0\.0001"):
         repair_mesh(inverted, settings, np.random.default_rng(0))
 
@@ -148,7 +152,7 @@ def test_leak_test_with_given_interior_points():
     ("kwargs", "message"),
     [
         ({"merge_distance_m": -1.0}, "merge_distance_m: expected a finite value >= 0"),
-        ({"on_leak": "ignore"}, "on_leak: expected 'error' or 'warn', got 'ignore'"),
+        ({"if_not_watertight": "ignore"}, "expected 'warn' or 'error', got 'ignore'"),
         ({"leak_test_rays": -1}, "leak_test_rays: expected an integer >= 0"),
         ({"max_leak_fraction": 2.0}, r"max_leak_fraction: expected a fraction in \[0, 1\]"),
     ],
@@ -174,7 +178,7 @@ def test_bad_calls():
     with pytest.raises(
         GeometryError, match=r"repair_mesh\.rng: expected a numpy\.random\.Generator"
     ):
-        repair_mesh(room)
+        repair_mesh(room, RepairSettings(leak_test_rays=10))
 
 
 def test_report_to_dict(repaired):
@@ -192,7 +196,8 @@ def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():
     assert mesh.air_volume() == pytest.approx(2 * one_floor.air_volume())
     assert np.all(house_contains_air(mesh.face_centroids + 1e-3 * mesh.face_normals, floors=2))
     # a clean mesh passes repair unchanged (two storeys: two closed pieces)
-    fixed, report = repair_mesh(mesh, rng=np.random.default_rng(0))
+    settings = RepairSettings(leak_test_rays=5000, if_not_watertight="error")
+    fixed, report = repair_mesh(mesh, settings, np.random.default_rng(0))
     assert report.after.components == 2 and report.components_flipped == 0
     assert report.faces_flipped_coherent == 0 and report.merged_vertices == 0
     np.testing.assert_array_equal(fixed.faces, mesh.faces)

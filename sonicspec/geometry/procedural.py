@@ -563,11 +563,14 @@ def _is_closed(faces: np.ndarray) -> bool:
 
 
 def add_obstacles(room: SceneMesh, obstacles: Sequence[SceneMesh]) -> SceneMesh:
-    """Merge obstacles into a room; obstacle ``k`` gets ``face_object == k``, room faces -1.
+    """Merge obstacles into a room, each obstacle with its own object id.
 
-    The equivalent of Habitat's ``add_object`` in SonicSim's occlusion study. Each obstacle must
-    lie within the room's bounding box (checked); that it does not cross a wall of a non-convex
-    room, or another obstacle, is the caller's responsibility.
+    Obstacle ``k`` gets ``face_object == base + k``, where ``base`` is 0 for a room without
+    object ids (whose faces then get -1) and one more than the largest id otherwise (an
+    imported scan keeps its objects' ids). The equivalent of Habitat's ``add_object`` in
+    SonicSim's occlusion study. Each obstacle must lie within the room's bounding box
+    (checked); that it does not cross a wall of a non-convex room, or another obstacle, is the
+    caller's responsibility.
 
     Raises
     ------
@@ -577,7 +580,10 @@ def add_obstacles(room: SceneMesh, obstacles: Sequence[SceneMesh]) -> SceneMesh:
     room.validate()
     lo, hi = room.bounds
     tolerance = 1e-9 * max(float(np.ptp(room.vertices, axis=0).max()), 1.0)
-    parts = [room.replace(face_object=np.full(room.n_faces, -1, np.int32))]
+    if room.face_object is None:
+        parts, base = [room.replace(face_object=np.full(room.n_faces, -1, np.int32))], 0
+    else:
+        parts, base = [room], int(room.face_object.max(initial=-1)) + 1
     for k, obstacle in enumerate(obstacles):
         obstacle.validate()
         if obstacle.n_faces == 0:
@@ -589,5 +595,5 @@ def add_obstacles(room: SceneMesh, obstacles: Sequence[SceneMesh]) -> SceneMesh:
                 f"{lo.round(3).tolist()}..{hi.round(3).tolist()} m, got "
                 f"{o_lo.round(3).tolist()}..{o_hi.round(3).tolist()} m"
             )
-        parts.append(obstacle.replace(face_object=np.full(obstacle.n_faces, k, np.int32)))
+        parts.append(obstacle.replace(face_object=np.full(obstacle.n_faces, base + k, np.int32)))
     return SceneMesh.concatenate(parts).validate()

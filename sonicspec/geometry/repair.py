@@ -60,7 +60,7 @@ _PARITY_DIRECTIONS /= np.linalg.norm(_PARITY_DIRECTIONS, axis=1, keepdims=True)
 
 @dataclass(frozen=True)
 class RepairSettings:
-    """What :func:`repair_mesh` may change, and what it accepts (mirrors the spec's RepairSpec).
+    """What :func:`repair_mesh` may change, and what it accepts (the spec's RepairSpec).
 
     Attributes
     ----------
@@ -74,21 +74,23 @@ class RepairSettings:
     orient : bool
         Re-orient faces so normals point into the air.
     leak_test_rays : int
-        Rays of the leak test run on the result (:func:`leak_test`); 0 skips it.
+        Rays of a leak test run on the result (:func:`leak_test`, needs ``rng``); 0 (the
+        default) skips it, e.g. when the caller tests after adding obstacles.
     max_leak_fraction : float
         Largest acceptable share of leaking rays.
-    on_leak : {"error", "warn"}
+    if_not_watertight : {"warn", "error"}
         What a result that is not watertight, or leaks more than ``max_leak_fraction``, does:
-        a :class:`GeometryError` or a :class:`SonicspecWarning`. Never silent.
+        a :class:`SonicspecWarning` or a :class:`GeometryError` (the spec's ``on_leak``).
+        Never silent.
     """
 
     merge_distance_m: float = 1e-3
     min_component_area_m2: float = 0.01
     max_hole_size_m: float = 1.0
     orient: bool = True
-    leak_test_rays: int = 10_000
+    leak_test_rays: int = 0
     max_leak_fraction: float = 1e-4
-    on_leak: str = "error"
+    if_not_watertight: str = "warn"
 
     def __post_init__(self) -> None:
         for name in ("merge_distance_m", "min_component_area_m2", "max_hole_size_m"):
@@ -107,9 +109,10 @@ class RepairSettings:
                 "RepairSettings.max_leak_fraction: expected a fraction in [0, 1], got "
                 f"{self.max_leak_fraction!r}"
             )
-        if self.on_leak not in ("warn", "error"):
+        if self.if_not_watertight not in ("warn", "error"):
             raise GeometryError(
-                f"RepairSettings.on_leak: expected 'error' or 'warn', got {self.on_leak!r}"
+                "RepairSettings.if_not_watertight: expected 'warn' or 'error', got "
+                f"{self.if_not_watertight!r}"
             )
 
 
@@ -541,12 +544,13 @@ def repair_mesh(
     ------
     GeometryError
         The mesh has no faces; no ``rng`` for the leak test; or the result is not watertight
-        or leaks more than ``settings.max_leak_fraction`` and ``settings.on_leak == "error"``.
+        or leaks more than ``settings.max_leak_fraction`` and
+        ``settings.if_not_watertight == "error"``.
 
     Warns
     -----
     SonicspecWarning
-        The result is not watertight or leaks, and ``settings.on_leak == "warn"``.
+        The result is not watertight or leaks, and ``settings.if_not_watertight == "warn"``.
     """
     settings = settings or RepairSettings()
     if settings.leak_test_rays > 0 and rng is None:
@@ -638,7 +642,7 @@ def repair_mesh(
             f"{'; '.join(problems)}; raise max_hole_size_m (now {settings.max_hole_size_m} m) "
             "or merge_distance_m, or fix the scan"
         )
-        if settings.on_leak == "error":
+        if settings.if_not_watertight == "error":
             raise GeometryError(message)
         warnings.warn(message, SonicspecWarning, stacklevel=2)
     return repaired, report
