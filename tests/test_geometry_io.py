@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sonicspec.errors import GeometryError
+from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry.io import load_matterport, load_mesh, mpcat40_table, read_house
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.testing.meshes import write_matterport_scene, write_plain_meshes
@@ -246,3 +246,16 @@ def test_face_index_out_of_range_names_the_file(tmp_path):
 def test_bad_options(plain, kwargs, message):
     with pytest.raises(GeometryError, match=message):
         load_mesh(plain.obj, **kwargs)
+
+
+def test_ply_labels_on_polygon_faces_warn(tmp_path):
+    path = tmp_path / "quads.ply"
+    path.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+        "property int label\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n"
+        "4 0 1 2 3 5\n3 0 1 4 9\n"
+    )
+    with pytest.warns(SonicspecWarning, match=r"quads\.ply: expected one label per triangle"):
+        mesh = load_mesh(path)
+    assert mesh.n_faces == 3 and mesh.face_label is None

@@ -27,6 +27,7 @@ mesh is given (then faces have no labels).
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -34,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sonicspec.errors import GeometryError
+from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry.mesh import UNLABELED, SceneMesh
 
 __all__ = [
@@ -191,6 +192,11 @@ def load_mesh(
     GeometryError
         Missing file, unsupported extension, unreadable or corrupt file, no triangles, or
         invalid contents; the message names the file.
+
+    Warns
+    -----
+    SonicspecWarning
+        A PLY face property cannot be kept because the file has polygon faces.
     """
     path = _check_path(path, "load_mesh", SUPPORTED_EXTENSIONS)
     up = _resolve_up(up_axis, path)
@@ -232,6 +238,17 @@ def load_mesh(
         face_object = None
         ply_label = _ply_face_property(geometry, _PLY_LABEL_PROPERTIES)
         ply_object = _ply_face_property(geometry, _PLY_OBJECT_PROPERTIES)
+        for kind, values in (("label", ply_label), ("object id", ply_object)):
+            if values is not None and len(values) != n_faces:
+                # trimesh splits polygons into triangles and reorders them, so per-face values
+                # can no longer be matched to triangles
+                warnings.warn(
+                    f"{path}: expected one {kind} per triangle, got {len(values)} values for "
+                    f"{n_faces} triangles (the file has polygon faces); {kind}s are not kept, "
+                    "triangulate the file to keep them",
+                    SonicspecWarning,
+                    stacklevel=2,
+                )
         if ply_label is not None and len(ply_label) == n_faces:
             values, face_label = np.unique(ply_label.astype(np.int64), return_inverse=True)
             labels = tuple(str(v) for v in values)
