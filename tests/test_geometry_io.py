@@ -259,3 +259,14 @@ def test_ply_labels_on_polygon_faces_warn(tmp_path):
     with pytest.warns(SonicspecWarning, match=r"quads\.ply: expected one label per triangle"):
         mesh = load_mesh(path)
     assert mesh.n_faces == 3 and mesh.face_label is None
+
+
+def test_semantic_ply_with_polygon_faces_is_an_error(tmp_path, mp3d):
+    path = tmp_path / "quads_semantic.ply"
+    path.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+        "property int object_id\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3 0\n"
+    )
+    with pytest.raises(GeometryError, match=r"quads_semantic\.ply: expected one object_id per"):
+        load_matterport(mp3d.glb, path)

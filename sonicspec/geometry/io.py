@@ -399,7 +399,12 @@ def _read_semantic_ply(path: Path, up: str, unit_scale: float) -> tuple[SceneMes
             f"{path}: expected a semantic mesh with triangles, got none (an empty mesh or points)"
         )
     object_id = _ply_face_property(loaded, ("object_id",))
-    if object_id is None or len(object_id) != len(loaded.faces):
+    if object_id is not None and len(object_id) != len(loaded.faces):
+        raise GeometryError(
+            f"{path}: expected one object_id per triangle, got {len(object_id)} for "
+            f"{len(loaded.faces)} triangles (the file has polygon faces)"
+        )
+    if object_id is None:
         raise GeometryError(
             f"{path}: expected a face property 'object_id' (habitat-sim's semantic PLY), "
             "got none; is this the <id>_semantic.ply file?"
