@@ -223,3 +223,16 @@ def test_mesh_stats_agree_with_pymeshlab(house, repaired):
         assert ours.non_manifold_edges == peer["non_two_manifold_edges"]
         assert ours.components == peer["connected_components_number"]
     assert _pymeshlab_measures(repaired[0])["is_mesh_two_manifold"]
+
+
+def test_hole_patch_takes_the_label_of_the_surface_it_continues():
+    room = shoebox((4.0, 3.0, 2.5), floor_material="carpet")
+    labels = np.array(room.labels)[room.face_label]
+    floor_face = int(np.flatnonzero(labels == "floor")[0])
+    holed = room.subset(np.arange(room.n_faces) != floor_face)  # walls border 2 of 3 edges
+    fixed, report = repair_mesh(holed, RepairSettings(max_hole_size_m=10.0))
+    assert report.holes_closed == 1 and report.watertight
+    new = np.array(fixed.labels)[fixed.face_label][-report.hole_faces_added :]
+    assert set(new) == {"floor"}
+    assert set(np.array(fixed.materials)[fixed.face_material[-1:]]) == {"carpet"}
+    assert fixed.air_volume() == pytest.approx(30.0)

@@ -14,8 +14,8 @@ wound either way. A ray tracer needs a closed surface whose normals all face the
    in opposite directions);
 6. close holes whose boundary loop spans at most ``max_hole_size_m``: the loop is projected to
    its best-fit plane and triangulated by ear clipping (a fan around its centroid when the
-   projection is not simple); new faces take the material, label and object of the faces
-   around the hole;
+   projection is not simple); new faces take the material, label and object of the bordering
+   face whose normal is closest to the patch's;
 7. point each piece's normals into the air, decided by ray parity: a point just in front of a
    face is in the air when a ray from it crosses the whole surface an odd number of times
    (one envelope around it, obstacles entered and left in pairs).
@@ -28,6 +28,7 @@ available and its pure-numpy one otherwise.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import warnings
 from dataclasses import dataclass
 
@@ -427,15 +428,16 @@ def _fill_hole(vertices: np.ndarray, loop: list[int]) -> tuple[np.ndarray, np.nd
 
 def _close_holes(vertices, faces, keep_attrs, n_vertices, max_size_m):
     loops = _boundary_loops(faces, n_vertices)
+    if max_size_m <= 0 or not loops:
+        return vertices, faces, keep_attrs, len(loops), 0, 0
+    # The face across each boundary edge: a loop edge u→v borders the face that runs v→u.
+    directed, face_of = _edge_keys(faces, n_vertices)
+    across = dict(zip(directed.tolist(), face_of.tolist(), strict=True))
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    face_normal = np.cross(b - a, c - a)
+    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
     closed = 0
     new_faces, new_attrs, new_vertices = [], [], []
-    if max_size_m <= 0:
-        return vertices, faces, keep_attrs, len(loops), 0, 0
-    # adjacency from vertex to faces, to inherit attributes from the faces around a hole
-    vertex_face = sparse.coo_matrix(
-        (np.ones(faces.size, bool), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
-        shape=(n_vertices, len(faces)),
-    ).tocsr()
     extra = len(vertices)
     for loop in loops:
         if len(loop) < 3 or len(set(loop)) != len(loop):
@@ -444,14 +446,21 @@ def _close_holes(vertices, faces, keep_attrs, n_vertices, max_size_m):
         if np.linalg.norm(points.max(axis=0) - points.min(axis=0)) > max_size_m:
             continue
         tris, new_vertex = _fill_hole(vertices, loop)
+        corners = np.concatenate([vertices, [new_vertex]]) if new_vertex is not None else vertices
+        patch_normal = np.cross(
+            corners[tris[:, 1]] - corners[tris[:, 0]], corners[tris[:, 2]] - corners[tris[:, 0]]
+        ).sum(axis=0)
         if new_vertex is not None:
             tris = np.where(tris == len(vertices), extra, tris)
             new_vertices.append(new_vertex)
             extra += 1
-        neighbours = np.unique(vertex_face[loop].indices)
-        values, counts = np.unique(keep_attrs[neighbours], return_counts=True)
+        # The patch continues the surface it lies in: it takes the material, label and object
+        # of the bordering face whose normal is closest to its own (a wall panel's neighbours
+        # on the wall, not the floor it meets).
+        ring = [across[v * n_vertices + u] for u, v in itertools.pairwise([*loop, loop[0]])]
+        best = ring[int(np.argmax(face_normal[ring] @ patch_normal))]
         new_faces.append(tris)
-        new_attrs.append(np.full(len(tris), values[np.argmax(counts)]))
+        new_attrs.append(np.full(len(tris), keep_attrs[best]))
         closed += 1
     if not new_faces:
         return vertices, faces, keep_attrs, len(loops), 0, 0
