@@ -1,0 +1,79 @@
+"""Manifests: Lhotse-compatible JSONL (recordings, supervisions) and a flat CSV.
+
+Lhotse reads ``RecordingSet`` and ``SupervisionSet`` from JSONL files of dicts in the shape
+its ``to_dict`` writes; sonicspec writes that shape without importing Lhotse:
+
+* recording: ``{id, sources: [{type: "file", channels: [0..C-1], source: path}],
+  sampling_rate, num_samples, duration, channel_ids}``
+* supervision: ``{id, recording_id, start, duration, channel, text, speaker}``
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class RecordingEntry:
+    """One audio file of the dataset, as a manifest sees it."""
+
+    id: str
+    path: str
+    sample_rate_hz: int
+    num_samples: int
+    channels: int
+
+    def to_lhotse(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "sources": [{"type": "file", "channels": list(range(self.channels)),
+                         "source": self.path}],
+            "sampling_rate": self.sample_rate_hz,
+            "num_samples": self.num_samples,
+            "duration": round(self.num_samples / self.sample_rate_hz, 6),
+            "channel_ids": list(range(self.channels)),
+        }
+
+
+@dataclass(frozen=True)
+class SupervisionEntry:
+    """One utterance inside a recording: where it is, who says what."""
+
+    id: str
+    recording_id: str
+    start_sample: int
+    end_sample: int
+    sample_rate_hz: int
+    text: str
+    speaker: str
+
+    def to_lhotse(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "recording_id": self.recording_id,
+            "start": round(self.start_sample / self.sample_rate_hz, 6),
+            "duration": round((self.end_sample - self.start_sample) / self.sample_rate_hz, 6),
+            "channel": 0,
+            "text": self.text,
+            "speaker": self.speaker,
+        }
+
+
+def jsonl(items: Iterable[Mapping[str, Any]]) -> str:
+    """One compact JSON object per line, keys sorted."""
+    return "".join(json.dumps(item, sort_keys=True, ensure_ascii=False) + "\n" for item in items)
+
+
+def csv_text(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> str:
+    """CSV with a header; missing cells are empty."""
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({c: row.get(c, "") for c in columns})
+    return out.getvalue()
