@@ -236,3 +236,23 @@ def test_hole_patch_takes_the_label_of_the_surface_it_continues():
     assert set(new) == {"floor"}
     assert set(np.array(fixed.materials)[fixed.face_material[-1:]]) == {"carpet"}
     assert fixed.air_volume() == pytest.approx(30.0)
+
+
+def test_many_pieces_each_turned_to_the_air():
+    # 36 boxes on a grid in a hall, a random third of them (and the hall) inside out
+    rng = np.random.default_rng(11)
+    hall = shoebox((12.0, 12.0, 3.0))
+    boxes = [
+        box_obstacle((1.5 + 1.8 * i, 1.5 + 1.8 * j, 0.8), (0.5, 0.7, 0.6), yaw_deg=15.0 * i)
+        for i in range(6)
+        for j in range(6)
+    ]
+    scene = add_obstacles(hall, boxes)
+    piece = scene.face_object + 1
+    inverted = rng.random(piece.max() + 1) < 0.33
+    inverted[0] = True
+    faces = np.array(scene.faces)
+    faces[inverted[piece]] = faces[inverted[piece]][:, ::-1]
+    fixed, report = repair_mesh(scene.replace(faces=faces))
+    assert report.components_flipped == inverted.sum()
+    np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)

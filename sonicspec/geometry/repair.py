@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
-from scipy.sparse.csgraph import breadth_first_order, connected_components
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from sonicspec.errors import GeometryError, SonicspecWarning
@@ -323,8 +323,12 @@ def _drop_debris(vertices, faces, keep_attrs, n_vertices, min_area_m2):
     )
 
 
-def _orient_coherently(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
-    """Flip faces so that faces sharing a manifold edge traverse it in opposite directions."""
+def _manifold_edge_graph(faces: np.ndarray, n_vertices: int) -> sparse.csr_matrix:
+    """Face adjacency across edges shared by exactly two faces.
+
+    Entry (f, g) is 2 when f and g run their shared edge the same way (one must flip), 1 when
+    they run it in opposite directions (consistent).
+    """
     n_faces = len(faces)
     keys, face_of = _undirected(faces, n_vertices)
     a = faces[:, [0, 1, 2]].ravel()
@@ -332,33 +336,41 @@ def _orient_coherently(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, 
     order = np.argsort(keys, kind="stable")
     keys_sorted = keys[order]
     pair = np.flatnonzero(keys_sorted[1:] == keys_sorted[:-1])
-    # keep only edges with exactly two faces (manifold)
     _, counts = np.unique(keys_sorted, return_counts=True)
-    count_per = np.repeat(counts, counts)
-    pair = pair[count_per[pair] == 2]
+    pair = pair[np.repeat(counts, counts)[pair] == 2]  # manifold edges only
     f, g = face_of[order[pair]], face_of[order[pair + 1]]
-    # same direction on the shared edge ⇒ the two faces must end up with opposite flip states
     same = forward[order[pair]] == forward[order[pair + 1]]
-    graph = sparse.coo_matrix(
+    return sparse.coo_matrix(
         (np.r_[same, same].astype(np.int8) + 1, (np.r_[f, g], np.r_[g, f])), (n_faces, n_faces)
     ).tocsr()
-    # Propagate flip states along a breadth-first spanning tree of each piece: a child flips
-    # relative to its parent when they run their shared edge the same way.
-    flip = [False] * n_faces
-    seen = np.zeros(n_faces, bool)
-    for root in range(n_faces):
-        if seen[root]:
-            continue
-        visit, predecessors = breadth_first_order(graph, root, directed=False)
-        seen[visit] = True
-        children = visit[1:]
-        parents = predecessors[children]
-        same_way = (np.asarray(graph[children, parents]).ravel() == 2).tolist()
-        for node, parent, toggle in zip(children.tolist(), parents.tolist(), same_way, strict=True):
-            flip[node] = flip[parent] ^ toggle
-    flip = np.array(flip, dtype=bool)
+
+
+def _orient_coherently(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
+    """Flip faces so that faces sharing a manifold edge traverse it in opposite directions."""
+    n_faces = len(faces)
+    graph = _manifold_edge_graph(faces, n_vertices)
+    _, label = connected_components(graph, directed=False)
+    # Propagate flip states breadth-first from one root per piece, all pieces at once (one
+    # numpy step per BFS level): a face flips relative to the neighbour that reached it when
+    # the two run their shared edge the same way.
+    flip = np.zeros(n_faces, bool)
+    visited = np.zeros(n_faces, bool)
+    frontier = np.unique(label, return_index=True)[1]
+    visited[frontier] = True
+    indptr, indices, data = graph.indptr, graph.indices, graph.data
+    while len(frontier):
+        counts = indptr[frontier + 1] - indptr[frontier]
+        parent = np.repeat(frontier, counts)
+        row_start = indptr[frontier] - (np.cumsum(counts) - counts)
+        slot = np.repeat(row_start, counts) + np.arange(counts.sum())
+        child, relation = indices[slot], data[slot]
+        fresh = ~visited[child]
+        child, parent, relation = child[fresh], parent[fresh], relation[fresh]
+        child, first = np.unique(child, return_index=True)  # one parent per newly reached face
+        flip[child] = flip[parent[first]] ^ (relation[first] == 2)
+        visited[child] = True
+        frontier = child
     # keep the majority's winding in each piece (fewest flips)
-    _, label = _face_components(faces, n_vertices)
     flipped_share = np.bincount(label, weights=flip) / np.bincount(label)
     flip ^= (flipped_share > 0.5)[label]
     out = faces.copy()
@@ -496,8 +508,11 @@ def _parity_in_air(intersector, points: np.ndarray) -> np.ndarray:
 
 
 def _orient_to_air(vertices, faces, n_vertices):
-    """Flip each connected piece whose normals point out of the air (ray-parity vote)."""
-    n, label = _face_components(faces, n_vertices)
+    """Flip each coherent piece whose normals point out of the air (ray-parity vote).
+
+    Pieces are connected through manifold edges, so that each is consistently wound.
+    """
+    n, label = connected_components(_manifold_edge_graph(faces, n_vertices), directed=False)
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     cross = np.cross(b - a, c - a)
     area = 0.5 * np.linalg.norm(cross, axis=1)
@@ -506,17 +521,15 @@ def _orient_to_air(vertices, faces, n_vertices):
     extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     offset = 1e-4 * extent
     intersector = _ray_intersector(vertices, faces)
-    fronts, backs, owners = [], [], []
-    for k in range(n):
-        members = np.flatnonzero(label == k)
-        # the largest faces of the piece: their centroids are far from edges
-        chosen = members[np.argsort(-area[members], kind="stable")[:15]]
-        fronts.append(centroid[chosen] + offset * normal[chosen])
-        backs.append(centroid[chosen] - offset * normal[chosen])
-        owners.append(np.full(len(chosen), k))
-    owners = np.concatenate(owners)
-    front_air = _parity_in_air(intersector, np.concatenate(fronts))
-    back_air = _parity_in_air(intersector, np.concatenate(backs))
+    # the 15 largest faces of each piece (their centroids are far from edges), found for all
+    # pieces at once: sort by piece, then by decreasing area, and keep the first ranks
+    order = np.lexsort((-area, label))
+    start = np.searchsorted(label[order], np.arange(n))
+    rank = np.arange(len(order)) - start[label[order]]
+    chosen = order[rank < 15]
+    owners = label[chosen]
+    front_air = _parity_in_air(intersector, centroid[chosen] + offset * normal[chosen])
+    back_air = _parity_in_air(intersector, centroid[chosen] - offset * normal[chosen])
     # +1: air in front only (right way); -1: air behind only; 0 abstains (a face in contact
     # with another surface, e.g. the underside of a box on the floor, has air on neither side)
     votes = np.bincount(owners, weights=front_air.astype(int) - back_air.astype(int), minlength=n)
