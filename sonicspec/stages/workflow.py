@@ -137,7 +137,7 @@ def snakemake_command(
         "--nolock",
     ]
     if profile is not None:
-        cmd += ["--profile", str(profile)]
+        cmd += ["--profile", str(Path(profile).resolve())]
     else:
         cmd += ["--cores", str(cores), "--keep-going"]
     if profile is not None and cores:
