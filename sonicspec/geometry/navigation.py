@@ -275,12 +275,15 @@ def detect_floors(mesh: SceneMesh, settings: NavigationSettings | None = None) -
 def _first_hits(
     triangles: np.ndarray, origins: np.ndarray, direction: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """First face hit by each ray and its distance (inf for a miss); Embree when available."""
+    """First face hit by each ray (-1: none) and its distance (inf: none), with Embree."""
     try:
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
-    except ImportError:  # pragma: no cover - embreex is a core dependency
-        return _first_hits_numpy(triangles, origins, direction)
+    except ImportError as exc:  # pragma: no cover - embreex is a core dependency
+        raise GeometryError(
+            "walkable_grid: expected the Embree ray tracer to be installed, got ImportError; "
+            "pip install embreex"
+        ) from exc
     scene = rtcore_scene.EmbreeScene()
     TriangleMesh(scene, triangles.astype(np.float32))
     directions = np.broadcast_to(direction.astype(np.float32), origins.shape)
@@ -297,31 +300,6 @@ def _first_hits(
         hit = result["primID"] >= 0
         face[part] = np.where(hit, result["primID"], -1)
         distance[part] = np.where(hit, result["tfar"].astype(np.float64), np.inf)
-    return face, distance
-
-
-def _first_hits_numpy(
-    triangles: np.ndarray, origins: np.ndarray, direction: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pure-numpy fallback (trimesh's triangle intersector), same contract as Embree's."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(
-        vertices=triangles.reshape(-1, 3),
-        faces=np.arange(triangles.shape[0] * 3).reshape(-1, 3),
-        process=False,
-    )
-    intersector = trimesh.ray.ray_triangle.RayMeshIntersector(mesh)
-    directions = np.broadcast_to(direction, origins.shape)
-    faces, rays, locations = intersector.intersects_id(
-        origins, directions, multiple_hits=True, return_locations=True
-    )
-    face = np.full(origins.shape[0], -1, np.int64)
-    distance = np.full(origins.shape[0], np.inf)
-    along = np.einsum("ij,ij->i", locations - origins[rays], directions[rays])
-    order = np.argsort(along, kind="stable")[::-1]  # nearest written last
-    face[rays[order]] = faces[order]
-    distance[rays[order]] = along[order]
     return face, distance
 
 
