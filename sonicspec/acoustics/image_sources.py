@@ -1,0 +1,423 @@
+"""Early specular reflections by the image-source method over the mesh's planar regions.
+
+Why regions, not triangles: a flat wall is usually several triangles. Mirroring the source in
+every triangle would create the same image once per triangle (duplicated arrivals) and lose the
+reflection whose point falls exactly on a shared edge. Coplanar, edge-connected triangles with
+the same material are therefore merged into one planar region first; a reflection point is valid
+when it lies inside the union of the region's triangles (which is the region polygon, holes and
+non-convex outlines included, without building an outline).
+
+Validity of a candidate path (Borish 1984, backtracking from the receiver): every reflection
+point must lie inside its region, between its two neighbouring path points' sides of the plane,
+and every path segment (source → first reflection → … → receiver) must be free — or pass
+through transmitting surfaces, whose ``√τ`` then multiplies the amplitude (a segment through an
+opaque surface kills the path). Everything is vectorised per order over arrays of candidates.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from sonicspec.acoustics.arrivals import KIND_SPECULAR, Arrivals
+from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
+from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.errors import AcousticsError, SonicspecWarning
+
+__all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_regions"]
+
+# Regions above this count skip the P×P "can one region be reached from another" table.
+_MAX_REGIONS_FOR_REACH_TABLE = 3000
+
+
+@dataclass(frozen=True, eq=False)
+class PlanarRegions:
+    """Coplanar, edge-connected, same-material triangles merged into planar regions.
+
+    Attributes
+    ----------
+    normals : (P, 3) float64
+        Unit region normals (into the air, the faces' orientation).
+    plane_d : (P,) float64
+        Plane offsets: ``normals[p]·x == plane_d[p]`` on the plane.
+    face_region : (F,) int64
+        Region of every face.
+    region_start : (P+1,) int64
+        ``region_faces[region_start[p]:region_start[p+1]]`` are the faces of region ``p``.
+    region_faces : (F,) int64
+        Faces sorted by region.
+    reflection_energy : (P, n_bands) float64
+        Specular reflection energy factor ``(1-τ)(1-α)(1-s)`` per region and band.
+    """
+
+    normals: np.ndarray
+    plane_d: np.ndarray
+    face_region: np.ndarray
+    region_start: np.ndarray
+    region_faces: np.ndarray
+    reflection_energy: np.ndarray
+
+    @property
+    def n_regions(self) -> int:
+        return int(self.normals.shape[0])
+
+
+def planar_regions(
+    scene: AcousticScene, angle_tol_rad: float = 1e-4, distance_tol_m: float = 1e-4
+) -> PlanarRegions:
+    """Merge coplanar, edge-connected triangles with identical coefficients into regions.
+
+    Parameters
+    ----------
+    scene : AcousticScene
+        The mesh.
+    angle_tol_rad : float
+        Largest angle between the normals of two neighbouring triangles of one region.
+    distance_tol_m : float
+        Largest distance of a triangle's far vertex from its neighbour's plane, metres.
+
+    Returns
+    -------
+    PlanarRegions
+        Region planes are the area-weighted mean of their triangles' planes (exact when the
+        triangles are exactly coplanar).
+    """
+    faces = scene.faces
+    n_faces = scene.n_faces
+    # Undirected edges of every face, sorted so equal edges are adjacent.
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edge_face = np.repeat(np.arange(n_faces), 3)
+    key = edges[:, 0] * (int(edges.max()) + 1) + edges[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, edge_face = key[order], edge_face[order]
+    # Chain faces that share an edge (non-manifold edges chain their faces in order).
+    same = key[1:] == key[:-1]
+    fa, fb = edge_face[:-1][same], edge_face[1:][same]
+    nrm = scene.normals
+    cos_ok = np.einsum("ij,ij->i", nrm[fa], nrm[fb]) >= np.cos(angle_tol_rad)
+    # Coplanar, not merely parallel: every vertex of b lies on a's plane.
+    vb = scene.vertices[faces[fb]]
+    off = np.abs(np.einsum("ij,ikj->ik", nrm[fa], vb) - scene.plane_d[fa][:, None]).max(axis=1)
+    coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
+    same_mat = np.all(coef[fa] == coef[fb], axis=1)
+    link = cos_ok & (off <= distance_tol_m) & same_mat
+    graph = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(n_faces, n_faces))
+    n_regions, label = connected_components(graph, directed=False)
+    label = label.astype(np.int64)
+
+    area = scene.face_areas_m2
+    weighted = np.zeros((n_regions, 3))
+    np.add.at(weighted, label, nrm * area[:, None])
+    normals = weighted / np.linalg.norm(weighted, axis=1, keepdims=True)
+    centroid = scene.vertices[faces].mean(axis=1)
+    d_num = np.zeros(n_regions)
+    np.add.at(d_num, label, area * np.einsum("ij,ij->i", normals[label], centroid))
+    d_den = np.zeros(n_regions)
+    np.add.at(d_den, label, area)
+    plane_d = d_num / d_den
+
+    region_faces = np.argsort(label, kind="stable")
+    region_start = np.searchsorted(label[region_faces], np.arange(n_regions + 1))
+    first = region_faces[region_start[:-1]]
+    t, a, s = scene.transmission[first], scene.absorption[first], scene.scattering[first]
+    return PlanarRegions(
+        normals=normals,
+        plane_d=plane_d,
+        face_region=label,
+        region_start=region_start.astype(np.int64),
+        region_faces=region_faces.astype(np.int64),
+        reflection_energy=(1.0 - t) * (1.0 - a) * (1.0 - s),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ImageSourceResult:
+    """Image-source arrivals per receiver and the order that was completed.
+
+    ``max_order`` may be lower than requested when the candidate count hit the limit (a
+    warning says so); the ray tracer must then be told this order so that no specular path
+    is lost or counted twice.
+    """
+
+    arrivals: tuple[Arrivals, ...]
+    max_order: int
+
+
+def _reach_tables(scene: AcousticScene, regions: PlanarRegions, tol: float) -> np.ndarray | None:
+    """``reach[side, q, p]``: region p has a vertex strictly on side (0: front, 1: back) of q.
+
+    A path reflected at q towards side ``σ`` can only next reach regions with some part on that
+    side; this prunes candidates in non-convex scenes. None when there are too many regions.
+    """
+    n_regions = regions.n_regions
+    if n_regions > _MAX_REGIONS_FOR_REACH_TABLE:
+        return None
+    tri = scene.vertices[scene.faces[regions.region_faces]]  # faces sorted by region
+    reach = np.zeros((2, n_regions, n_regions), dtype=bool)
+    starts = regions.region_start[:-1]
+    chunk = max(1, 2_000_000 // max(1, 3 * len(tri)))
+    flat = tri.reshape(-1, 3)
+    for q0 in range(0, n_regions, chunk):
+        q = slice(q0, min(n_regions, q0 + chunk))
+        dist = (regions.normals[q] @ flat.T - regions.plane_d[q][:, None]).reshape(-1, len(tri), 3)
+        reach[0, q] = np.maximum.reduceat(dist.max(axis=2), starts, axis=1) > tol
+        reach[1, q] = np.minimum.reduceat(dist.min(axis=2), starts, axis=1) < -tol
+    return reach
+
+
+def _inside_regions(
+    scene: AcousticScene, regions: PlanarRegions, points: np.ndarray, region: np.ndarray
+) -> np.ndarray:
+    """Whether each point (on its region's plane) lies inside one of the region's triangles."""
+    inside = np.zeros(len(points), dtype=bool)
+    if len(points) == 0:
+        return inside
+    tol = 1e-9
+    order = np.argsort(region, kind="stable")
+    bounds = np.searchsorted(region[order], np.unique(region))
+    bounds = np.append(bounds, len(order))
+    for k in range(len(bounds) - 1):
+        idx = order[bounds[k] : bounds[k + 1]]
+        p = region[idx[0]]
+        fcs = regions.region_faces[regions.region_start[p] : regions.region_start[p + 1]]
+        tri = scene.vertices[scene.faces[fcs]]
+        a = tri[:, 0]
+        v0, v1 = tri[:, 1] - a, tri[:, 2] - a
+        d00 = np.einsum("ij,ij->i", v0, v0)
+        d01 = np.einsum("ij,ij->i", v0, v1)
+        d11 = np.einsum("ij,ij->i", v1, v1)
+        den = d00 * d11 - d01 * d01
+        # Chunk points so the (points × triangles) matrices stay small.
+        step = max(1, 1_000_000 // len(fcs))
+        for s0 in range(0, len(idx), step):
+            sub = idx[s0 : s0 + step]
+            v2 = points[sub][:, None, :] - a[None]
+            d20 = np.einsum("mtj,tj->mt", v2, v0)
+            d21 = np.einsum("mtj,tj->mt", v2, v1)
+            v = (d11 * d20 - d01 * d21) / den
+            w = (d00 * d21 - d01 * d20) / den
+            inside[sub] = np.any((v >= -tol) & (w >= -tol) & (v + w <= 1 + tol), axis=1)
+    return inside
+
+
+def image_sources(
+    scene: AcousticScene,
+    source: np.ndarray,
+    receivers: np.ndarray,
+    max_order: int = 3,
+    air_m_per_band: np.ndarray | None = None,
+    speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S,
+    regions: PlanarRegions | None = None,
+    max_path_length_m: float | None = None,
+    max_candidates: int = 2_000_000,
+) -> ImageSourceResult:
+    """Specular reflections of order 1…``max_order`` from a source to every receiver.
+
+    Parameters
+    ----------
+    scene : AcousticScene
+        The mesh with its per-face coefficients.
+    source : (3,) float
+        Source position, metres.
+    receivers : (n, 3) float
+        Receiver positions, metres.
+    max_order : int
+        Highest reflection order (>= 0; 0 gives no arrivals).
+    air_m_per_band : (n_bands,) float, optional
+        ISO 9613-1 air energy attenuation ``m`` per band, 1/m; pressure decays as
+        ``exp(-m·L/2)`` over the unfolded path length ``L``.
+    speed_of_sound_m_s : float
+        Speed of sound, m/s.
+    regions : PlanarRegions, optional
+        Precomputed :func:`planar_regions` of ``scene`` (reuse across sources).
+    max_path_length_m : float, optional
+        Drop paths longer than this (e.g. ``c ×`` the RIR length). Safe pruning: a valid
+        path's length never decreases with further reflections.
+    max_candidates : int
+        Largest number of candidate images of one order. If the next order would exceed it,
+        the search stops at the previous order with a :class:`SonicspecWarning` (the result's
+        ``max_order`` says which order was completed).
+
+    Returns
+    -------
+    ImageSourceResult
+        Per receiver, arrivals with amplitude per band
+        ``Π√((1-τ)(1-α)(1-s)) · Π√τ_crossed · exp(-m·L/2) / (4πL)`` at delay ``L/c``,
+        the direction of arrival (towards the image source) and the order.
+
+    Notes
+    -----
+    Reflection factors are energy coefficients for random incidence applied as angle-independent
+    pressure factors (no phase, no angle dependence), like pyroomacoustics' ISM. Faces reflect
+    on both sides. Diffraction at region edges is not modelled.
+    """
+    source = check_points("source", source)
+    if len(source) != 1:
+        raise AcousticsError(f"source: expected one position, got {len(source)}")
+    receivers = check_points("receivers", receivers)
+    if not isinstance(max_order, int | np.integer) or max_order < 0:
+        raise AcousticsError(f"max_order: expected an integer >= 0, got {max_order!r}")
+    air = check_air(air_m_per_band, scene.n_bands)
+    if not speed_of_sound_m_s > 0:
+        raise AcousticsError(f"speed_of_sound_m_s: expected > 0, got {speed_of_sound_m_s}")
+    if regions is None:
+        regions = planar_regions(scene)
+    if len(regions.face_region) != scene.n_faces:
+        raise AcousticsError(
+            f"regions: expected the planar regions of this scene ({scene.n_faces} faces), "
+            f"got regions of {len(regions.face_region)} faces"
+        )
+    src = source[0]
+    n_rcv = len(receivers)
+    tol = scene.eps_m
+    reach = _reach_tables(scene, regions, tol) if max_order >= 2 else None
+    normals, plane_d = regions.normals, regions.plane_d
+
+    per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
+    # The image tree, one order at a time: chain[i, j] is the image after j+1 reflections,
+    # planes[i, j] the region of reflection j+1, side[i] the side (0 front, 1 back) of the last
+    # plane on which the pre-image lies (where the reflected sound goes).
+    chain = np.zeros((1, 0, 3))
+    planes = np.zeros((1, 0), dtype=np.int64)
+    side = np.zeros(1, dtype=np.int64)
+    last_pos = src[None, :]
+    completed = 0
+    for order in range(1, max_order + 1):
+        dist = last_pos @ normals.T - plane_d[None, :]  # (M, P) signed distances
+        ok = np.abs(dist) > tol
+        if order > 1:
+            ok &= np.arange(regions.n_regions)[None, :] != planes[:, -1][:, None]
+            if reach is not None:
+                ok &= reach[side, planes[:, -1]]
+        parent, plane = np.nonzero(ok)
+        if len(parent) > max_candidates:
+            warnings.warn(
+                f"image sources: order {order} would need {len(parent)} candidates (limit "
+                f"{max_candidates}); stopping at order {order - 1}; hint: lower the image-source "
+                "order for this scene — the ray tracer covers the rest",
+                SonicspecWarning,
+                stacklevel=2,
+            )
+            break
+        d = dist[parent, plane]
+        new_pos = last_pos[parent] - 2.0 * d[:, None] * normals[plane]
+        new_side = (d < 0).astype(np.int64)
+        if max_path_length_m is not None:
+            near = np.min(
+                np.linalg.norm(new_pos[:, None, :] - receivers[None, :, :], axis=2), axis=1
+            )
+            keep = near <= max_path_length_m
+            parent, plane, new_pos, new_side = (
+                parent[keep],
+                plane[keep],
+                new_pos[keep],
+                new_side[keep],
+            )
+        chain = np.concatenate([chain[parent], new_pos[:, None, :]], axis=1)
+        planes = np.concatenate([planes[parent], plane[:, None]], axis=1)
+        side, last_pos = new_side, new_pos
+        completed = order
+        if len(last_pos) == 0:
+            break
+        _validate_order(
+            scene,
+            regions,
+            src,
+            receivers,
+            chain,
+            planes,
+            side,
+            air,
+            speed_of_sound_m_s,
+            max_path_length_m,
+            per_receiver,
+        )
+    if max_order > 0 and completed < max_order and len(last_pos) == 0:
+        completed = max_order  # no image survives: higher orders are empty, hence complete
+    arrivals = tuple(
+        Arrivals.concatenate(parts) if parts else Arrivals.empty(scene.n_bands)
+        for parts in per_receiver
+    )
+    return ImageSourceResult(arrivals=arrivals, max_order=completed)
+
+
+def _validate_order(
+    scene: AcousticScene,
+    regions: PlanarRegions,
+    src: np.ndarray,
+    receivers: np.ndarray,
+    chain: np.ndarray,
+    planes: np.ndarray,
+    side: np.ndarray,
+    air: np.ndarray,
+    c: float,
+    max_path_length_m: float | None,
+    per_receiver: list[list[Arrivals]],
+) -> None:
+    """Backtrack every (image, receiver) pair of one order; append the valid arrivals."""
+    n_img, order = planes.shape
+    normals, plane_d = regions.normals, regions.plane_d
+    img = np.repeat(np.arange(n_img), len(receivers))
+    rcv = np.tile(np.arange(len(receivers)), n_img)
+    # The receiver must be on the side the last reflection sends sound to.
+    dist_r = (
+        np.einsum("ij,ij->i", receivers[rcv], normals[planes[img, -1]]) - plane_d[planes[img, -1]]
+    )
+    sgn = np.where(side[img] == 0, 1.0, -1.0)
+    keep = dist_r * sgn > scene.eps_m
+    img, rcv = img[keep], rcv[keep]
+    if max_path_length_m is not None:
+        length = np.linalg.norm(chain[img, -1] - receivers[rcv], axis=1)
+        keep = length <= max_path_length_m
+        img, rcv = img[keep], rcv[keep]
+    # Backtrack: x runs from the receiver to the reflection points, last to first.
+    points = np.zeros((len(img), order + 2, 3))
+    points[:, -1] = receivers[rcv]
+    points[:, 0] = src
+    x = receivers[rcv]
+    for j in range(order - 1, -1, -1):
+        p = planes[img, j]
+        target = chain[img, j]
+        vec = target - x
+        den = np.einsum("ij,ij->i", vec, normals[p])
+        t = (plane_d[p] - np.einsum("ij,ij->i", x, normals[p])) / np.where(den != 0, den, 1.0)
+        good = (den != 0) & (t > 0) & (t < 1)
+        q = x + t[:, None] * vec
+        good &= _inside_regions(scene, regions, q, p)
+        img, rcv, x, points = img[good], rcv[good], q[good], points[good]
+        points[:, j + 1] = x
+        if len(img) == 0:
+            return
+    # Every segment must be free or transmitting: energy factor per band of all crossings.
+    n_pairs = len(img)
+    seg_start = points[:, :-1].reshape(-1, 3)
+    seg_end = points[:, 1:].reshape(-1, 3)
+    trans = scene.segment_transmission(seg_start, seg_end).reshape(n_pairs, order + 1, -1)
+    trans_energy = trans.prod(axis=1)
+    refl_energy = regions.reflection_energy[planes[img]].prod(axis=1)
+    energy = trans_energy * refl_energy
+    alive = np.any(energy > 0, axis=1)
+    img, rcv, energy = img[alive], rcv[alive], energy[alive]
+    vec = chain[img, -1] - receivers[rcv]
+    length = np.linalg.norm(vec, axis=1)
+    amp = (
+        np.sqrt(energy)
+        * np.exp(-0.5 * air[None, :] * length[:, None])
+        / (4.0 * np.pi * length[:, None])
+    )
+    for r in np.unique(rcv):
+        sel = rcv == r
+        per_receiver[r].append(
+            Arrivals(
+                times_s=length[sel] / c,
+                amplitudes=amp[sel],
+                directions=vec[sel] / length[sel, None],
+                order=np.full(int(sel.sum()), order, dtype=np.int64),
+                kind=np.full(int(sel.sum()), KIND_SPECULAR, dtype=np.int8),
+                path_length_m=length[sel],
+            )
+        )

@@ -1,0 +1,285 @@
+"""Embree scene of one mesh with its per-face acoustic coefficients, built once and reused.
+
+Every query of the tracer (first hits of rays, occlusion of segments, the surfaces a segment
+crosses) goes through :class:`AcousticScene`. It takes plain arrays, not a ``SceneMesh``, so the
+acoustics library does not depend on the geometry package.
+
+Precision: Embree works in float32. The scene is shifted to its bounding-box centre before it
+is handed to Embree (halving the coordinate magnitudes), and every hit distance is recomputed in
+float64 against the exact plane of the hit face, so hit points lie on their face to float64
+precision. Rays leaving a surface start ``eps_m`` off it (see :attr:`AcousticScene.eps_m`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from sonicspec.errors import AcousticsError
+
+__all__ = ["AcousticScene"]
+
+# Embree returns this distance for rays that hit nothing (query="DISTANCE").
+_EMBREE_MISS = 1e36
+
+
+def _coefficients(name: str, values: np.ndarray, n_faces: int) -> np.ndarray:
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 2 or values.shape[0] != n_faces:
+        raise AcousticsError(
+            f"{name}: expected an array of shape (n_faces={n_faces}, n_bands), "
+            f"got shape {values.shape}"
+        )
+    if (
+        not np.all(np.isfinite(values))
+        or values.min(initial=0.0) < 0
+        or values.max(initial=0.0) > 1
+    ):
+        raise AcousticsError(
+            f"{name}: expected coefficients in [0, 1], got values in "
+            f"[{np.nanmin(values)}, {np.nanmax(values)}]"
+        )
+    values = np.ascontiguousarray(values)
+    values.setflags(write=False)
+    return values
+
+
+class AcousticScene:
+    """A triangle mesh in Embree plus per-face absorption, scattering and transmission.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Vertex positions, metres.
+    faces : (F, 3) int
+        Vertex indices per triangle; the normal ``(b-a)×(c-a)`` points into the air.
+    absorption, scattering, transmission : (F, n_bands) float
+        Per-face, per-octave-band energy coefficients in [0, 1]. Energy convention used by the
+        whole tracer: of the energy incident on a face, the fraction ``τ`` is transmitted; the
+        rest ``(1-τ)`` meets the surface, which absorbs ``α`` of it and reflects ``(1-α)``, of
+        which ``s`` is scattered (Lambert) and ``1-s`` reflected specularly. With ``τ = 0`` this
+        is the usual random-incidence convention; ``τ = 1`` is an acoustically open surface.
+
+    Notes
+    -----
+    Faces reflect on both sides (a thin sheet in a scan has air on both sides); the tracer
+    uses the normal on the side the sound arrives from.
+    """
+
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        absorption: np.ndarray,
+        scattering: np.ndarray,
+        transmission: np.ndarray,
+    ) -> None:
+        vertices = np.asarray(vertices, dtype=np.float64)
+        faces = np.asarray(faces)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or len(vertices) < 3:
+            raise AcousticsError(f"vertices: expected shape (V>=3, 3), got {vertices.shape}")
+        if not np.all(np.isfinite(vertices)):
+            raise AcousticsError("vertices: expected finite coordinates, got NaN or inf")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+            raise AcousticsError(f"faces: expected shape (F>=1, 3), got {faces.shape}")
+        if not np.issubdtype(faces.dtype, np.integer):
+            raise AcousticsError(f"faces: expected integer vertex indices, got {faces.dtype}")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise AcousticsError(
+                f"faces: expected indices in [0, {len(vertices) - 1}], "
+                f"got [{faces.min()}, {faces.max()}]"
+            )
+        n_faces = len(faces)
+        self.absorption = _coefficients("absorption", absorption, n_faces)
+        self.scattering = _coefficients("scattering", scattering, n_faces)
+        self.transmission = _coefficients("transmission", transmission, n_faces)
+        n_bands = self.absorption.shape[1]
+        if self.scattering.shape[1] != n_bands or self.transmission.shape[1] != n_bands:
+            raise AcousticsError(
+                "scattering/transmission: expected the same number of bands as absorption "
+                f"({n_bands}), got {self.scattering.shape[1]} and {self.transmission.shape[1]}"
+            )
+
+        self.vertices = np.ascontiguousarray(vertices)
+        self.faces = np.ascontiguousarray(faces.astype(np.int64))
+        self.vertices.setflags(write=False)
+        self.faces.setflags(write=False)
+        tri = self.vertices[self.faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area2 = np.linalg.norm(cross, axis=1)
+        if np.any(area2 <= 0):
+            raise AcousticsError(
+                f"faces: expected non-degenerate triangles, got {int(np.sum(area2 <= 0))} with "
+                "zero area; hint: repair the mesh first"
+            )
+        #: Unit face normals (F, 3), into the air.
+        self.normals = cross / area2[:, None]
+        #: Plane offsets (F,): a point x is on face f's plane when ``normals[f]·x == plane_d[f]``.
+        self.plane_d = np.einsum("ij,ij->i", self.normals, tri[:, 0])
+        self.face_areas_m2 = 0.5 * area2
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.bounds = np.stack([lo, hi])
+        self._shift = 0.5 * (lo + hi)
+        extent = float(np.max(hi - lo))
+        #: Offset (m) by which rays leaving a surface start off it: far above the float32
+        #: resolution of the shifted coordinates, far below any acoustic length scale.
+        self.eps_m = max(1e-5, 2e-5 * max(extent, float(np.max(np.abs(self._shift)))))
+        self.has_transmission = bool(np.any(self.transmission > 0))
+
+        self._embree = rtcore_scene.EmbreeScene()
+        # Keep a reference: the Embree geometry must live as long as the scene.
+        self._mesh = TriangleMesh(
+            self._embree,
+            (self.vertices - self._shift).astype(np.float32),
+            self.faces.astype(np.int32),
+        )
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    @property
+    def n_bands(self) -> int:
+        return int(self.absorption.shape[1])
+
+    # -- raw queries -------------------------------------------------------------------------
+
+    def _to_f32(self, origins: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(origins - self._shift, dtype=np.float32)
+
+    def intersect(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """First surface hit by each ray.
+
+        Parameters
+        ----------
+        origins, directions : (n, 3) float
+            Ray origins (m) and *unit* directions.
+
+        Returns
+        -------
+        face : (n,) int64
+            Index of the first face hit, -1 where the ray escapes.
+        distance_m : (n,) float64
+            Distance to the hit along the ray (``inf`` for misses), recomputed in float64 on the
+            face's plane.
+        """
+        n = len(origins)
+        if n == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        out = self._embree.run(
+            self._to_f32(origins), np.ascontiguousarray(directions, dtype=np.float32), output=1
+        )
+        face = out["primID"].astype(np.int64)
+        tfar = out["tfar"].astype(np.float64)
+        miss = (face < 0) | (tfar >= _EMBREE_MISS)
+        face[miss] = -1
+        distance = np.full(n, np.inf)
+        hit = ~miss
+        fh = face[hit]
+        nrm = self.normals[fh]
+        denom = np.einsum("ij,ij->i", nrm, directions[hit])
+        exact = (self.plane_d[fh] - np.einsum("ij,ij->i", nrm, origins[hit])) / np.where(
+            np.abs(denom) > 1e-9, denom, 1.0
+        )
+        # Grazing rays: the plane solve is ill-conditioned; keep Embree's float32 distance.
+        good = (np.abs(denom) > 1e-6) & (exact > 0)
+        distance[hit] = np.where(good, exact, tfar[hit])
+        return face, distance
+
+    def occluded(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """Whether any surface lies strictly between each origin and its target.
+
+        ``eps_m`` is left free at both ends, so points on (or just off) surfaces can be tested.
+        Returns a bool array ``(n,)``.
+        """
+        n = len(origins)
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        vec = targets - origins
+        length = np.linalg.norm(vec, axis=1)
+        direction = vec / np.where(length > 0, length, 1.0)[:, None]
+        start = origins + direction * self.eps_m
+        tfar = np.maximum(length - 2.0 * self.eps_m, 0.0)
+        res = self._embree.run(
+            self._to_f32(start),
+            np.ascontiguousarray(direction, dtype=np.float32),
+            dists=np.ascontiguousarray(tfar, dtype=np.float32),
+            query="OCCLUDED",
+        )
+        return (res != -1) & (tfar > 0)
+
+    def crossings(
+        self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Every surface crossed strictly between origins and targets.
+
+        Repeated first-hit queries, each restarting ``eps_m`` beyond the previous hit.
+
+        Returns
+        -------
+        segment : (m,) int64
+            Index of the segment of each crossing.
+        face : (m,) int64
+            Face crossed.
+
+        Raises
+        ------
+        AcousticsError
+            If a segment crosses more than ``max_crossings`` surfaces (a corrupt mesh).
+        """
+        origins = np.asarray(origins, dtype=np.float64)
+        vec = np.asarray(targets, dtype=np.float64) - origins
+        length = np.linalg.norm(vec, axis=1)
+        direction = vec / np.where(length > 0, length, 1.0)[:, None]
+        live = np.flatnonzero(length > 2.0 * self.eps_m)
+        travelled = np.full(len(origins), self.eps_m)
+        seg_out: list[np.ndarray] = []
+        face_out: list[np.ndarray] = []
+        for _ in range(max_crossings + 1):
+            if live.size == 0:
+                break
+            start = origins[live] + direction[live] * travelled[live, None]
+            face, dist = self.intersect(start, direction[live])
+            crossed = (face >= 0) & (travelled[live] + dist < length[live] - self.eps_m)
+            live = live[crossed]
+            seg_out.append(live)
+            face_out.append(face[crossed])
+            travelled[live] += dist[crossed] + self.eps_m
+        else:
+            if live.size:
+                raise AcousticsError(
+                    f"segment crossings: expected at most {max_crossings} surfaces between two "
+                    f"points, got more for {live.size} segments; hint: the mesh may have "
+                    "duplicated or stacked faces — repair it"
+                )
+        if not seg_out:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return np.concatenate(seg_out), np.concatenate(face_out)
+
+    def segment_transmission(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """Per-band *energy* factor ``Π τ`` of the surfaces each segment crosses, ``(n, n_bands)``.
+
+        1 for a free segment, 0 where an opaque surface blocks it. Segments are first screened
+        with a cheap occlusion query; only blocked ones are walked surface by surface.
+        """
+        n = len(origins)
+        factor = np.ones((n, self.n_bands))
+        if n == 0:
+            return factor
+        blocked = np.flatnonzero(self.occluded(origins, targets))
+        if blocked.size == 0:
+            return factor
+        if not self.has_transmission:
+            factor[blocked] = 0.0
+            return factor
+        seg, face = self.crossings(origins[blocked], targets[blocked])
+        # log-sum keeps the product order-independent and exact zeros exact.
+        with np.errstate(divide="ignore"):
+            log_tau = np.log(self.transmission[face])
+        acc = np.zeros((blocked.size, self.n_bands))
+        np.add.at(acc, seg, log_tau)
+        factor[blocked] = np.exp(acc)
+        return factor
