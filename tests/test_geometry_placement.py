@@ -1,0 +1,321 @@
+"""Placement sampler: every rule of the recipe holds over many seeds; failures name the rule."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from sonicspec.errors import PlacementError
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.navigation import (
+    NavigationSettings,
+    build_navigation,
+    resample_polyline,
+)
+from sonicspec.geometry.placement import PlacementSettings, sample_placement
+from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
+
+NAV = NavigationSettings(cell_m=0.05, walker_radius_m=0.25)
+ROOM = (10.0, 7.0, 3.0)
+BOX_CENTER, BOX_SIZE = np.array([5.0, 2.5]), np.array([1.2, 2.0])  # furniture, 1 m high
+SEEDS = range(40)
+
+
+@pytest.fixture(scope="module")
+def hall():
+    room = add_obstacles(shoebox(ROOM), [box_obstacle([*BOX_CENTER, 0.5], [*BOX_SIZE, 1.0])])
+    return build_navigation(room, NAV)
+
+
+@pytest.fixture(scope="module")
+def house():
+    """Two storeys of 8 × 6 m: floors at z = 0 and z = 3.2."""
+    upper = shoebox([8, 6, 2.8])
+    upper = upper.replace(vertices=upper.vertices + np.array([0, 0, 3.2]))
+    return build_navigation(SceneMesh.concatenate([shoebox([8, 6, 3]), upper]), NAV)
+
+
+def wall_distance(points):
+    x, y = points[..., 0], points[..., 1]
+    return np.minimum.reduce([x, ROOM[0] - x, y, ROOM[1] - y])
+
+
+def box_distance(points):
+    d = np.maximum(np.abs(points[..., :2] - BOX_CENTER) - BOX_SIZE / 2, 0.0)
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def in_range(value, bounds, tol=1e-9):
+    return bounds[0] - tol <= value <= bounds[1] + tol
+
+
+def test_every_rule_holds_over_many_seeds(hall):
+    settings = PlacementSettings()
+    grid = hall.grid(0)
+    motions = ["shortest_path", "line", "static"]
+    lengths_over_straight = []
+    for seed in SEEDS:
+        p = sample_placement(
+            hall,
+            settings,
+            scene_id="hall",
+            speech=motions,
+            noise=True,
+            music=True,
+            rng=np.random.default_rng(seed),
+        )
+        assert p.scene_id == "hall" and p.floor_index == 0
+        assert p.mic_m[2] == pytest.approx(settings.mic_height_m)
+        statics = [p.noise, p.music]
+        everything = [p.mic_m] + [s.start_m for s in p.speech] + [s.end_m for s in p.speech]
+        everything += [s.start_m for s in statics]
+        everything = np.array(everything)
+        # Clearances, measured on the analytic room and box (the sampler only knows the grid).
+        assert wall_distance(everything).min() >= settings.wall_clearance_m - 0.005
+        assert box_distance(everything).min() >= settings.obstacle_clearance_m - 0.005
+        for source, motion in zip(p.speech, motions, strict=True):
+            assert source.motion == motion
+            assert in_range(source.height_m, settings.source_height_m)
+            assert source.start_m[2] == pytest.approx(source.height_m)
+            assert source.end_m[2] == pytest.approx(source.height_m)
+            d_start = np.linalg.norm(source.start_m - p.mic_m)
+            assert in_range(d_start, settings.source_start_distance_m)
+            if motion == "static":
+                assert np.array_equal(source.end_m, source.start_m)
+                assert source.path_m.shape == (1, 3) and source.path_length_m == 0.0
+                continue
+            assert in_range(np.linalg.norm(source.end_m - p.mic_m), settings.source_end_distance_m)
+            travel = np.linalg.norm(source.end_m - source.start_m)
+            assert in_range(travel, settings.source_travel_distance_m)
+            assert np.array_equal(source.path_m[0], source.start_m)
+            assert np.array_equal(source.path_m[-1], source.end_m)
+            steps = np.linalg.norm(np.diff(source.path_m, axis=0), axis=1)
+            assert source.path_length_m == pytest.approx(steps.sum())
+            assert source.path_length_m >= travel - 1e-9
+            # The walked path keeps the walker's radius from walls and box (within a cell).
+            dense = resample_polyline(source.path_m, 0.02)
+            assert wall_distance(dense).min() >= NAV.walker_radius_m - NAV.cell_m
+            assert box_distance(dense).min() >= NAV.walker_radius_m - NAV.cell_m
+            # Its vertices lie on the mic's walkable component (segments may graze cell corners).
+            assert np.all(grid.component_at(source.path_m) == grid.component_at(p.mic_m))
+            if motion == "line":
+                assert source.path_length_m == pytest.approx(travel)
+                assert grid.line_of_sight(source.start_m, source.end_m)
+            else:
+                lengths_over_straight.append(source.path_length_m / travel)
+        for source, bounds in (
+            (p.noise, settings.noise_distance_m),
+            (p.music, settings.music_distance_m),
+        ):
+            assert source.motion == "static"
+            assert in_range(np.linalg.norm(source.start_m - p.mic_m), bounds)
+            assert in_range(source.height_m, settings.noise_height_m)
+        positions = [s.start_m for s in (*p.speech, p.noise, p.music)]
+        for a, b in itertools.combinations(positions, 2):
+            assert np.linalg.norm(a - b) >= settings.min_source_separation_m
+    # The box sits in the middle of the hall: some shortest paths had to walk round it.
+    assert max(lengths_over_straight) > 1.02
+
+
+def test_placement_is_deterministic_for_a_generator(hall):
+    def place(seed):
+        return sample_placement(
+            hall,
+            PlacementSettings(),
+            scene_id="hall",
+            speech=["shortest_path"] * 3,
+            noise=True,
+            music=True,
+            rng=np.random.default_rng(seed),
+        ).to_dict()
+
+    first = place(123)
+    assert place(123) == first
+    assert place(124) != first
+    # to_dict is plain JSON.
+    assert json.loads(json.dumps(first)) == first
+    assert len(first["speech"]) == 3 and first["noise"]["motion"] == "static"
+
+
+def test_same_floor_keeps_the_storeys_apart(house):
+    settings = PlacementSettings()
+    mic_floors, crossed = set(), False
+    for seed in range(25):
+        p = sample_placement(
+            house,
+            settings,
+            scene_id="house",
+            speech=["shortest_path", "static"],
+            noise=True,
+            music=True,
+            rng=np.random.default_rng(seed),
+        )
+        mic_floors.add(p.floor_index)
+        z_floor = house.floors[p.floor_index].z_m
+        assert p.mic_m[2] == pytest.approx(z_floor + settings.mic_height_m)
+        for source in (*p.speech, p.noise, p.music):
+            assert source.floor_index == p.floor_index
+            assert np.all(source.path_m[:, 2] - z_floor == pytest.approx(source.height_m))
+    # Both storeys host groups, so the rule was exercised on each.
+    assert mic_floors == {0, 1}
+
+    loose = PlacementSettings(same_floor=False)
+    for seed in range(25):
+        p = sample_placement(
+            house,
+            loose,
+            scene_id="house",
+            speech=["shortest_path", "static"],
+            noise=True,
+            music=True,
+            rng=np.random.default_rng(seed),
+        )
+        floors = {s.floor_index for s in (*p.speech, p.noise, p.music)}
+        crossed |= floors != {p.floor_index}
+        # Distances still hold in 3-D across storeys, and a path never changes floor.
+        for source in (*p.speech, p.noise, p.music):
+            assert in_range(np.linalg.norm(source.start_m - p.mic_m), (1.0, 8.0))
+            z = house.floors[source.floor_index].z_m + source.height_m
+            assert source.path_m[:, 2] == pytest.approx(np.full(len(source.path_m), z))
+    assert crossed  # without the rule, sources do land on the other storey
+
+
+def test_fixed_microphone_is_used(hall):
+    settings = PlacementSettings(mic_position_m=(2.0, 5.0, 1.2))
+    p = sample_placement(
+        hall,
+        settings,
+        scene_id="hall",
+        speech=["line"],
+        noise=False,
+        music=False,
+        rng=np.random.default_rng(0),
+    )
+    assert p.mic_m.tolist() == [2.0, 5.0, 1.2]
+    assert p.noise is None and p.music is None
+    assert in_range(np.linalg.norm(p.speech[0].start_m - p.mic_m), (1.0, 8.0))
+
+
+def test_fixed_microphone_off_the_floor_is_an_error(hall):
+    for position in ((20.0, 5.0, 1.5), (2.0, 5.0, 2.5)):  # outside; above head height
+        with pytest.raises(PlacementError, match=r"scene 'hall': mic_position_m: expected a point"):
+            sample_placement(
+                hall,
+                PlacementSettings(mic_position_m=position),
+                scene_id="hall",
+                speech=["static"],
+                noise=False,
+                music=False,
+                rng=np.random.default_rng(0),
+            )
+
+
+def test_impossible_distance_in_a_small_room_names_scene_and_rule():
+    closet = build_navigation(shoebox([1.2, 1.2, 2.5]), NAV)
+    with pytest.raises(
+        PlacementError,
+        match=r"scene 'closet': could not place speech source 0's start point on floor 0: "
+        r"expected .* within 300 tries.*most failed: distance from the mic 1–8 m",
+    ):
+        sample_placement(
+            closet,
+            PlacementSettings(max_tries=300),
+            scene_id="closet",
+            speech=["line"],
+            noise=True,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+def test_out_of_reach_range_names_the_rule(hall):
+    settings = PlacementSettings(noise_distance_m=(15.0, 20.0), max_tries=500)
+    with pytest.raises(
+        PlacementError,
+        match=r"scene 'hall': could not place the noise source on floor 0.*"
+        r"most failed: distance from the mic 15–20 m",
+    ):
+        sample_placement(
+            hall,
+            settings,
+            scene_id="hall",
+            speech=["static"],
+            noise=True,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+def test_travel_range_failure_names_the_end_point(hall):
+    settings = PlacementSettings(source_travel_distance_m=(11.0, 12.0), max_tries=400)
+    with pytest.raises(
+        PlacementError,
+        match=r"speech source 0's end point on floor 0.*most failed: distance from the (mic|start)",
+    ):
+        sample_placement(
+            hall,
+            settings,
+            scene_id="hall",
+            speech=["shortest_path"],
+            noise=False,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+def test_clearance_larger_than_the_room_is_an_error(hall):
+    with pytest.raises(
+        PlacementError,
+        match=r"scene 'hall': expected walkable area with wall "
+        r"clearance >= 4 m",
+    ):
+        sample_placement(
+            hall,
+            PlacementSettings(wall_clearance_m=4.0),
+            scene_id="hall",
+            speech=["static"],
+            noise=False,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+def test_unknown_motion_is_an_error(hall):
+    with pytest.raises(PlacementError, match=r"speech\[1\]: expected one of .*got 'run'"):
+        sample_placement(
+            hall,
+            PlacementSettings(),
+            scene_id="hall",
+            speech=["static", "run"],
+            noise=False,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"source_start_distance_m": (8.0, 1.0)}, r"source_start_distance_m: expected finite"),
+        (
+            {"noise_height_m": (0.0, 1.0)},
+            r"noise_height_m: expected finite \[min, max\] with min > 0",
+        ),
+        ({"music_distance_m": 3.0}, r"music_distance_m: expected a pair"),
+        ({"wall_clearance_m": -0.1}, r"wall_clearance_m: expected a finite distance >= 0"),
+        ({"mic_height_m": 0.0}, r"mic_height_m: expected a finite positive"),
+        ({"max_tries": 0}, r"max_tries: expected an integer >= 1"),
+        ({"mic_position_m": (1.0, 2.0)}, r"mic_position_m: expected \[x, y, z\]"),
+    ],
+)
+def test_settings_errors(kwargs, match):
+    with pytest.raises(PlacementError, match=match):
+        PlacementSettings(**kwargs)
+
+
+def test_navigation_settings_follow_the_walker():
+    nav = PlacementSettings(walker_radius_m=0.3, walker_height_m=1.9).navigation_settings(0.1)
+    assert (nav.cell_m, nav.walker_radius_m, nav.walker_height_m) == (0.1, 0.3, 1.9)
