@@ -18,6 +18,9 @@ from sonicspec.store import ArtifactStore
 
 STAGES: dict[str, str] = {
     "mesh": "sonicspec.stages.mesh:run",
+    "navigation": "sonicspec.stages.navigation:run",
+    "placement": "sonicspec.stages.placement:run",
+    "dataset": "sonicspec.stages.dataset:run",
 }
 """Step name -> ``module:function`` taking a :class:`JobContext`."""
 

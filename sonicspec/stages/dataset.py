@@ -1,0 +1,59 @@
+"""Stage ``dataset``: ``dataset.json`` and the manifests, from every export job's record."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec import __version__
+from sonicspec.export.files import write_json, write_text
+from sonicspec.export.manifests import csv_text, jsonl
+from sonicspec.stages.context import JobContext
+
+CSV_COLUMNS = ("split", "group", "kind", "name", "path", "channels", "num_samples",
+               "sample_rate_hz")
+
+
+def run(ctx: JobContext) -> None:
+    params = ctx.params
+    out = Path(params["output_dir"])
+    exports: list[dict[str, Any]] = ctx.input_data("export")
+    groups = sorted((g for e in exports for g in e["groups"]), key=lambda g: g["group"])
+    files_written: list[str] = []
+    by_split: dict[str, list[dict[str, Any]]] = {}
+    for g in groups:
+        by_split.setdefault(g["split"], []).append(g)
+    for split, items in sorted(by_split.items()):
+        recordings = [r for g in items for r in g["recordings"]]
+        supervisions = [s for g in items for s in g["supervisions"]]
+        if "lhotse" in params["manifests"]:
+            for name, rows in (("recordings", recordings), ("supervisions", supervisions)):
+                path = out / "manifests" / f"{split}_{name}.jsonl"
+                write_text(path, jsonl(rows))
+                files_written.append(str(path.relative_to(out)))
+        if "csv" in params["manifests"]:
+            rows = [dict(f, split=split, group=g["group"]) for g in items for f in g["files"]]
+            path = out / "manifests" / f"{split}.csv"
+            write_text(path, csv_text(rows, CSV_COLUMNS))
+            files_written.append(str(path.relative_to(out)))
+    counts = {split: {"groups": len(items),
+                      "files": sum(len(g["files"]) for g in items),
+                      "audio_hours": round(sum(g["duration_s"] for g in items) / 3600.0, 6)}
+              for split, items in sorted(by_split.items())}
+    summary = {
+        "name": params["spec"]["name"],
+        "description": params["spec"]["description"],
+        "sonicspec_version": __version__,
+        "spec_version": params["spec"]["sonicspec"],
+        "spec": params["spec"],
+        "splits": counts,
+        "groups": [{"group": g["group"], "split": g["split"], "scene_id": g["scene_id"],
+                    "metadata": g["metadata"]} for g in groups],
+        "manifests": files_written,
+    }
+    write_json(out / "dataset.json", summary)
+    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
+              {"dataset_json": str(out / "dataset.json"), "manifests": files_written,
+               "splits": counts})
