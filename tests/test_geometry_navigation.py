@@ -186,11 +186,31 @@ def test_only_geometry_in_the_head_room_blocks():
 
 
 def test_low_ceiling_leaves_no_walkable_area():
-    grid = build_navigation(shoebox([4, 4, 1.6]), SETTINGS).grid(0)
+    room = shoebox([4, 4, 1.6])  # lower than the walker's 1.8 m
+    floors = detect_floors(room, SETTINGS)
+    grid = walkable_grid(room, floors[0], SETTINGS)
     assert grid.area_m2 == 0.0
     assert grid.n_components == 0
-    with pytest.raises(GeometryError, match="expected walkable cells"):
+    with pytest.raises(GeometryError, match="expected walkable cells on floor 0, got none"):
         sample_walkable_points(grid, 3, np.random.default_rng(0))
+    with pytest.raises(GeometryError, match=r"expected a floor with at least 1 m² of walkable"):
+        build_navigation(room, SETTINGS)
+
+
+def test_partition_tops_flush_with_the_ceiling_are_not_a_floor():
+    # Box partitions reaching the ceiling have upward tops at ceiling height: a level with
+    # upward area but no walkable area, which build_navigation drops.
+    partitions = [
+        box_obstacle([3, 1.5, 1.35], [0.15, 3.0, 2.7], label="wall"),
+        box_obstacle([1.5, 3, 1.35], [3.0, 0.15, 2.7], label="wall"),
+        box_obstacle([4.5, 3, 1.35], [3.0, 0.15, 2.7], label="wall"),
+    ]
+    room = add_obstacles(shoebox([6, 6, 2.7]), partitions)
+    levels = detect_floors(room, NavigationSettings(min_floor_area_m2=0.5))
+    assert [f.z_m for f in levels] == pytest.approx([0.0, 2.7])
+    nav = build_navigation(room, NavigationSettings(min_floor_area_m2=0.5))
+    assert [(f.index, f.z_m) for f in nav.floors] == [(0, 0.0)]
+    assert nav.grid(0).floor is nav.floors[0]
 
 
 @pytest.mark.parametrize("thickness", [0.2, 0.02])

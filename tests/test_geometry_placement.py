@@ -53,7 +53,8 @@ def in_range(value, bounds, tol=1e-9):
 
 
 def test_every_rule_holds_over_many_seeds(hall):
-    settings = PlacementSettings()
+    # Clearances above the walker radius (0.25 m), so they bind beyond walkability.
+    settings = PlacementSettings(wall_clearance_m=0.5, obstacle_clearance_m=0.6)
     grid = hall.grid(0)
     motions = ["shortest_path", "line", "static"]
     lengths_over_straight = []
@@ -214,7 +215,7 @@ def test_fixed_microphone_off_the_floor_is_an_error(hall):
 
 
 def test_impossible_distance_in_a_small_room_names_scene_and_rule():
-    closet = build_navigation(shoebox([1.2, 1.2, 2.5]), NAV)
+    closet = build_navigation(shoebox([1.0, 1.0, 2.5]), NavigationSettings(min_floor_area_m2=0.1))
     with pytest.raises(
         PlacementError,
         match=r"scene 'closet': could not place speech source 0's start point on floor 0: "

@@ -6,7 +6,9 @@ A floor (level) is where people stand: upward-facing surfaces (normal z ≥ ``fl
 i.e. the air is above them). :func:`detect_floors` makes an area-weighted histogram of their
 heights and takes its peaks greedily, largest area first, skipping any peak closer than
 ``floor_separation_m`` to one already taken; table tops, beds and steps (small, or close above
-a larger floor) are thereby not floors.
+a larger floor) are thereby not floors. :func:`build_navigation` then keeps only the levels
+with at least ``min_floor_area_m2`` of walkable area (the tops of partitions flush with the
+ceiling form a level, but nobody stands there).
 
 Walkable grid
 -------------
@@ -52,6 +54,7 @@ All lengths are metres, the frame is z up (see :mod:`sonicspec.geometry.mesh`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -212,7 +215,10 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
 
 
 def detect_floors(mesh: SceneMesh, settings: NavigationSettings | None = None) -> tuple[Floor, ...]:
-    """Find the floors (levels) of a scene from its upward-facing faces.
+    """Find the levels of a scene from its upward-facing faces (candidate floors).
+
+    A level may still be one nobody stands on (the tops of partitions flush with the ceiling):
+    :func:`build_navigation` keeps only levels with walkable area.
 
     Parameters
     ----------
@@ -272,35 +278,47 @@ def detect_floors(mesh: SceneMesh, settings: NavigationSettings | None = None) -
 
 
 # --------------------------------------------------------------------------- ray casting
+class _Rays:
+    """An Embree scene of a mesh's triangles, built once and queried for first hits."""
+
+    def __init__(self, triangles: np.ndarray) -> None:
+        try:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+        except ImportError as exc:  # pragma: no cover - embreex is a core dependency
+            raise GeometryError(
+                "navigation: expected the Embree ray tracer to be installed, got ImportError; "
+                "pip install embreex"
+            ) from exc
+        self.scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(self.scene, np.ascontiguousarray(triangles, dtype=np.float32))
+
+    def first_hits(
+        self, origins: np.ndarray, direction: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """First face hit by each ray (-1: none) and its distance (inf: none)."""
+        directions = np.broadcast_to(direction.astype(np.float32), origins.shape)
+        face = np.full(origins.shape[0], -1, np.int64)
+        distance = np.full(origins.shape[0], np.inf)
+        chunk = 1 << 20  # bounded float32 copies for huge grids
+        for begin in range(0, origins.shape[0], chunk):
+            part = slice(begin, begin + chunk)
+            result = self.scene.run(
+                np.ascontiguousarray(origins[part], dtype=np.float32),
+                np.ascontiguousarray(directions[part]),
+                output=1,
+            )
+            hit = result["primID"] >= 0
+            face[part] = np.where(hit, result["primID"], -1)
+            distance[part] = np.where(hit, result["tfar"].astype(np.float64), np.inf)
+        return face, distance
+
+
 def _first_hits(
     triangles: np.ndarray, origins: np.ndarray, direction: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """First face hit by each ray (-1: none) and its distance (inf: none), with Embree."""
-    try:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-    except ImportError as exc:  # pragma: no cover - embreex is a core dependency
-        raise GeometryError(
-            "walkable_grid: expected the Embree ray tracer to be installed, got ImportError; "
-            "pip install embreex"
-        ) from exc
-    scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene, triangles.astype(np.float32))
-    directions = np.broadcast_to(direction.astype(np.float32), origins.shape)
-    face = np.full(origins.shape[0], -1, np.int64)
-    distance = np.full(origins.shape[0], np.inf)
-    chunk = 1 << 20  # bounded float32 copies for huge grids
-    for begin in range(0, origins.shape[0], chunk):
-        part = slice(begin, begin + chunk)
-        result = scene.run(
-            np.ascontiguousarray(origins[part], dtype=np.float32),
-            np.ascontiguousarray(directions[part]),
-            output=1,
-        )
-        hit = result["primID"] >= 0
-        face[part] = np.where(hit, result["primID"], -1)
-        distance[part] = np.where(hit, result["tfar"].astype(np.float64), np.inf)
-    return face, distance
+    return _Rays(triangles).first_hits(origins, direction)
 
 
 # --------------------------------------------------------------------------- walkable grid
@@ -506,7 +524,9 @@ def _band_samples(
     owner = np.concatenate(owners)
     # Shared edges and vertices are sampled by every triangle that has them: keep one copy.
     keys = np.floor(xy / (0.25 * spacing_m)).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
+    keys -= keys.min(axis=0)
+    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]  # one int64 per point: fast
+    _, first = np.unique(flat, return_index=True)
     return xy[first], owner[first]
 
 
@@ -552,6 +572,12 @@ def walkable_grid(
     settings = settings or NavigationSettings()
     if mesh.n_faces == 0:
         raise GeometryError("walkable_grid: expected a mesh with faces, got an empty mesh")
+    return _walkable_grid(mesh, floor, settings, _Rays(mesh.vertices[mesh.faces]))
+
+
+def _walkable_grid(
+    mesh: SceneMesh, floor: Floor, settings: NavigationSettings, rays: _Rays
+) -> WalkableGrid:
     h = settings.cell_m
     z_f = floor.z_m
     triangles = mesh.vertices[mesh.faces]
@@ -569,7 +595,7 @@ def walkable_grid(
     # 1. Downward rays from head height.
     top = z_f + settings.walker_height_m
     origins = np.column_stack([centers, np.full(centers.shape[0], top)])
-    face, distance = _first_hits(triangles, origins, np.array([0.0, 0.0, -1.0]))
+    face, distance = rays.first_hits(origins, np.array([0.0, 0.0, -1.0]))
     hit = face >= 0
     hit_z = np.where(hit, top - distance, -np.inf)
     facing_up = np.zeros(face.shape, bool)
@@ -672,9 +698,28 @@ def build_navigation(mesh: SceneMesh, settings: NavigationSettings | None = None
         See :func:`detect_floors` and :func:`walkable_grid`.
     """
     settings = settings or NavigationSettings()
-    floors = detect_floors(mesh, settings)
+    if mesh.n_faces == 0:
+        raise GeometryError("build_navigation: expected a mesh with faces, got an empty mesh")
+    rays = _Rays(mesh.vertices[mesh.faces])  # one Embree scene for every floor
+    levels = detect_floors(mesh, settings)
+    grids = [_walkable_grid(mesh, level, settings, rays) for level in levels]
+    # A level nobody can stand on (the tops of partitions flush with the ceiling, a wide
+    # shelf) is not a floor: keep levels with walkable area, renumbered from 0.
+    kept = [g for g in grids if g.area_m2 >= settings.min_floor_area_m2]
+    if not kept:
+        best = max(grids, key=lambda g: g.area_m2)
+        raise GeometryError(
+            f"build_navigation: expected a floor with at least {settings.min_floor_area_m2:g} m² "
+            f"of walkable area, got at most {best.area_m2:.3g} m² (floor at z = "
+            f"{best.floor.z_m:.3g} m); is the walker ({settings.walker_radius_m:g} m radius, "
+            f"{settings.walker_height_m:g} m tall) too large for the scene?"
+        )
+    floors = tuple(dataclasses.replace(g.floor, index=k) for k, g in enumerate(kept))
     return Navigation(
-        floors=floors, grids=tuple(walkable_grid(mesh, floor, settings) for floor in floors)
+        floors=floors,
+        grids=tuple(
+            dataclasses.replace(g, floor=f, _cache={}) for g, f in zip(kept, floors, strict=True)
+        ),
     )
 
 
