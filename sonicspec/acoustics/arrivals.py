@@ -130,15 +130,20 @@ class EnergyHistogram:
         Σ (band-summed energy × unit direction of arrival) per bin. Divided by
         ``energy.sum(axis=1)`` it is the energy-weighted mean direction; its length (0…1) says
         how directional the bin is (≈0 in a diffuse field, 1 for a single direction).
+    departure_sum : (n_bins, 3) float64
+        The same for the direction in which each contributing ray *left the source*. Under
+        reciprocity (tracing from a static microphone to many source positions) this is the
+        direction of arrival at the microphone.
     """
 
     bin_s: float
     energy: np.ndarray
     direction_sum: np.ndarray
+    departure_sum: np.ndarray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "energy", _frozen(self.energy))
-        object.__setattr__(self, "direction_sum", _frozen(self.direction_sum))
+        for name in ("energy", "direction_sum", "departure_sum"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
 
     @property
     def n_bins(self) -> int:
