@@ -223,6 +223,24 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return EXIT_FAILURE if problems else EXIT_OK
 
 
+def cmd_scene_inspect(args: argparse.Namespace) -> int:
+    from sonicspec.stages.inspect import format_facts, inspect_scene, scene_ids
+
+    loaded = _load_or_exit(args.spec)
+    if loaded is None:
+        return EXIT_INVALID
+    if args.scene is None:
+        ids = scene_ids(loaded)
+        if len(ids) != 1:
+            print(f"sonicspec: error: --scene: the spec has {len(ids)} scenes; choose one of "
+                  f"{', '.join(ids)}", file=sys.stderr)
+            return EXIT_INVALID
+        args.scene = ids[0]
+    facts = inspect_scene(loaded, args.scene, plot=Path(args.plot) if args.plot else None)
+    print(json.dumps(facts, indent=2) if args.json else format_facts(facts))
+    return EXIT_OK
+
+
 def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temp file and a rename: never a half-written file."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -297,6 +315,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--dry-run", action="store_true", help="show the jobs that would run")
     p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("scene", help="look at the scenes of a spec")
+    scene_sub = p.add_subparsers(dest="scene_command", metavar="ACTION")
+    scene_sub.required = True
+    p = scene_sub.add_parser("inspect", help="mesh statistics, repair report, materials, "
+                             "floors, walkable area and a floor-plan picture")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument("--scene", metavar="ID", help="scene id (required if the spec has several)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the floor plan with a sampled group")
+    p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
+    p.set_defaults(func=cmd_scene_inspect)
 
     p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")
     p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")

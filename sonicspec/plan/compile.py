@@ -225,6 +225,21 @@ def _corpus_params(
     return params, paths
 
 
+def scene_jobs(spec: DatasetSpec, entries: list[SceneEntry], base_dir: Path,
+               digests: FileDigests) -> list[tuple[SceneEntry, Job, Job]]:
+    """The ``mesh`` and ``navigation`` jobs of every concrete scene (no corpus is read)."""
+    out = []
+    for entry in entries:
+        params, paths = _mesh_params(spec, entry, digests, base_dir)
+        mesh = Job("mesh", params, (), f"mesh {entry.id}", paths)
+        nav = Job("navigation", {
+            "walker_radius_m": spec.placement.walker_radius_m,
+            "walker_height_m": spec.placement.walker_height_m,
+        }, (mesh.key,), f"navigation {entry.id}")
+        out.append((entry, mesh, nav))
+    return out
+
+
 def _shards(groups: list[str], size: int) -> list[list[str]]:
     return [groups[i : i + size] for i in range(0, len(groups), size)]
 
@@ -250,18 +265,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     entries = expand_scenes(spec, base)
     mesh_keys: dict[str, str] = {}
     nav_keys: dict[str, str] = {}
-    for entry in entries:
-        params, paths = _mesh_params(spec, entry, digests, base)
-        mesh = Job("mesh", params, (), f"mesh {entry.id}", paths)
-        nav = Job(
-            "navigation",
-            {
-                "walker_radius_m": spec.placement.walker_radius_m,
-                "walker_height_m": spec.placement.walker_height_m,
-            },
-            (mesh.key,),
-            f"navigation {entry.id}",
-        )
+    for entry, mesh, nav in scene_jobs(spec, entries, base, digests):
         jobs.extend([mesh, nav])
         mesh_keys[entry.id], nav_keys[entry.id] = mesh.key, nav.key
     digests.save()

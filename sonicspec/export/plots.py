@@ -1,0 +1,115 @@
+"""Pictures a person wants to look at: the floor plan of a scene with a sampled group.
+
+matplotlib is an optional dependency (``pip install 'sonicspec[plot]'``), imported only here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.errors import SonicspecError
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.navigation import Navigation
+
+
+def _pyplot():
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise SonicspecError("plots need matplotlib: pip install 'sonicspec[plot]'") from None
+    return plt
+
+
+def slice_segments(mesh: SceneMesh, z_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the horizontal plane ``z = z_m`` cuts the mesh: (S, 2, 2) segments, face ids."""
+    v = mesh.vertices[mesh.faces]  # (F, 3, 3)
+    d = v[:, :, 2] - z_m
+    above = d > 0
+    crossing = above.any(axis=1) & ~above.all(axis=1)
+    v, d = v[crossing], d[crossing]
+    ids = np.flatnonzero(crossing)
+    segments = np.zeros((len(v), 2, 2))
+    for k in range(len(v)):
+        points = []
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            if (d[k, a] > 0) != (d[k, b] > 0):
+                t = d[k, a] / (d[k, a] - d[k, b])
+                points.append(v[k, a, :2] + t * (v[k, b, :2] - v[k, a, :2]))
+        if len(points) >= 2:
+            segments[k] = points[:2]
+    return segments, ids
+
+
+def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: dict[str, Any] | None,
+                    path: Path, *, title: str = "") -> Path:
+    """Floor plan per floor: walkable area, walls, obstacles, mic, sources and their paths."""
+    from matplotlib.collections import LineCollection
+
+    plt = _pyplot()
+    n = max(1, len(nav.grids))
+    fig, axes = plt.subplots(1, n, figsize=(6.5 * n, 6), squeeze=False)
+    for k, ax in enumerate(axes[0]):
+        if k >= len(nav.grids):
+            ax.text(0.5, 0.5, "no floor found", ha="center", transform=ax.transAxes)
+            continue
+        grid = nav.grids[k]
+        ny, nx = grid.shape
+        x0, y0 = grid.origin_xy_m
+        extent = (x0, x0 + nx * grid.cell_m, y0, y0 + ny * grid.cell_m)
+        ax.imshow(np.where(grid.walkable, 1.0, np.nan), origin="lower", extent=extent,
+                  cmap="Greens", vmin=0, vmax=2, alpha=0.6, interpolation="nearest")
+        # Walls cut at 1 m; objects also at 0.25 m, so low furniture (beds, sofas) shows.
+        walls, obstacles = [], []
+        for dz in (1.0, 0.25):
+            segments, ids = slice_segments(mesh, grid.floor.z_m + dz)
+            is_object = np.zeros(len(ids), bool)
+            if mesh.face_object is not None:
+                is_object = mesh.face_object[ids] >= 0
+            obstacles.append(segments[is_object])
+            if dz == 1.0:
+                walls.append(segments[~is_object])
+        ax.add_collection(LineCollection(np.concatenate(walls), colors="black", linewidths=1.6,
+                                         label="walls (cut at 1 m)"))
+        obstacle_segments = np.concatenate(obstacles)
+        if len(obstacle_segments):
+            ax.add_collection(LineCollection(obstacle_segments, colors="saddlebrown",
+                                             linewidths=1.2, label="obstacles"))
+        if placement is not None and placement.get("floor_index") == k:
+            mic = placement["mic_m"]
+            ax.plot(mic[0], mic[1], marker="^", color="crimson", markersize=11, ls="none",
+                    label="microphone")
+            for i, src in enumerate(placement["speech"]):
+                p = np.asarray(src["path_m"])
+                color = f"C{i}"
+                ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=2, label=f"speaker {i + 1}")
+                pts = np.asarray(src.get("rir_points_m", p))
+                ax.plot(pts[:, 0], pts[:, 1], ".", color=color, ms=4)
+                ax.plot(p[0, 0], p[0, 1], "o", color=color, ms=8)
+                ax.plot(p[-1, 0], p[-1, 1], "s", color=color, ms=8)
+            for kind, marker in (("noise", "X"), ("music", "P")):
+                src = placement.get(kind)
+                if src is not None:
+                    ax.plot(src["start_m"][0], src["start_m"][1], marker=marker, color="dimgray",
+                            ms=11, ls="none", label=kind)
+        area = grid.area_m2
+        ax.set_title(f"floor {k} (z = {grid.floor.z_m:.2f} m, walkable {area:.1f} m²)")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_aspect("equal")
+        lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+        ax.set_xlim(lo[0] - 0.3, hi[0] + 0.3)
+        ax.set_ylim(lo[1] - 0.3, hi[1] + 0.3)
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    if title:
+        fig.suptitle(title + ("  (o start, ■ end, · RIR points)" if placement else ""))
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,131 @@
+"""`sonicspec scene inspect`: one scene of a spec, built as the pipeline builds it, in numbers.
+
+Runs the ``mesh`` and ``navigation`` stage code in process (no store, no Snakemake) and draws
+one group's placement with the spec's rules, so what a person inspects is what a build uses.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
+from sonicspec.geometry.navigation import build_navigation
+from sonicspec.plan.compile import FileDigests, expand_scenes, scene_jobs
+from sonicspec.plan.hashing import rng_for
+from sonicspec.spec.load import LoadedSpec, did_you_mean
+from sonicspec.stages.mesh import build_scene_mesh
+from sonicspec.stages.navigation import settings_from as nav_settings
+from sonicspec.stages.placement import place_group
+from sonicspec.stages.placement import settings_from as placement_settings
+
+
+def scene_ids(loaded: LoadedSpec) -> list[str]:
+    return [e.id for e in expand_scenes(loaded.spec, loaded.base_dir.resolve())]
+
+
+def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
+    """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
+    spec = loaded.spec
+    base = loaded.base_dir.resolve()
+    entries = expand_scenes(spec, base)
+    chosen = [e for e in entries if e.id == scene_id]
+    if not chosen:
+        ids = [e.id for e in entries]
+        raise CompileError(f"--scene: expected one of {', '.join(ids)}, got {scene_id!r}"
+                           + did_you_mean(scene_id, ids))
+    ((entry, mesh_job, nav_job),) = scene_jobs(spec, chosen, base, FileDigests())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SonicspecWarning)
+        mesh, report = build_scene_mesh(dict(mesh_job.params), dict(mesh_job.paths),
+                                        rng_for(spec.seed, "mesh", mesh_job.key))
+    nav = build_navigation(mesh, nav_settings(dict(nav_job.params)))
+    areas = mesh.face_areas
+    by_material: dict[str, float] = {}
+    for index, name in enumerate(mesh.materials):
+        by_material[name] = float(areas[mesh.face_material == index].sum())
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    params = {
+        "scene_id": scene_id, "placement": spec.placement.model_dump(mode="json"),
+        "trajectory": spec.trajectory.model_dump(mode="json"),
+        "microphone": spec.microphone.model_dump(mode="json"),
+        "speakers": spec.mixture.speakers, "noise": spec.corpora.noise is not None,
+        "music": spec.corpora.music is not None,
+    }
+    placement: dict[str, Any] | None = None
+    placement_error = None
+    try:
+        placement = place_group(nav, placement_settings(params), params, "inspect",
+                                rng_for(spec.seed, "inspect", scene_id))
+    except PlacementError as exc:
+        placement_error = str(exc)
+    facts = {
+        "scene_id": scene_id,
+        "kind": report["kind"],
+        "bounds_m": [lo.tolist(), hi.tolist()],
+        "vertices": int(mesh.vertices.shape[0]),
+        "faces": int(mesh.faces.shape[0]),
+        "surface_area_m2": float(areas.sum()),
+        "air_volume_m3": float(mesh.air_volume()),
+        "repair": report.get("repair"),
+        "leak": report.get("leak"),
+        "warnings": [str(w.message) for w in caught] + report.get("warnings", []),
+        "materials_m2": dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
+        "labels": list(mesh.labels),
+        "floors": [g.to_dict() for g in nav.grids],
+        "placement": placement,
+        "placement_error": placement_error,
+    }
+    if plot is not None:
+        from sonicspec.export.plots import plot_floor_plan
+
+        plot_floor_plan(mesh, nav, placement, plot, title=f"{spec.name}: {scene_id}")
+        facts["plot"] = str(plot)
+    return facts
+
+
+def format_facts(facts: dict[str, Any]) -> str:
+    """The facts as a short report for a terminal."""
+    lo, hi = facts["bounds_m"]
+    size = np.subtract(hi, lo)
+    lines = [
+        f"scene {facts['scene_id']} ({facts['kind']}): {facts['faces']} faces, "
+        f"{facts['vertices']} vertices",
+        f"bounds [{', '.join(f'{v:.2f}' for v in lo)}] .. [{', '.join(f'{v:.2f}' for v in hi)}]"
+        f" m (size {' x '.join(f'{v:.2f}' for v in size)} m)",
+        f"surface {facts['surface_area_m2']:.1f} m², air volume {facts['air_volume_m3']:.1f} m³",
+    ]
+    rep = facts["repair"]
+    if rep is not None:
+        lines.append(
+            f"repair: faces {rep['before']['faces']} -> {rep['after']['faces']}, merged "
+            f"{rep['merged_vertices']} vertices, closed {rep['holes_closed']}/{rep['holes_found']}"
+            f" holes, removed {rep['debris_components_removed']} debris pieces; watertight "
+            f"{'yes' if rep['watertight'] else 'NO'}")
+    if facts["leak"] is not None:
+        leak = facts["leak"]
+        lines.append(f"leak test: {leak['fraction']:.4%} of {leak['rays']} rays escape")
+    lines.append("materials (area):")
+    total = sum(facts["materials_m2"].values()) or 1.0
+    for name, area in facts["materials_m2"].items():
+        lines.append(f"  {name:<28} {area:9.1f} m²  {100 * area / total:5.1f} %")
+    for f in facts["floors"]:
+        lines.append(f"floor {f['floor']['index']} at z = {f['floor']['z_m']:.2f} m: walkable "
+                     f"{f['walkable_area_m2']:.1f} m² in {len(f['component_areas_m2'])} "
+                     "component(s)")
+    if facts["placement"] is not None:
+        p = facts["placement"]
+        lines.append(f"sampled group: mic at [{', '.join(f'{v:.2f}' for v in p['mic_m'])}], "
+                     + ", ".join(f"speaker {i + 1} walks {s['path_length_m']:.2f} m "
+                                 f"({len(s['rir_points_m'])} RIR points)"
+                                 for i, s in enumerate(p["speech"])))
+    else:
+        lines.append(f"placement impossible: {facts['placement_error']}")
+    for w in facts["warnings"]:
+        lines.append(f"warning: {w}")
+    if "plot" in facts:
+        lines.append(f"floor plan: {facts['plot']}")
+    return "\n".join(lines)
