@@ -37,7 +37,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         ids = [e.id for e in entries]
         raise CompileError(f"--scene: expected one of {', '.join(ids)}, got {scene_id!r}"
                            + did_you_mean(scene_id, ids))
-    ((entry, mesh_job, nav_job),) = scene_jobs(spec, chosen, base, FileDigests())
+    ((_, mesh_job, nav_job),) = scene_jobs(spec, chosen, base, FileDigests())
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SonicspecWarning)
         mesh, report = build_scene_mesh(dict(mesh_job.params), dict(mesh_job.paths),
