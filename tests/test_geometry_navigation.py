@@ -114,6 +114,30 @@ def test_each_storey_walkable_area_is_its_own():
     assert nav.to_dict()["floors"][1]["floor"]["z_m"] == pytest.approx(3.2)
 
 
+def test_scan_like_building_keeps_its_floors_and_area():
+    # Finely tessellated, with ±5 mm vertex noise, like a scan: the same two floors and about
+    # the same walkable area (the noise moves walls by millimetres).
+    import trimesh.remesh
+
+    building = two_storey()
+    vertices, faces, index = trimesh.remesh.subdivide_to_size(
+        building.vertices, building.faces, max_edge=0.5, return_index=True
+    )
+    rng = np.random.default_rng(0)
+    scan = SceneMesh(
+        vertices=vertices + rng.uniform(-0.005, 0.005, vertices.shape),
+        faces=faces,
+        face_material=building.face_material[index],
+        materials=building.materials,
+    )
+    assert scan.n_faces > 2000
+    nav = build_navigation(scan, SETTINGS)
+    assert [f.z_m for f in nav.floors] == pytest.approx([0.0, 3.2], abs=0.006)
+    expected = (6 - 2 * R) * (5 - 2 * R)
+    assert [g.area_m2 for g in nav.grids] == pytest.approx([expected] * 2, rel=0.02)
+    assert [g.n_components for g in nav.grids] == [1, 1]
+
+
 def test_floors_need_upward_faces():
     room = shoebox([4, 4, 3])
     walls_only = room.subset(room.face_label == room.labels.index("wall"))

@@ -309,6 +309,7 @@ def test_unknown_motion_is_an_error(hall):
         ({"wall_clearance_m": -0.1}, r"wall_clearance_m: expected a finite distance >= 0"),
         ({"mic_height_m": 0.0}, r"mic_height_m: expected a finite positive"),
         ({"max_tries": 0}, r"max_tries: expected an integer >= 1"),
+        ({"item_budget": 2.5}, r"item_budget: expected an integer >= 1"),
         ({"mic_position_m": (1.0, 2.0)}, r"mic_position_m: expected \[x, y, z\]"),
     ],
 )
@@ -320,3 +321,69 @@ def test_settings_errors(kwargs, match):
 def test_navigation_settings_follow_the_walker():
     nav = PlacementSettings(walker_radius_m=0.3, walker_height_m=1.9).navigation_settings(0.1)
     assert (nav.cell_m, nav.walker_radius_m, nav.walker_height_m) == (0.1, 0.3, 1.9)
+
+
+def test_a_mic_in_a_closet_is_redrawn():
+    # A 7 × 5 m room and a separate 2.5 × 2.5 m closet (12 % of the eligible area): no source
+    # can be 3–8 m from a mic drawn in the closet within its component, so such groups
+    # restart from a new mic, and every placement ends up in the room.
+    closet = shoebox([2.5, 2.5, 2.5])
+    closet = closet.replace(vertices=closet.vertices + np.array([8.0, 0.0, 0.0]))
+    nav = build_navigation(SceneMesh.concatenate([shoebox([7, 5, 3]), closet]), NAV)
+    assert nav.grid(0).n_components == 2
+    settings = PlacementSettings(
+        source_start_distance_m=(3.0, 8.0), noise_distance_m=(3.0, 8.0), item_budget=20
+    )
+    restarts = 0
+    for seed in range(60):
+        p = sample_placement(
+            nav,
+            settings,
+            scene_id="flat",
+            speech=["shortest_path"],
+            noise=True,
+            music=False,
+            rng=np.random.default_rng(seed),
+        )
+        assert p.mic_m[0] < 7 and p.speech[0].start_m[0] < 7 and p.noise.start_m[0] < 7
+        restarts += p.restarts
+    assert restarts >= 1
+
+
+def test_separation_failure_names_the_rule(hall):
+    settings = PlacementSettings(min_source_separation_m=20.0, max_tries=300)
+    with pytest.raises(
+        PlacementError,
+        match=r"speech source 1's start point.*most failed: separation from other sources "
+        r">= 20 m",
+    ):
+        sample_placement(
+            hall,
+            settings,
+            scene_id="hall",
+            speech=["static", "static"],
+            noise=False,
+            music=False,
+            rng=np.random.default_rng(0),
+        )
+
+
+def test_unsmoothed_paths_follow_the_grid(hall):
+    def place(smooth):
+        return sample_placement(
+            hall,
+            PlacementSettings(smooth_paths=smooth),
+            scene_id="hall",
+            speech=["shortest_path"],
+            noise=False,
+            music=False,
+            rng=np.random.default_rng(5),
+        ).speech[0]
+
+    smooth, raw = place(True), place(False)
+    assert np.array_equal(smooth.start_m, raw.start_m) and np.array_equal(smooth.end_m, raw.end_m)
+    assert raw.path_length_m >= smooth.path_length_m
+    assert len(raw.path_m) > len(smooth.path_m)
+    # Interior vertices of the grid path are cell centres, one cell (or a diagonal) apart.
+    steps = np.linalg.norm(np.diff(raw.path_m[1:-1, :2], axis=0), axis=1)
+    assert np.all(np.isclose(steps, 0.05) | np.isclose(steps, 0.05 * np.sqrt(2)))

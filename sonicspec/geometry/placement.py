@@ -81,7 +81,8 @@ class PlacementSettings:
     Distances are 3-D, metres. ``walker_radius_m`` and ``walker_height_m`` are used when the
     navigation is built (:meth:`navigation_settings`); ``mic_height_m`` comes from the
     microphone spec. ``item_budget`` bounds the candidates spent on one item before the group
-    restarts from a new mic.
+    restarts from a new mic. ``smooth_paths`` string-pulls shortest paths (the trajectory
+    spec's ``smooth``); without it they are 8-connected grid paths.
     """
 
     source_start_distance_m: tuple[float, float] = (1.0, 8.0)
@@ -101,6 +102,7 @@ class PlacementSettings:
     walker_height_m: float = 1.8
     mic_height_m: float = 1.5
     item_budget: int = 200
+    smooth_paths: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -209,6 +211,8 @@ class Placement:
         The static noise and music sources, when requested.
     tries : int
         Candidates drawn in all (for diagnostics).
+    restarts : int
+        Times the group was started again from a new mic (an item ran out of its budget).
     """
 
     scene_id: str
@@ -218,6 +222,7 @@ class Placement:
     noise: SourcePlacement | None = None
     music: SourcePlacement | None = None
     tries: int = 0
+    restarts: int = 0
 
     def to_dict(self) -> dict:
         """Plain JSON-ready dictionary (the group metadata's positions and trajectories)."""
@@ -229,6 +234,7 @@ class Placement:
             "noise": None if self.noise is None else self.noise.to_dict(),
             "music": None if self.music is None else self.music.to_dict(),
             "tries": int(self.tries),
+            "restarts": int(self.restarts),
         }
 
 
@@ -419,7 +425,9 @@ class _Sampler:
         s = self.s
         same = s.same_floor
         items: dict[str, _Item] = {"mic": _Item("the microphone", "mic")}
+        restarts = -1
         while self.tries < s.max_tries:
+            restarts += 1
             if s.mic_position_m is not None:
                 mic, mic_floor, mic_comp = self.fixed_mic()
             else:
@@ -486,7 +494,9 @@ class _Sampler:
                     path = np.stack([start, end])
                     length = float(np.linalg.norm(end - start))
                 else:
-                    nav_path = shortest_path(grid, start, end, height_m=height)
+                    nav_path = shortest_path(
+                        grid, start, end, height_m=height, smooth=s.smooth_paths
+                    )
                     path = nav_path.points_m.copy()
                     # The path's ends are the drawn points exactly (same xy; z from the floor).
                     path[0], path[-1] = start, end
@@ -524,6 +534,7 @@ class _Sampler:
                     noise=statics["noise"],
                     music=statics["music"],
                     tries=self.tries,
+                    restarts=restarts,
                 )
         raise self._error(items)
 
