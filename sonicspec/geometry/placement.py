@@ -270,8 +270,6 @@ def _eligible_pool(navigation: Navigation, settings: PlacementSettings) -> _Pool
 @dataclass
 class _Item:
     label: str  # e.g. "speech source 2's end point"
-    kind: str  # "mic", "start", "end", "noise", "music"
-    source: int = -1
     failures: Counter = field(default_factory=Counter)
     tries: int = 0
     floor: int | None = None  # the floor it was last drawn on (None: any floor)
@@ -424,7 +422,7 @@ class _Sampler:
     def run(self, noise: bool, music: bool) -> Placement:
         s = self.s
         same = s.same_floor
-        items: dict[str, _Item] = {"mic": _Item("the microphone", "mic")}
+        items: dict[str, _Item] = {"mic": _Item("the microphone")}
         restarts = -1
         while self.tries < s.max_tries:
             restarts += 1
@@ -443,7 +441,7 @@ class _Sampler:
             failed = False
             for i, motion in enumerate(self.motions):
                 label = f"speech source {i}"
-                item = items.setdefault(f"start{i}", _Item(f"{label}'s start point", "start", i))
+                item = items.setdefault(f"start{i}", _Item(f"{label}'s start point"))
                 rule = mic_rule.format(_fmt_range(*s.source_start_distance_m))
                 got = self.draw(
                     item,
@@ -463,7 +461,7 @@ class _Sampler:
                     )
                     starts.append(start)
                     continue
-                item = items.setdefault(f"end{i}", _Item(f"{label}'s end point", "end", i))
+                item = items.setdefault(f"end{i}", _Item(f"{label}'s end point"))
                 anchors = [
                     (
                         mic_rule.format(_fmt_range(*s.source_end_distance_m)),
@@ -512,7 +510,7 @@ class _Sampler:
             ):
                 if failed or not wanted:
                     continue
-                item = items.setdefault(name, _Item(f"the {name} source", name))
+                item = items.setdefault(name, _Item(f"the {name} source"))
                 rule = mic_rule.format(_fmt_range(*distance))
                 got = self.draw(
                     item, s.noise_height_m, [(rule, mic, distance)], floor, comp, starts
