@@ -39,15 +39,19 @@ floor and both distances are at least ``walker_radius_m``.
 Walkable cells are split into 8-connected components, numbered by decreasing area; all of
 them are kept. Two points are mutually reachable exactly when they lie in the same component:
 :func:`shortest_path` raises :class:`PathNotFoundError` otherwise, and the placement sampler
-draws every position of a group from one component.
+(:mod:`sonicspec.geometry.placement`) draws a group's positions from the mic's component.
 
 Paths
 -----
 Dijkstra on the 8-connected grid of walkable cells (SciPy's compiled ``csgraph``, searched
 only out to a bound that grows if the goal is not reached), then string pulling: starting
 from the start point, the path jumps to the farthest successive grid vertex still in line of
-sight (the straight segment stays on walkable cells of the component). The result is an
-any-angle polyline whose length is within about a cell of the true geodesic.
+sight (the straight segment stays on walkable cells of the component). String pulling leaves
+corners at cell centres, up to a cell off the taut path, so a few passes of corner cutting
+(each corner replaced by the farthest visible chord across it, then string pulling again)
+tighten the path around obstacles. The result is an any-angle polyline; on the tests'
+analytic detours (tangents and arcs round inflated corners) it is within 0.5 % of the true
+geodesic at 5 cm cells.
 
 All lengths are metres, the frame is z up (see :mod:`sonicspec.geometry.mesh`).
 """
