@@ -449,5 +449,7 @@ def test_grid_errors():
     with pytest.raises(GeometryError, match=r"expected a floor index in \[0, 0\], got 2"):
         nav.grid(2)
     empty = SceneMesh(np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros(0, int), ("x",))
-    with pytest.raises(GeometryError, match="expected a mesh with faces"):
+    with pytest.raises(GeometryError, match="walkable_grid: expected a mesh with faces"):
         walkable_grid(empty, nav.floors[0], SETTINGS)
+    with pytest.raises(GeometryError, match="build_navigation: expected a mesh with faces"):
+        build_navigation(empty, SETTINGS)

@@ -21,7 +21,7 @@ from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 NAV = NavigationSettings(cell_m=0.05, walker_radius_m=0.25)
 ROOM = (10.0, 7.0, 3.0)
 BOX_CENTER, BOX_SIZE = np.array([5.0, 2.5]), np.array([1.2, 2.0])  # furniture, 1 m high
-SEEDS = range(40)
+SEEDS = range(50)
 
 
 @pytest.fixture(scope="module")
