@@ -243,6 +243,35 @@ def test_same_seed_gives_identical_bytes():
     assert a[0].histogram.energy.tobytes() != c[0].histogram.energy.tobytes()
 
 
+def test_result_bytes_do_not_depend_on_thread_count():
+    verts, faces = shoebox(6.0, 5.0, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.3, s=0.4, n_bands=2)
+    src, rcv = np.array([1.0, 1.0, 1.5]), np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0]])
+    settings = RayTraceSettings(n_rays=900, max_time_s=0.3, batch_size=300)
+    one = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=1)
+    two = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=2)
+    three = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=3)
+    for a, b, c in zip(one, two, three, strict=True):
+        assert a.histogram.energy.tobytes() == b.histogram.energy.tobytes()
+        assert a.histogram.energy.tobytes() == c.histogram.energy.tobytes()
+        assert a.histogram.direction_sum.tobytes() == c.histogram.direction_sum.tobytes()
+
+
+def test_swapping_source_and_receiver_changes_t30_by_less_than_5_percent():
+    verts, faces = shoebox(10.0, 7.0, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.5, n_bands=2)
+    settings = RayTraceSettings(n_rays=2000, max_time_s=1.0)
+    forward, _ = total_histogram(scene, SRC, RCV, np.random.default_rng(1), settings, None)
+    backward, _ = total_histogram(
+        scene, RCV[0], SRC[None], np.random.default_rng(2), settings, None
+    )
+    t_f = schroeder_t30(forward, settings.bin_s)
+    t_b = schroeder_t30(backward, settings.bin_s)
+    assert np.all(np.abs(t_f / t_b - 1) < 0.05)
+    # the first 30 ms (direct sound and image sources, plus early rain) agree too
+    np.testing.assert_allclose(forward[:30].sum(axis=0), backward[:30].sum(axis=0), rtol=0.05)
+
+
 def test_directions_late_field_is_diffuse_and_mean_direction_bounded():
     verts, faces = shoebox(6.0, 5.0, 3.0)
     scene = uniform_scene(verts, faces, alpha=0.1, s=0.7, n_bands=1)
@@ -275,3 +304,7 @@ def test_settings_and_input_errors():
         trace_rays(scene, np.array([1.0, 1, 1]), np.array([[2.0, 2, 2]]), 42)  # type: ignore[arg-type]
     with pytest.raises(AcousticsError, match="source: expected one position"):
         trace_rays(scene, np.ones((2, 3)), np.array([[2.0, 2, 2]]), np.random.default_rng(0))
+    with pytest.raises(AcousticsError, match="n_threads: expected an integer >= 1"):
+        trace_rays(
+            scene, np.ones(3), np.array([[2.0, 2, 2]]), np.random.default_rng(0), n_threads=0
+        )

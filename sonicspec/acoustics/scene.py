@@ -211,6 +211,21 @@ class AcousticScene:
         )
         return (res != -1) & (tfar > 0)
 
+    def occluded_along(
+        self, origins: np.ndarray, directions: np.ndarray, lengths_m: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`occluded` for segments given as origin, unit direction and length (m)."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=bool)
+        tfar = lengths_m - 2.0 * self.eps_m
+        res = self._embree.run(
+            self._to_f32(origins + directions * self.eps_m),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            dists=np.ascontiguousarray(np.maximum(tfar, 0.0), dtype=np.float32),
+            query="OCCLUDED",
+        )
+        return (res != -1) & (tfar > 0)
+
     def crossings(
         self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64
     ) -> tuple[np.ndarray, np.ndarray]:
