@@ -104,10 +104,12 @@ def test_order_3_shoebox_count_and_amplitudes():
     np.testing.assert_allclose(np.sort(ours.amplitudes[:, 0]), ref, rtol=1e-5)  # pra: float32
 
 
-def test_subdivided_walls_merge_into_six_regions_and_give_the_same_images():
+@pytest.mark.parametrize("levels", [2, 3])  # 32 triangles per wall: barycentric; 128: Embree probe
+def test_subdivided_walls_merge_into_six_regions_and_give_the_same_images(levels):
     verts, faces = shoebox(5.0, 4.0, 3.0)
-    fine_v, fine_f = trimesh.remesh.subdivide(verts, faces)
-    fine_v, fine_f = trimesh.remesh.subdivide(fine_v, fine_f)
+    fine_v, fine_f = verts, faces
+    for _ in range(levels):
+        fine_v, fine_f = trimesh.remesh.subdivide(fine_v, fine_f)
     coarse = uniform_scene(verts, faces, alpha=0.3)
     fine = uniform_scene(fine_v, fine_f, alpha=0.3)
     assert planar_regions(coarse).n_regions == 6
@@ -129,9 +131,12 @@ def test_different_materials_on_one_plane_stay_separate_regions():
     assert planar_regions(other).n_regions == 7
 
 
-def test_l_room_images_need_visibility():
+@pytest.mark.parametrize("levels", [0, 3])
+def test_l_room_images_need_visibility(levels):
     poly = [(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)]
     verts, faces = extruded_room(poly, [(3, 4, 5), (3, 5, 0), (3, 0, 1), (3, 1, 2)], 3.0)
+    for _ in range(levels):
+        verts, faces = trimesh.remesh.subdivide(verts, faces)
     scene = uniform_scene(verts, faces)
     src = np.array([5.5, 1.0, 1.5])
     rcv = np.array([[1.0, 5.5, 1.5]])

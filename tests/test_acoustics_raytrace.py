@@ -126,6 +126,16 @@ def test_t30_within_10_percent_of_eyring_with_air_absorption():
     assert res.escaped_ray_fraction == 0.0
 
 
+def test_specular_shoebox_decays_slower_than_eyring():
+    """Without scattering the field in a flat room is not diffuse: T30 exceeds Eyring's."""
+    verts, faces = shoebox(10.0, 7.0, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.0, n_bands=1)
+    settings = RayTraceSettings(n_rays=2000, max_time_s=1.5)
+    energy, _ = total_histogram(scene, SRC, RCV, np.random.default_rng(4), settings, None)
+    t30 = schroeder_t30(energy, settings.bin_s)[0]
+    assert t30 > 1.2 * eyring_t60(210.0, 242.0, 0.2, 0.0)
+
+
 def test_live_room_decay_is_not_truncated():
     verts, faces = shoebox(10.0, 7.0, 3.0)
     scene = uniform_scene(verts, faces, alpha=0.02, s=0.5)

@@ -169,20 +169,46 @@ def _reach_tables(scene: AcousticScene, regions: PlanarRegions, tol: float) -> n
     return reach
 
 
+# Regions with more triangles than this are tested with an Embree probe ray, not barycentrics.
+_MAX_TRIANGLES_FOR_BARYCENTRIC = 64
+
+
 def _inside_regions(
-    scene: AcousticScene, regions: PlanarRegions, points: np.ndarray, region: np.ndarray
+    scene: AcousticScene,
+    regions: PlanarRegions,
+    points: np.ndarray,
+    region: np.ndarray,
+    side: np.ndarray,
 ) -> np.ndarray:
-    """Whether each point (on its region's plane) lies inside one of the region's triangles."""
+    """Whether each point (on its region's plane) lies inside its region.
+
+    Small regions: barycentric test against each triangle in float64 (exact up to 1e-9).
+    Large regions (e.g. finely tessellated walls): a probe ray from ``eps_m`` in front of the
+    point (on ``side`` of the plane: +1 front, -1 back) straight back onto the plane; the point
+    is inside when the face it hits belongs to the region — O(log F) per point.
+    """
     inside = np.zeros(len(points), dtype=bool)
     if len(points) == 0:
         return inside
     tol = 1e-9
-    order = np.argsort(region, kind="stable")
-    bounds = np.searchsorted(region[order], np.unique(region))
-    bounds = np.append(bounds, len(order))
-    for k in range(len(bounds) - 1):
+    n_tri = np.diff(regions.region_start)[region]
+    big = n_tri > _MAX_TRIANGLES_FOR_BARYCENTRIC
+    if np.any(big):
+        idx = np.flatnonzero(big)
+        nrm = regions.normals[region[idx]] * side[idx, None]
+        probe = 4.0 * scene.eps_m
+        face, dist = scene.intersect(points[idx] + probe * nrm, -nrm)
+        hit = (face >= 0) & (dist < 2.0 * probe)
+        inside[idx] = hit & (regions.face_region[np.maximum(face, 0)] == region[idx])
+    small = np.flatnonzero(~big)
+    if small.size == 0:
+        return inside
+    order = small[np.argsort(region[small], kind="stable")]
+    uniq, first = np.unique(region[order], return_index=True)
+    bounds = np.append(first, len(order))
+    for k in range(len(uniq)):
         idx = order[bounds[k] : bounds[k + 1]]
-        p = region[idx[0]]
+        p = uniq[k]
         fcs = regions.region_faces[regions.region_start[p] : regions.region_start[p + 1]]
         tri = scene.vertices[scene.faces[fcs]]
         a = tri[:, 0]
@@ -191,16 +217,12 @@ def _inside_regions(
         d01 = np.einsum("ij,ij->i", v0, v1)
         d11 = np.einsum("ij,ij->i", v1, v1)
         den = d00 * d11 - d01 * d01
-        # Chunk points so the (points × triangles) matrices stay small.
-        step = max(1, 1_000_000 // len(fcs))
-        for s0 in range(0, len(idx), step):
-            sub = idx[s0 : s0 + step]
-            v2 = points[sub][:, None, :] - a[None]
-            d20 = np.einsum("mtj,tj->mt", v2, v0)
-            d21 = np.einsum("mtj,tj->mt", v2, v1)
-            v = (d11 * d20 - d01 * d21) / den
-            w = (d00 * d21 - d01 * d20) / den
-            inside[sub] = np.any((v >= -tol) & (w >= -tol) & (v + w <= 1 + tol), axis=1)
+        v2 = points[idx][:, None, :] - a[None]
+        d20 = np.einsum("mtj,tj->mt", v2, v0)
+        d21 = np.einsum("mtj,tj->mt", v2, v1)
+        v = (d11 * d20 - d01 * d21) / den
+        w = (d00 * d21 - d01 * d20) / den
+        inside[idx] = np.any((v >= -tol) & (w >= -tol) & (v + w <= 1 + tol), axis=1)
     return inside
 
 
@@ -387,7 +409,9 @@ def _validate_order(
         t = (plane_d[p] - np.einsum("ij,ij->i", x, normals[p])) / np.where(den != 0, den, 1.0)
         good = (den != 0) & (t > 0) & (t < 1)
         q = x + t[:, None] * vec
-        good &= _inside_regions(scene, regions, q, p)
+        # The path arrives from x's side of the plane.
+        x_side = np.where(np.einsum("ij,ij->i", x, normals[p]) - plane_d[p] >= 0, 1.0, -1.0)
+        good &= _inside_regions(scene, regions, q, p, x_side)
         img, rcv, x, points = img[good], rcv[good], q[good], points[good]
         points[:, j + 1] = x
         if len(img) == 0:

@@ -1,0 +1,260 @@
+"""Tracer throughput: rays/s against the raw Embree ceiling, one RIR, many receivers at once.
+
+Reproduce:  python bench/bench_tracer.py            (about a minute on 2 cores)
+            python bench/bench_tracer.py --pra      (adds pyroomacoustics' hybrid simulator)
+
+Figures printed:
+* raw embreex first-hit rate (the ceiling) in the 10 x 7 x 3 m shoebox, 1 and 2 threads;
+* tracer throughput: surface hits per second (each hit = one first-hit query, one Lambert
+  shadow ray per receiver, sphere tests and the bookkeeping in numpy);
+* one RIR's histograms (direct + image sources order 3 + rays) at 2 000 and 20 000 rays, with
+  T30 per band against Eyring (with ISO 9613-1 air absorption) and the seed-to-seed spread;
+* N = 1, 10, 100 receivers traced at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.scene import AcousticScene
+
+BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
+SIZE = (10.0, 7.0, 3.0)
+SRC = np.array([2.1, 3.3, 1.4])
+RCV = np.array([[7.2, 4.9, 1.6]])
+
+
+def shoebox(lx: float, ly: float, lz: float) -> tuple[np.ndarray, np.ndarray]:
+    v = np.array(
+        [
+            [0, 0, 0],
+            [lx, 0, 0],
+            [lx, ly, 0],
+            [0, ly, 0],
+            [0, 0, lz],
+            [lx, 0, lz],
+            [lx, ly, lz],
+            [0, ly, lz],
+        ],
+        dtype=float,
+    )
+    f = [(0, 1, 2), (0, 2, 3), (4, 6, 5), (4, 7, 6)]
+    for i in range(4):
+        j = (i + 1) % 4
+        f += [(i, j + 4, j), (i, i + 4, j + 4)]
+    return v, np.array(f)
+
+
+def iso9613_energy_per_m(f_hz: np.ndarray, temperature_c: float = 20.0, rh_pct: float = 50.0):
+    t, t0, t01 = temperature_c + 273.15, 293.15, 273.16
+    h = rh_pct * 10 ** (-6.8346 * (t01 / t) ** 1.261 + 4.6151)
+    fr_o = 24 + 4.04e4 * h * (0.02 + h) / (0.391 + h)
+    fr_n = (t / t0) ** -0.5 * (9 + 280 * h * np.exp(-4.170 * ((t / t0) ** (-1 / 3) - 1)))
+    db = (
+        8.686
+        * f_hz**2
+        * (
+            1.84e-11 * (t / t0) ** 0.5
+            + (t / t0) ** -2.5
+            * (
+                0.01275 * np.exp(-2239.1 / t) / (fr_o + f_hz**2 / fr_o)
+                + 0.1068 * np.exp(-3352.0 / t) / (fr_n + f_hz**2 / fr_n)
+            )
+        )
+    )
+    return db / (10 * math.log10(math.e))
+
+
+def schroeder_t30(energy: np.ndarray, bin_s: float) -> np.ndarray:
+    edc = np.cumsum(energy[::-1], axis=0)[::-1]
+    t = np.arange(len(energy)) * bin_s
+    out = []
+    for b in range(energy.shape[1]):
+        with np.errstate(divide="ignore"):
+            db = 10 * np.log10(edc[:, b] / edc[0, b])
+        sel = (db <= -5) & (db >= -35)
+        out.append(-60.0 / np.polyfit(t[sel], db[sel], 1)[0])
+    return np.array(out)
+
+
+def scene_for(alpha: float, s: float) -> AcousticScene:
+    v, f = shoebox(*SIZE)
+    n, b = len(f), len(BANDS_HZ)
+    return AcousticScene(v, f, np.full((n, b), alpha), np.full((n, b), s), np.zeros((n, b)))
+
+
+def raw_embree(scene: AcousticScene, n: int = 400_000, repeats: int = 5) -> None:
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.c_[rng.uniform(0.5, 9.5, n), rng.uniform(0.5, 6.5, n), rng.uniform(0.5, 2.5, n)]
+    o32 = (o - scene._shift).astype(np.float32)
+    d32 = d.astype(np.float32)
+    emb = scene._embree
+    emb.run(o32, d32)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        emb.run(o32, d32, output=1)
+    one = n * repeats / (time.perf_counter() - t)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        emb.run(o32, d32, query="OCCLUDED")
+    occ = n * repeats / (time.perf_counter() - t)
+    half = n // 2
+    with ThreadPoolExecutor(2) as ex:
+        t = time.perf_counter()
+        for _ in range(repeats):
+            list(
+                ex.map(
+                    lambda sl: emb.run(o32[sl], d32[sl], output=1), [slice(0, half), slice(half, n)]
+                )
+            )
+        two = n * repeats / (time.perf_counter() - t)
+    print(f"raw embreex first hit (with distances), 1 thread : {one / 1e6:6.2f} M rays/s")
+    print(f"raw embreex first hit (with distances), 2 threads: {two / 1e6:6.2f} M rays/s")
+    print(f"raw embreex occlusion, 1 thread                  : {occ / 1e6:6.2f} M rays/s")
+
+
+def one_rir(scene: AcousticScene, air: np.ndarray, n_rays: int, seed: int, receivers=RCV):
+    t0 = time.perf_counter()
+    regions = planar_regions(scene)
+    ism = image_sources(scene, SRC, receivers, max_order=3, air_m_per_band=air, regions=regions)
+    direct = direct_sound(scene, SRC, receivers, air_m_per_band=air)
+    t1 = time.perf_counter()
+    settings = RayTraceSettings(
+        n_rays=n_rays, max_time_s=1.5, specular_order_excluded=ism.max_order
+    )
+    res = trace_rays(
+        scene, SRC, receivers, np.random.default_rng(seed), settings, air_m_per_band=air
+    )
+    t2 = time.perf_counter()
+    h = res[0].histogram
+    energy = (
+        h.energy
+        + ism.arrivals[0].energy_histogram(h.bin_s, h.n_bins)
+        + direct[0].energy_histogram(h.bin_s, h.n_bins)
+    )
+    return energy, h.bin_s, t1 - t0, t2 - t1, res[0]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pra", action="store_true", help="also time pyroomacoustics' hybrid")
+    args = parser.parse_args()
+    print(
+        f"# bench_tracer  python {platform.python_version()}  numpy {np.__version__}  "
+        f"{platform.machine()}  cores={len(__import__('os').sched_getaffinity(0))}"
+    )
+    print("# reproduce: python bench/bench_tracer.py" + (" --pra" if args.pra else ""))
+    air = iso9613_energy_per_m(BANDS_HZ)
+    scene = scene_for(0.2, 0.5)
+    raw_embree(scene)
+    eyring = 24 * math.log(10) * 210.0 / (343.0 * (-242.0 * math.log(0.8) + 4 * air * 210.0))
+    print("\n## one RIR, 10 x 7 x 3 m, alpha 0.2, s 0.5, ISM order 3 + rays, 1.5 s, 7 bands")
+    print("Eyring T30 [s]:", np.round(eyring, 3))
+    for n_rays in (2_000, 20_000):
+        t30s, times = [], []
+        for seed in range(3 if n_rays > 2_000 else 5):
+            energy, bin_s, t_ism, t_rt, res = one_rir(scene, air, n_rays, seed)
+            t30s.append(schroeder_t30(energy, bin_s))
+            times.append(t_rt)
+        t30s = np.array(t30s)
+        hits = n_rays * res.mean_reflections
+        print(
+            f"{n_rays:6d} rays: trace {np.median(times):6.2f} s (ISM+direct {t_ism * 1e3:.0f} ms), "
+            f"{hits / np.median(times) / 1e6:.2f} M hits/s, {res.mean_reflections:.0f} hits/ray, "
+            f"escaped {res.escaped_ray_fraction:.1e}"
+        )
+        err = np.abs(t30s.mean(axis=0) / eyring - 1) * 100
+        spread = t30s.std(axis=0, ddof=1) / t30s.mean(axis=0) * 100
+        print(f"        T30 mean [s] {np.round(t30s.mean(axis=0), 3)}")
+        print(f"        |T30/Eyring-1| % {np.round(err, 1)}")
+        print(f"        seed spread (std) % {np.round(spread, 1)}")
+
+    print("\n## many receivers at once (2 000 rays, 1.5 s): cost vs N")
+    rng = np.random.default_rng(0)
+    base = None
+    for n_rcv in (1, 10, 100):
+        rcv = np.c_[
+            rng.uniform(1, 9, n_rcv), rng.uniform(1, 6, n_rcv), rng.uniform(0.5, 2.5, n_rcv)
+        ]
+        t = time.perf_counter()
+        image_sources(scene, SRC, rcv, max_order=3, air_m_per_band=air)
+        t_ism = time.perf_counter() - t
+        settings = RayTraceSettings(n_rays=2_000, max_time_s=1.5)
+        t = time.perf_counter()
+        trace_rays(scene, SRC, rcv, np.random.default_rng(1), settings, air_m_per_band=air)
+        t_rt = time.perf_counter() - t
+        base = base or (t_ism + t_rt)
+        total = t_ism + t_rt
+        print(
+            f"N = {n_rcv:3d}: ISM {t_ism:6.2f} s  rays {t_rt:6.2f} s  total {total:6.2f} s  "
+            f"= {total / base:5.1f} x N=1  ({total / n_rcv * 1e3:.0f} ms/receiver)"
+        )
+
+    print("\n## threads (20 000 rays in 4 batches, 1 receiver; bytes identical by design)")
+    for n_threads in (1, 2):
+        settings = RayTraceSettings(n_rays=20_000, max_time_s=1.5, batch_size=5_000)
+        t = time.perf_counter()
+        trace_rays(scene, SRC, RCV, np.random.default_rng(1), settings, air, n_threads=n_threads)
+        print(f"{n_threads} thread(s): {time.perf_counter() - t:6.2f} s")
+
+    print("\n## mesh size: shoebox walls subdivided (same acoustics), 2 000 rays, 1 receiver")
+    import trimesh
+
+    v, f = shoebox(*SIZE)
+    for level in range(0, 9, 2):
+        vv, ff = v, f
+        for _ in range(level):
+            vv, ff = trimesh.remesh.subdivide(vv, ff)
+        n, b = len(ff), len(BANDS_HZ)
+        t = time.perf_counter()
+        sc = AcousticScene(vv, ff, np.full((n, b), 0.2), np.full((n, b), 0.5), np.zeros((n, b)))
+        t_build = time.perf_counter() - t
+        t = time.perf_counter()
+        ism = image_sources(sc, SRC, RCV, max_order=3, air_m_per_band=air)
+        t_ism = time.perf_counter() - t
+        settings = RayTraceSettings(n_rays=2_000, max_time_s=1.5)
+        t = time.perf_counter()
+        (res,) = trace_rays(sc, SRC, RCV, np.random.default_rng(1), settings, air)
+        t_rt = time.perf_counter() - t
+        print(
+            f"{n:8d} triangles: scene {t_build:5.2f} s  ISM(3) {t_ism:5.2f} s "
+            f"({len(ism.arrivals[0])} arrivals)  rays {t_rt:5.2f} s "
+            f"({2_000 * res.mean_reflections / t_rt / 1e6:.2f} M hits/s)"
+        )
+
+    if args.pra:
+        import pyroomacoustics as pra
+
+        print("\n## pyroomacoustics 0.10.1 hybrid (ISM order 3 + its ray tracer), same room")
+        for n_rays in (2_000, 10_000):
+            room = pra.ShoeBox(
+                list(SIZE), fs=16_000, materials=pra.Material(0.2, 0.5), max_order=3,
+                ray_tracing=True, air_absorption=True,
+            )  # fmt: skip
+            room.set_ray_tracing(n_rays=n_rays)
+            room.add_source(list(SRC))
+            room.add_microphone(list(RCV[0]))
+            t = time.perf_counter()
+            room.compute_rir()
+            dt = time.perf_counter() - t
+            rt = pra.experimental.measure_rt60(room.rir[0][0], fs=16_000, decay_db=30)
+            print(f"{n_rays:6d} rays: {dt:6.2f} s, broadband T30 {rt:.3f} s")
+
+
+if __name__ == "__main__":
+    main()
