@@ -128,7 +128,14 @@ def raw_embree(scene: AcousticScene, n: int = 400_000, repeats: int = 5) -> None
     print(f"raw embreex occlusion, 1 thread                  : {occ / 1e6:6.2f} M rays/s")
 
 
-def one_rir(scene: AcousticScene, air: np.ndarray, n_rays: int, seed: int, receivers=RCV):
+def one_rir(
+    scene: AcousticScene,
+    air: np.ndarray,
+    n_rays: int,
+    seed: int,
+    receivers=RCV,
+    diffuse_rain: bool = True,
+):
     t0 = time.perf_counter()
     regions = planar_regions(scene)
     ism = image_sources(scene, SRC, receivers, max_order=3, air_m_per_band=air, regions=regions)
@@ -165,10 +172,12 @@ def main() -> None:
     eyring = 24 * math.log(10) * 210.0 / (343.0 * (-242.0 * math.log(0.8) + 4 * air * 210.0))
     print("\n## one RIR, 10 x 7 x 3 m, alpha 0.2, s 0.5, ISM order 3 + rays, 1.5 s, 7 bands")
     print("Eyring T30 [s]:", np.round(eyring, 3))
-    for n_rays in (2_000, 20_000):
+    for n_rays, rain in ((500, True), (2_000, True), (20_000, True), (2_000, False)):
+        if not rain:
+            print("-- receiver spheres only (no diffuse rain), for the variance comparison")
         t30s, times = [], []
         for seed in range(3 if n_rays > 2_000 else 5):
-            energy, bin_s, t_ism, t_rt, res = one_rir(scene, air, n_rays, seed)
+            energy, bin_s, t_ism, t_rt, res = one_rir(scene, air, n_rays, seed, diffuse_rain=rain)
             t30s.append(schroeder_t30(energy, bin_s))
             times.append(t_rt)
         t30s = np.array(t30s)
@@ -186,24 +195,42 @@ def main() -> None:
 
     print("\n## many receivers at once (2 000 rays, 1.5 s): cost vs N")
     rng = np.random.default_rng(0)
-    base = None
-    for n_rcv in (1, 10, 100):
-        rcv = np.c_[
-            rng.uniform(1, 9, n_rcv), rng.uniform(1, 6, n_rcv), rng.uniform(0.5, 2.5, n_rcv)
-        ]
-        t = time.perf_counter()
-        image_sources(scene, SRC, rcv, max_order=3, air_m_per_band=air)
-        t_ism = time.perf_counter() - t
-        settings = RayTraceSettings(n_rays=2_000, max_time_s=1.5)
-        t = time.perf_counter()
-        trace_rays(scene, SRC, rcv, np.random.default_rng(1), settings, air_m_per_band=air)
-        t_rt = time.perf_counter() - t
-        base = base or (t_ism + t_rt)
-        total = t_ism + t_rt
-        print(
-            f"N = {n_rcv:3d}: ISM {t_ism:6.2f} s  rays {t_rt:6.2f} s  total {total:6.2f} s  "
-            f"= {total / base:5.1f} x N=1  ({total / n_rcv * 1e3:.0f} ms/receiver)"
-        )
+    receivers = np.c_[rng.uniform(1, 9, 100), rng.uniform(1, 6, 100), rng.uniform(0.5, 2.5, 100)]
+    for per_hit in (8, 0):
+        label = "all receivers" if per_hit == 0 else f"{per_hit} receivers"
+        print(f"-- diffuse rain onto {label} per hit")
+        base = None
+        for n_rcv in (1, 10, 100):
+            rcv = receivers[:n_rcv]
+            t = time.perf_counter()
+            ism = image_sources(scene, SRC, rcv, max_order=3, air_m_per_band=air)
+            t_ism = time.perf_counter() - t
+            settings = RayTraceSettings(
+                n_rays=2_000, max_time_s=1.5, rain_receivers_per_hit=per_hit
+            )
+            t = time.perf_counter()
+            res = trace_rays(
+                scene, SRC, rcv, np.random.default_rng(1), settings, air_m_per_band=air
+            )
+            t_rt = time.perf_counter() - t
+            total = t_ism + t_rt
+            base = base or total
+            t30 = np.array(
+                [
+                    schroeder_t30(
+                        r.histogram.energy
+                        + a.energy_histogram(r.histogram.bin_s, r.histogram.n_bins),
+                        r.histogram.bin_s,
+                    )[3]
+                    for r, a in zip(res, ism.arrivals, strict=True)
+                ]
+            )
+            print(
+                f"N = {n_rcv:3d}: ISM {t_ism:6.2f} s  rays {t_rt:6.2f} s  total {total:6.2f} s  "
+                f"= {total / base:5.1f} x N=1  ({total / n_rcv * 1e3:.0f} ms/receiver); "
+                f"1 kHz T30 over receivers {t30.mean():.3f} s "
+                f"± {t30.std() / t30.mean() * 100:.1f} %"
+            )
 
     print("\n## threads (20 000 rays in 4 batches, 1 receiver; bytes identical by design)")
     for n_threads in (1, 2):
@@ -242,18 +269,25 @@ def main() -> None:
 
         print("\n## pyroomacoustics 0.10.1 hybrid (ISM order 3 + its ray tracer), same room")
         for n_rays in (2_000, 10_000):
-            room = pra.ShoeBox(
-                list(SIZE), fs=16_000, materials=pra.Material(0.2, 0.5), max_order=3,
-                ray_tracing=True, air_absorption=True,
-            )  # fmt: skip
-            room.set_ray_tracing(n_rays=n_rays)
-            room.add_source(list(SRC))
-            room.add_microphone(list(RCV[0]))
-            t = time.perf_counter()
-            room.compute_rir()
-            dt = time.perf_counter() - t
-            rt = pra.experimental.measure_rt60(room.rir[0][0], fs=16_000, decay_db=30)
-            print(f"{n_rays:6d} rays: {dt:6.2f} s, broadband T30 {rt:.3f} s")
+            for seed in range(3):
+                # pyroomacoustics has no generator argument: seed numpy's global one
+                np.random.seed(seed)  # noqa: NPY002
+                room = pra.ShoeBox(
+                    list(SIZE),
+                    fs=16_000,
+                    materials=pra.Material(0.2, 0.5),
+                    max_order=3,
+                    ray_tracing=True,
+                    air_absorption=True,
+                )
+                room.set_ray_tracing(n_rays=n_rays)
+                room.add_source(list(SRC))
+                room.add_microphone(list(RCV[0]))
+                t = time.perf_counter()
+                room.compute_rir()
+                dt = time.perf_counter() - t
+                rt = pra.experimental.measure_rt60(room.rir[0][0], fs=16_000, decay_db=30)
+                print(f"{n_rays:6d} rays, seed {seed}: {dt:6.2f} s, broadband T30 {rt:.3f} s")
 
 
 if __name__ == "__main__":

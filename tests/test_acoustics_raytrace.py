@@ -267,6 +267,22 @@ def test_rain_onto_a_subset_of_receivers_is_unbiased():
     assert abs(np.mean(ratios) - 1) < 0.02
 
 
+def test_receiver_volume_only_agrees_with_diffuse_rain():
+    """The classic sphere-only estimator and diffuse rain estimate the same energy."""
+    verts, faces = shoebox(10.0, 7.0, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.7, n_bands=1)
+    out = []
+    for rain in (True, False):
+        settings = RayTraceSettings(
+            n_rays=4000, max_time_s=1.0, diffuse_rain=rain, receiver_radius_m=0.5,
+            radius_growth=0.0, max_receiver_radius_m=0.5,
+        )  # fmt: skip
+        energy, _ = total_histogram(scene, SRC, RCV, np.random.default_rng(3), settings, None)
+        out.append((energy[50:].sum(), schroeder_t30(energy, settings.bin_s)[0]))
+    assert out[1][0] == pytest.approx(out[0][0], rel=0.08)
+    assert out[1][1] == pytest.approx(out[0][1], rel=0.05)
+
+
 def test_same_seed_gives_identical_bytes():
     verts, faces = shoebox(6.0, 5.0, 3.0)
     scene = uniform_scene(verts, faces, alpha=0.3, s=0.4, n_bands=3)

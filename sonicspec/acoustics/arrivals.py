@@ -172,8 +172,10 @@ class TraceResult:
     n_rays : int
         Rays launched from the source (shared by every receiver of the trace).
     escaped_ray_fraction : float
-        Fraction of launched rays that left the mesh (hit nothing): in a closed room this
-        measures leaks; their energy is lost, and counted here instead of silently dropped.
+        Fraction of launched rays that left the mesh (hit nothing): in a closed, opaque room
+        this measures leaks (holes, float32 cracks); with transmitting outer walls it also
+        counts sound transmitted to the outside. Their energy is lost, and reported here
+        instead of silently dropped.
     specular_order_excluded : int
         Purely specular paths with at most this many reflections were *not* counted here
         because the image-source method renders them.

@@ -109,6 +109,10 @@ class RayTraceSettings:
         Speed of sound, m/s.
     batch_size : int
         Rays traced together (memory ∝ batch size × receivers).
+    diffuse_rain : bool
+        True: diffuse rain + receiver spheres (default, low variance). False: receiver spheres
+        only (the classic receiver-volume method; every path but the direct sound and the
+        image sources is counted by the sphere), kept as a reference and for comparison.
     rain_receivers_per_hit : int
         0: every hit rains onto every receiver. M > 0 with more than M receivers: every hit
         rains onto about M of them (every S-th from a random offset, ``S = ceil(N/M)``, weighted
@@ -126,6 +130,7 @@ class RayTraceSettings:
     specular_order_excluded: int = 3
     speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S
     batch_size: int = 8192
+    diffuse_rain: bool = True
     rain_receivers_per_hit: int = 8
 
     def __post_init__(self) -> None:
@@ -460,7 +465,9 @@ def _trace_batch(
         escaped += int(np.count_nonzero(miss))
         # Receiver spheres: paths whose last reflection is specular, beyond the image sources.
         # (An escaping ray's segment is infinite; it is still tested, then dropped.)
-        eligible = ~last_diffuse & (any_diffuse | (n_refl > st.specular_order_excluded))
+        eligible = any_diffuse | (n_refl > st.specular_order_excluded)
+        if st.diffuse_rain:
+            eligible &= ~last_diffuse
         if np.any(eligible):
             idx = np.flatnonzero(eligible)
             _sphere_hits(
@@ -485,7 +492,7 @@ def _trace_batch(
         # Diffuse rain: the scattered share goes to every receiver via a shadow ray.
         alive_time = length < max_len
         rain = alive_time & ev.scatters[face]
-        if np.any(rain):
+        if st.diffuse_rain and np.any(rain):
             sel = np.flatnonzero(rain)
             _rain(
                 scene, hit[sel], n_side[sel], energy[sel] * ev.w_diff[face[sel]], length[sel],
