@@ -142,7 +142,10 @@ def one_rir(
     direct = direct_sound(scene, SRC, receivers, air_m_per_band=air)
     t1 = time.perf_counter()
     settings = RayTraceSettings(
-        n_rays=n_rays, max_time_s=1.5, specular_order_excluded=ism.max_order
+        n_rays=n_rays,
+        max_time_s=1.5,
+        specular_order_excluded=ism.max_order,
+        diffuse_rain=diffuse_rain,
     )
     res = trace_rays(
         scene, SRC, receivers, np.random.default_rng(seed), settings, air_m_per_band=air
@@ -175,10 +178,12 @@ def main() -> None:
     for n_rays, rain in ((500, True), (2_000, True), (20_000, True), (2_000, False)):
         if not rain:
             print("-- receiver spheres only (no diffuse rain), for the variance comparison")
-        t30s, times = [], []
+        t30s, times, c50s = [], [], []
         for seed in range(3 if n_rays > 2_000 else 5):
             energy, bin_s, t_ism, t_rt, res = one_rir(scene, air, n_rays, seed, diffuse_rain=rain)
             t30s.append(schroeder_t30(energy, bin_s))
+            early = round(0.05 / bin_s)
+            c50s.append(10 * np.log10(energy[:early, 3].sum() / energy[early:, 3].sum()))
             times.append(t_rt)
         t30s = np.array(t30s)
         hits = n_rays * res.mean_reflections
@@ -192,6 +197,10 @@ def main() -> None:
         print(f"        T30 mean [s] {np.round(t30s.mean(axis=0), 3)}")
         print(f"        |T30/Eyring-1| % {np.round(err, 1)}")
         print(f"        seed spread (std) % {np.round(spread, 1)}")
+        print(
+            f"        C50 1 kHz {np.mean(c50s):.2f} dB, "
+            f"seed spread (std) {np.std(c50s, ddof=1):.2f} dB"
+        )
 
     print("\n## many receivers at once (2 000 rays, 1.5 s): cost vs N")
     rng = np.random.default_rng(0)

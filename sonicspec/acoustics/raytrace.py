@@ -48,9 +48,12 @@ Model (every approximation is listed here)
 * **Histograms**: per receiver, per-band energy in ``bin_s`` bins up to ``max_time_s``, with the
   band-summed energy-weighted sums of the arrival direction (towards the last reflection point,
   or against the ray for sphere hits) and of the ray's departure direction.
-* **Many receivers**: one trace serves every receiver (shadow rays and sphere tests per
-  receiver are the only per-receiver cost). For a moving source and a static microphone use
-  reciprocity: trace from the microphone and pass the trajectory points as ``receivers``.
+* **Many receivers**: one trace serves every receiver; sphere tests and shadow rays are the
+  only per-receiver cost, and the shadow rays are bounded by ``rain_receivers_per_hit``: with
+  more receivers each hit rains onto a random, evenly strided subset (weighted, unbiased), so
+  100 receivers cost ≈6× one, not 100× (bench_tracer). For a moving source and a static
+  microphone use reciprocity: trace from the microphone and pass the trajectory points as
+  ``receivers``; ``EnergyHistogram.departure_sum`` then holds the direction at the microphone.
 * **Determinism**: all randomness comes from the ``rng`` passed in (one spawned child generator
   per fixed batch of rays); batches may run on a thread pool but their histograms are summed
   in batch order, so the bytes of the result depend only on the inputs and the generator's
