@@ -237,3 +237,22 @@ def test_image_sources_are_reciprocal():
     i = np.lexsort((np.round(fwd.times_s, 9), fwd.order))
     j = np.lexsort((np.round(bwd.times_s, 9), bwd.order))
     np.testing.assert_allclose(fwd.amplitudes[i], bwd.amplitudes[j], rtol=1e-9)
+
+
+def test_noisy_scan_walls_merge_with_scan_tolerances():
+    """3 mm vertex noise: exact tolerances keep every triangle apart, scan tolerances merge
+    the walls and recover the clean room's image sources to within the noise."""
+    verts, faces = shoebox(5.0, 4.0, 3.0)
+    for _ in range(2):
+        verts, faces = trimesh.remesh.subdivide(verts, faces)
+    noisy = verts + np.random.default_rng(0).normal(0.0, 0.003, verts.shape)
+    clean_scene = uniform_scene(verts, faces, alpha=0.3)
+    noisy_scene = uniform_scene(noisy, faces, alpha=0.3)
+    assert planar_regions(noisy_scene).n_regions > 100
+    regions = planar_regions(noisy_scene, angle_tol_rad=0.1, distance_tol_m=0.02)
+    assert regions.n_regions == 6
+    src, mic = np.array([1.2, 1.5, 1.1]), np.array([[3.3, 2.2, 1.7]])
+    clean = image_sources(clean_scene, src, mic, max_order=2).arrivals[0]
+    scan = image_sources(noisy_scene, src, mic, max_order=2, regions=regions).arrivals[0]
+    assert len(scan) == len(clean) == 24
+    np.testing.assert_allclose(scan.path_length_m, clean.path_length_m, atol=0.01)

@@ -30,6 +30,8 @@ from sonicspec.errors import AcousticsError, SonicspecWarning
 
 __all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_regions"]
 
+# (candidate images × regions) signed distances computed per step of the image-tree growth.
+_CANDIDATE_CHUNK = 4_000_000
 # Regions above this count skip the P×P "can one region be reached from another" table.
 _MAX_REGIONS_FOR_REACH_TABLE = 3000
 
@@ -52,6 +54,8 @@ class PlanarRegions:
         Faces sorted by region.
     reflection_energy : (P, n_bands) float64
         Specular reflection energy factor ``(1-τ)(1-α)(1-s)`` per region and band.
+    distance_tol_m : float
+        The coplanarity tolerance used: how far a region's triangles may lie off its plane.
     """
 
     normals: np.ndarray
@@ -60,6 +64,7 @@ class PlanarRegions:
     region_start: np.ndarray
     region_faces: np.ndarray
     reflection_energy: np.ndarray
+    distance_tol_m: float = 0.0
 
     @property
     def n_regions(self) -> int:
@@ -85,6 +90,15 @@ def planar_regions(
     PlanarRegions
         Region planes are the area-weighted mean of their triangles' planes (exact when the
         triangles are exactly coplanar).
+
+    Notes
+    -----
+    The defaults merge exactly planar (procedural, CAD) faces only. On scans, noise makes every
+    triangle its own region and the image-source tree explodes (the search then stops at a
+    lower order with a warning); pass tolerances matching the scan noise (e.g. 0.1 rad and
+    0.02 m for 3 mm noise on ~1 m triangles) so walls merge — image sources then reflect on
+    the mean plane, an approximation of the order of that noise. Growing regions by
+    neighbour normals needs a larger angle tolerance for finer tessellations.
     """
     faces = scene.faces
     n_faces = scene.n_faces
@@ -131,6 +145,7 @@ def planar_regions(
         region_start=region_start.astype(np.int64),
         region_faces=region_faces.astype(np.int64),
         reflection_energy=(1.0 - t) * (1.0 - a) * (1.0 - s),
+        distance_tol_m=float(distance_tol_m),
     )
 
 
@@ -196,7 +211,8 @@ def _inside_regions(
     if np.any(big):
         idx = np.flatnonzero(big)
         nrm = regions.normals[region[idx]] * side[idx, None]
-        probe = 4.0 * scene.eps_m
+        # Start off the plane by more than the triangles may deviate from it (scans).
+        probe = max(4.0 * scene.eps_m, 2.0 * regions.distance_tol_m)
         face, dist = scene.intersect(points[idx] + probe * nrm, -nrm)
         hit = (face >= 0) & (dist < 2.0 * probe)
         inside[idx] = hit & (regions.face_region[np.maximum(face, 0)] == region[idx])
@@ -309,36 +325,46 @@ def image_sources(
     last_pos = src[None, :]
     completed = 0
     for order in range(1, max_order + 1):
-        dist = last_pos @ normals.T - plane_d[None, :]  # (M, P) signed distances
-        ok = np.abs(dist) > tol
-        if order > 1:
-            ok &= np.arange(regions.n_regions)[None, :] != planes[:, -1][:, None]
-            if reach is not None:
-                ok &= reach[side, planes[:, -1]]
-        parent, plane = np.nonzero(ok)
-        if len(parent) > max_candidates:
+        # Candidates (parent image, region), in row chunks so (M × P) never gets large.
+        n_regions = regions.n_regions
+        rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        count = 0
+        for r0 in range(0, len(last_pos), rows):
+            sl = slice(r0, r0 + rows)
+            dist = last_pos[sl] @ normals.T - plane_d[None, :]  # signed distances
+            ok = np.abs(dist) > tol
+            if order > 1:
+                last = planes[sl, -1]
+                ok &= np.arange(n_regions)[None, :] != last[:, None]
+                if reach is not None:
+                    ok &= reach[side[sl], last]
+            par, pln = np.nonzero(ok)
+            d = dist[par, pln]
+            pos = last_pos[sl][par] - 2.0 * d[:, None] * normals[pln]
+            if max_path_length_m is not None:
+                near = np.min(
+                    np.linalg.norm(pos[:, None, :] - receivers[None, :, :], axis=2), axis=1
+                )
+                keep = near <= max_path_length_m
+                par, pln, d, pos = par[keep], pln[keep], d[keep], pos[keep]
+            parts.append((par + r0, pln, pos, (d < 0).astype(np.int64)))
+            count += len(par)
+            if count > max_candidates:
+                break
+        if count > max_candidates:
             warnings.warn(
-                f"image sources: order {order} would need {len(parent)} candidates (limit "
-                f"{max_candidates}); stopping at order {order - 1}; hint: lower the image-source "
-                "order for this scene — the ray tracer covers the rest",
+                f"image sources: order {order} needs more than {max_candidates} candidates; "
+                f"stopping at order {order - 1}; hint: lower the image-source order for this "
+                "scene — the ray tracer covers the rest",
                 SonicspecWarning,
                 stacklevel=2,
             )
             break
-        d = dist[parent, plane]
-        new_pos = last_pos[parent] - 2.0 * d[:, None] * normals[plane]
-        new_side = (d < 0).astype(np.int64)
-        if max_path_length_m is not None:
-            near = np.min(
-                np.linalg.norm(new_pos[:, None, :] - receivers[None, :, :], axis=2), axis=1
-            )
-            keep = near <= max_path_length_m
-            parent, plane, new_pos, new_side = (
-                parent[keep],
-                plane[keep],
-                new_pos[keep],
-                new_side[keep],
-            )
+        parent = np.concatenate([q[0] for q in parts])
+        plane = np.concatenate([q[1] for q in parts])
+        new_pos = np.concatenate([q[2] for q in parts]).reshape(-1, 3)
+        new_side = np.concatenate([q[3] for q in parts])
         chain = np.concatenate([chain[parent], new_pos[:, None, :]], axis=1)
         planes = np.concatenate([planes[parent], plane[:, None]], axis=1)
         side, last_pos = new_side, new_pos
@@ -400,6 +426,11 @@ def _validate_order(
     points = np.zeros((len(img), order + 2, 3))
     points[:, -1] = receivers[rcv]
     points[:, 0] = src
+    # Visibility is tested from reflection points lifted off their plane towards the path
+    # (by twice the coplanarity tolerance), so a region's own triangles, which may lie up to
+    # that far off the mean plane, do not occlude the path.
+    lifted = points.copy()
+    lift = max(scene.eps_m, 2.0 * regions.distance_tol_m)
     x = receivers[rcv]
     for j in range(order - 1, -1, -1):
         p = planes[img, j]
@@ -412,14 +443,15 @@ def _validate_order(
         # The path arrives from x's side of the plane.
         x_side = np.where(np.einsum("ij,ij->i", x, normals[p]) - plane_d[p] >= 0, 1.0, -1.0)
         good &= _inside_regions(scene, regions, q, p, x_side)
-        img, rcv, x, points = img[good], rcv[good], q[good], points[good]
+        img, rcv, x, points, lifted = img[good], rcv[good], q[good], points[good], lifted[good]
         points[:, j + 1] = x
+        lifted[:, j + 1] = x + (lift * x_side[good])[:, None] * normals[p[good]]
         if len(img) == 0:
             return
     # Every segment must be free or transmitting: energy factor per band of all crossings.
     n_pairs = len(img)
-    seg_start = points[:, :-1].reshape(-1, 3)
-    seg_end = points[:, 1:].reshape(-1, 3)
+    seg_start = lifted[:, :-1].reshape(-1, 3)
+    seg_end = lifted[:, 1:].reshape(-1, 3)
     trans = scene.segment_transmission(seg_start, seg_end).reshape(n_pairs, order + 1, -1)
     trans_energy = trans.prod(axis=1)
     refl_energy = regions.reflection_energy[planes[img]].prod(axis=1)
