@@ -175,11 +175,15 @@ def cmd_build(args: argparse.Namespace) -> int:
     if loaded is None:
         return EXIT_INVALID
     plan = compile_spec(loaded)
+    if args.until:
+        plan = plan.until(args.until)
     profile = Path(args.profile) if args.profile else None
     code = run_build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run)
-    if code == 0 and not args.dry_run:
+    if code == 0 and not args.dry_run and not args.until:
         plan.write(_last_plan_path(plan))
         print(f"dataset written to {plan.output_dir}", file=sys.stderr)
+    elif code == 0 and args.until and not args.dry_run:
+        print(f"built up to {args.until}; artifacts in {plan.store_dir}", file=sys.stderr)
     return EXIT_OK if code == 0 else EXIT_FAILURE
 
 
@@ -314,6 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--profile", metavar="DIR", help="Snakemake profile, e.g. workflow/profiles/slurm"
     )
     p.add_argument("--dry-run", action="store_true", help="show the jobs that would run")
+    p.add_argument("--until", metavar="STEP", help="stop after this step (e.g. placement)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("scene", help="look at the scenes of a spec")

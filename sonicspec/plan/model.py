@@ -111,6 +111,15 @@ class Plan:
             out[job.step].append(job)
         return out
 
+    def until(self, step: str) -> Plan:
+        """The jobs of ``step`` and of every step before it (``sonicspec build --until``)."""
+        names = [s.name for s in STEPS]
+        if step not in names:
+            raise CompileError(f"--until: expected one of {', '.join(names)}, got {step!r}")
+        keep = set(names[: names.index(step) + 1])
+        return Plan(self.name, self.seed, self.store_dir, self.output_dir, self.spec_digest,
+                    tuple(j for j in self.jobs if j.step in keep))
+
     def __iter__(self) -> Iterator[Job]:
         return iter(self.jobs)
 

@@ -54,10 +54,16 @@ class WorkflowPlan:
         return [s for s in STEPS if s.name in present]
 
     def artifact(self, step: str, key: str) -> str:
-        return f"{self.store_dir}/{step}/{key[:2]}/{key}.zarr"
+        """The file that stands for an artifact: its group's ``zarr.json``.
+
+        It appears with the rest of the group in one rename, so its presence means the whole
+        artifact is there; naming a file (not the folder) keeps Snakemake from writing its
+        timestamp marker into the Zarr group.
+        """
+        return f"{self.store_dir}/{step}/{key[:2]}/{key}.zarr/zarr.json"
 
     def output_pattern(self, step: str) -> str:
-        return f"{self.store_dir}/{step}/{{pre}}/{{key}}.zarr"
+        return f"{self.store_dir}/{step}/{{pre}}/{{key}}.zarr/zarr.json"
 
     def log_pattern(self, step: str) -> str:
         return f"{self.store_dir}/logs/{step}/{{pre}}/{{key}}.log"
@@ -180,6 +186,7 @@ def run_build(
     stream: TextIO = sys.stderr,
     poll_s: float = 1.0,
     on_start: Callable[[subprocess.Popen], None] | None = None,
+    snakemake_args: list[str] | None = None,
 ) -> int:
     """Run the plan through Snakemake, printing progress; returns Snakemake's exit code."""
     store = ArtifactStore(plan.store_dir)
@@ -188,7 +195,8 @@ def run_build(
     if removed:
         print(f"removed {removed} unfinished artifact(s) left by an interrupted build", file=stream)
     plan_path = plan.write(Path(plan.store_dir) / "plans" / f"{plan.digest}.json")
-    cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run)
+    cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run,
+                            extra=snakemake_args)
     log_dir = Path(plan.store_dir) / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
     log_path = log_dir / f"snakemake-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"

@@ -143,6 +143,8 @@ class ArtifactStore:
                 if a.size:
                     arr[...] = a
             group.attrs.update(attrs)
+            if final.exists() and not self.exists(stage, key):
+                shutil.rmtree(final)  # a damaged leftover (e.g. its zarr.json was deleted)
             try:
                 os.rename(tmp, final)
             except OSError as exc:

@@ -10,7 +10,7 @@ for step in PLAN.steps():
         input:
             PLAN.inputs_of
         output:
-            directory(PLAN.output_pattern(step.name)),
+            PLAN.output_pattern(step.name),
         params:
             key="{key}",
             plan=PLAN.path,
