@@ -1,9 +1,10 @@
 """Benchmark (issue 3): import + repair + walkable area of a ~1 M-triangle scanned apartment.
 
 The scene is generated (no download): the furnished six-room apartment of
-``bench_navigation.py``, subdivided to about ``--triangles`` triangles with ±5 mm vertex
-noise, then damaged like a scan — 5 % of faces flipped, every vertex of 2 % of faces split
-(duplicated), a wall panel removed — and written as a binary PLY. A fresh process, pinned to
+``bench_navigation.py``, subdivided to about ``--triangles`` triangles (welded, so the surface
+is connected as a scanner's is) with ±5 mm vertex noise, then damaged like a scan: 5 % of faces
+flipped, every vertex of 2 % of faces split (duplicated), a wall panel removed; and written as
+a binary PLY. A fresh process, pinned to
 one core, then times the three steps a build runs on it and reads its peak memory.
 
 Target: under 60 s and under 4 GB on one core.
@@ -27,21 +28,35 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_navigation import apartment, peak_rss_mb, subdivide  # noqa: E402
+from bench_navigation import apartment, peak_rss_mb
 
-from sonicspec.geometry.io import load_mesh  # noqa: E402
-from sonicspec.geometry.navigation import NavigationSettings, build_navigation  # noqa: E402
-from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh  # noqa: E402
+from sonicspec.geometry.io import load_mesh
+from sonicspec.geometry.navigation import NavigationSettings, build_navigation
+from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh
 
 
 def damaged_ply(path: Path, triangles: int) -> tuple[int, int]:
     """Write the damaged apartment; returns (triangles, vertices)."""
     import trimesh
+    import trimesh.remesh
 
     rng = np.random.default_rng(0)
-    mesh = subdivide(apartment(rng), triangles, 0.005, rng)
-    vertices = np.array(mesh.vertices)
-    faces = np.array(mesh.faces)
+    room = apartment(rng)
+    # Subdivide, then weld the copies subdivision makes of shared edge points *before* adding
+    # scan noise, so the surface stays connected as a scanner's mesh is (noise added to each
+    # copy independently would tear it along every edge).
+    area = float(room.face_areas.sum())
+    max_edge = np.sqrt(2.0 * area / triangles)
+    for _ in range(4):
+        v, f = trimesh.remesh.subdivide_to_size(room.vertices, room.faces, max_edge=max_edge,
+                                                max_iter=30)
+        if abs(len(f) / triangles - 1) < 0.1:
+            break
+        max_edge *= np.sqrt(len(f) / triangles)
+    welded = trimesh.Trimesh(v, f, process=False)
+    welded.merge_vertices()
+    vertices = np.array(welded.vertices) + rng.uniform(-0.005, 0.005, welded.vertices.shape)
+    faces = np.array(welded.faces)
     flip = rng.random(len(faces)) < 0.05
     faces[flip] = faces[flip][:, ::-1]
     split = np.flatnonzero(rng.random(len(faces)) < 0.02)
