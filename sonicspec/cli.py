@@ -247,14 +247,9 @@ def cmd_scene_inspect(args: argparse.Namespace) -> int:
 
 def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temp file and a rename: never a half-written file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    from sonicspec.export.files import write_text
+
+    write_text(path, text)
 
 
 def build_parser() -> argparse.ArgumentParser:

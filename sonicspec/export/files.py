@@ -10,6 +10,8 @@ import errno
 import json
 import os
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -25,9 +27,24 @@ def _temp_beside(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
 
 
-def _fail(path: Path, exc: OSError) -> StoreError:
-    hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-    return StoreError(f"cannot write {path}: {exc.strerror or exc}{hint}")
+@contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename.
+
+    On any failure the temporary file is removed and ``path`` keeps its old content; an
+    ``OSError`` becomes a :class:`StoreError` naming the file (and a full disk as such).
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_beside(path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
+        raise StoreError(f"cannot write {path}: {exc.strerror or exc}{hint}") from exc
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 def write_audio(path: Path, audio: np.ndarray, sample_rate_hz: int, *, audio_format: str = "flac",
@@ -53,17 +70,9 @@ def write_audio(path: Path, audio: np.ndarray, sample_rate_hz: int, *, audio_for
     peak = float(np.max(np.abs(data))) if data.size else 0.0
     if subtype != "FLOAT" and peak > 1.0:
         raise StoreError(f"{path.name}: peak {peak:.3f} exceeds full scale and would clip")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
+    with atomic_path(path) as tmp:
         sf.write(str(tmp), data.T, int(sample_rate_hz), subtype=subtype,
                  format=FORMATS[audio_format])
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise _fail(path, exc) from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 
@@ -74,14 +83,7 @@ def write_json(path: Path, data: Any) -> Path:
 
 
 def write_text(path: Path, text: str) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
+    """Write UTF-8 text, atomically."""
+    with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise _fail(path, exc) from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
