@@ -256,3 +256,27 @@ def test_many_pieces_each_turned_to_the_air():
     fixed, report = repair_mesh(scene.replace(faces=faces))
     assert report.components_flipped == inverted.sum()
     np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
+
+
+def test_edge_keys_do_not_overflow_int32_on_large_meshes() -> None:
+    """Regression: merged vertex ids came back as int32, and the edge keys min·n + max
+    overflowed beyond ~46 000 vertices, so coherent orientation scrambled large scans."""
+    import trimesh.remesh
+
+    room = shoebox((10.0, 8.0, 3.0))
+    vertices, faces = trimesh.remesh.subdivide_to_size(room.vertices, room.faces, max_edge=0.12)
+    rng = np.random.default_rng(0)
+    faces = np.array(faces)
+    assert len(vertices) > 50_000
+    flip = rng.random(len(faces)) < 0.05
+    faces[flip] = faces[flip][:, ::-1]
+    split = np.flatnonzero(rng.random(len(faces)) < 0.02)  # merging runs on these copies
+    fresh = np.arange(len(vertices), len(vertices) + 3 * len(split)).reshape(-1, 3)
+    vertices = np.concatenate([vertices, vertices[faces[split]].reshape(-1, 3)])
+    faces[split] = fresh
+    mesh = SceneMesh(vertices=vertices, faces=faces,
+                     face_material=np.zeros(len(faces), np.int32), materials=("m",))
+    repaired, report = repair_mesh(mesh, RepairSettings())
+    stats = mesh_stats(repaired.faces, len(repaired.vertices))
+    assert stats.inconsistent_edges == 0 and report.watertight
+    assert repaired.air_volume() == pytest.approx(240.0, rel=1e-6)

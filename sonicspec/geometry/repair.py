@@ -194,14 +194,15 @@ class RepairReport:
 # --------------------------------------------------------------------------- topology helpers
 def _edge_keys(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """Directed edges (a→b of each face, 3F) as int64 keys a·n + b, and their face ids."""
-    a = faces[:, [0, 1, 2]].ravel()
-    b = faces[:, [1, 2, 0]].ravel()
+    a = faces[:, [0, 1, 2]].ravel().astype(np.int64)
+    b = faces[:, [1, 2, 0]].ravel().astype(np.int64)
     return a * n_vertices + b, np.repeat(np.arange(len(faces)), 3)
 
 
 def _undirected(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    a = faces[:, [0, 1, 2]].ravel()
-    b = faces[:, [1, 2, 0]].ravel()
+    # int64: the key min·n + max overflows int32 beyond ~46 000 vertices.
+    a = faces[:, [0, 1, 2]].ravel().astype(np.int64)
+    b = faces[:, [1, 2, 0]].ravel().astype(np.int64)
     return np.minimum(a, b) * n_vertices + np.maximum(a, b), np.repeat(np.arange(len(faces)), 3)
 
 
@@ -265,7 +266,7 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
     counts = np.bincount(cluster, minlength=n_clusters)[:, None]
     merged = np.zeros((n_clusters, 3))
     np.add.at(merged, cluster, vertices)
-    return merged / counts, cluster[faces], n - n_clusters
+    return merged / counts, cluster.astype(np.int64)[faces], n - n_clusters
 
 
 def _drop_degenerate(vertices, faces, keep_attrs, scale_m):
