@@ -56,8 +56,20 @@ def test_inspect_scanned_scene_reports_repair(tmp_path: Path, capsys) -> None:
     assert facts["repair"]["watertight"] is True
     assert facts["leak"]["fraction"] == 0.0
     assert {"wall", "floor", "ceiling", "table", "chair"} <= set(facts["labels"])
+    # Faces take materials from their mpcat40 labels through the default library's table.
+    assert {"upholstered_seat", "wooden_chair", "plaster_on_brick", "parquet_on_concrete",
+            "plaster_on_concrete"} <= set(facts["materials_m2"])
     code, text, _ = run(capsys, "scene", "inspect", str(spec))
     assert "watertight yes" in text and "leak test: 0.0000%" in text
+    # A label map in the spec wins over the library; SonicSet's library uses its own names.
+    spec.write_text(spec.read_text().replace(
+        "format: matterport}", "format: matterport, label_materials: {table: Glass}}")
+        + "materials: {library: sonicset}\n")
+    code, out, _ = run(capsys, "scene", "inspect", str(spec), "--json")
+    assert code == 0
+    materials = set(json.loads(out)["materials_m2"])
+    assert "Glass" in materials
+    assert "Acoustic Tile" in materials  # SonicSet's rule: 'ceiling' -> Acoustic Tile
 
 
 def test_unknown_scene_is_named(capsys) -> None:

@@ -197,7 +197,13 @@ def _mesh_params(
         if isinstance(ob, MeshObstacleSpec):
             files[f"obstacle{j}"] = digests.file(base_dir / ob.path)
             paths[f"obstacle{j}"] = str(base_dir / ob.path)
-    return {"scene": dumped, "files": files, "scene_id": entry.id}, paths
+    params: dict[str, Any] = {"scene": dumped, "files": files, "scene_id": entry.id}
+    if isinstance(scene, MeshSceneSpec):
+        # Faces of a scan get materials from their labels: the library's rule, overridden by
+        # the spec's global map and then by the scene's own.
+        params["library"] = spec.materials.library
+        params["label_materials"] = {**spec.materials.label_materials, **scene.label_materials}
+    return params, paths
 
 
 def _corpus_params(

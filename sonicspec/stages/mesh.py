@@ -61,6 +61,30 @@ def _obstacle(ob: dict[str, Any], path: str | None) -> SceneMesh:
     )
 
 
+def assign_materials(mesh: SceneMesh, library: str, overrides: dict[str, str],
+                     default: str | None) -> SceneMesh:
+    """Materials of a scan's faces from their semantic labels.
+
+    A label takes the material the spec maps it to, else the library's rule (SonicSet's
+    substring rule, or sonicspec's mpcat40 table); unlabeled faces take ``default`` when given.
+    """
+    from sonicspec.geometry.materials import load_library
+    from sonicspec.geometry.mesh import UNLABELED
+
+    lib = load_library(library)
+
+    def rule(label: str) -> str:
+        if label in overrides:
+            return overrides[label]
+        if label == UNLABELED and default is not None:
+            return default
+        return lib.material_for_label(label)
+
+    if mesh.face_label is None:
+        return mesh.with_materials(default or lib.material_for_label(UNLABELED))
+    return mesh.with_materials(rule)
+
+
 def build_scene_mesh(
     params: dict[str, Any], paths: dict[str, str], rng: np.random.Generator
 ) -> tuple[SceneMesh, dict[str, Any]]:
@@ -94,6 +118,8 @@ def build_scene_mesh(
         )
     else:
         mesh = load_mesh(paths["mesh"], scene["up_axis"], scale, material=default)
+    mesh = assign_materials(mesh, params["library"], params["label_materials"],
+                            scene["default_material"])
     repair = scene["repair"]
     if repair["enabled"]:
         settings = RepairSettings(
