@@ -11,8 +11,8 @@
   carries in each histogram bin equals the histogram's (gains interpolated linearly between bin
   centres, so the envelope has no steps), and the bands are summed. Gaussian noise has full
   reflection density from the first bin on; since the histogram holds only what the image
-  sources do not render (late and diffuse energy), its first bins are weak and the approximation
-  is inaudible in practice. The histogram and the arrivals never hold the same energy (the
+  sources do not render (late and diffuse energy), its first bins are weak, which limits the
+  effect of this approximation. The histogram and the arrivals never hold the same energy (the
   tracer counts it once), so the two parts simply add: no crossfade is needed between them.
 * **Length**: past the last arrival (with the band filters' ringing) and the last bin holding
   energy, capped at ``max_length_s``.
