@@ -245,6 +245,37 @@ def cmd_scene_inspect(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_rir(args: argparse.Namespace) -> int:
+    from sonicspec.stages.inspect import scene_ids
+    from sonicspec.stages.rir import format_rir_facts, rir_from_spec
+
+    loaded = _load_or_exit(args.spec)
+    if loaded is None:
+        return EXIT_INVALID
+    if args.scene is None:
+        ids = scene_ids(loaded)
+        if len(ids) != 1:
+            print(f"sonicspec: error: --scene: the spec has {len(ids)} scenes; choose one of "
+                  f"{', '.join(ids)}", file=sys.stderr)
+            return EXIT_INVALID
+        args.scene = ids[0]
+    rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
+    if args.output:
+        from sonicspec.export.files import write_audio
+
+        write_audio(Path(args.output), rir[None, :], loaded.spec.sample_rate_hz,
+                    audio_format="wav", subtype="FLOAT")
+        facts["output"] = args.output
+    if args.plot:
+        from sonicspec.export.plots import plot_rir
+
+        plot_rir(rir, loaded.spec.sample_rate_hz, facts["figures"]["bands_hz"], Path(args.plot),
+                 title=f"{args.scene}: source {args.source} -> mic {args.mic}")
+        facts["plot"] = args.plot
+    print(json.dumps(facts, indent=2) if args.json else format_rir_facts(facts))
+    return EXIT_OK
+
+
 def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temp file and a rename: never a half-written file."""
     from sonicspec.export.files import write_text
@@ -326,6 +357,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="FILE.png", help="draw the floor plan with a sampled group")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
     p.set_defaults(func=cmd_scene_inspect)
+
+    p = sub.add_parser("rir", help="one room impulse response in a spec's scene, with T30, EDT, "
+                       "C50 and DRR")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument("--scene", metavar="ID", help="scene id (required if the spec has several)")
+    p.add_argument("--source", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+                   help="source position, metres")
+    p.add_argument("--mic", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+                   help="microphone position, metres")
+    p.add_argument("-o", "--output", metavar="RIR.wav", help="write the RIR (float32 WAV)")
+    p.add_argument("--plot", metavar="FILE.png", help="waveform, decay curves, arrivals")
+    p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    p.set_defaults(func=cmd_rir)
 
     p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")
     p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")

@@ -113,3 +113,41 @@ def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: dict[str, Any] 
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_rir(rir: np.ndarray, sample_rate_hz: float, bands_hz, path: Path, *, title: str = ""
+             ) -> Path:
+    """Waveform, energy decay curves per band, and the early arrivals' levels."""
+    from sonicspec.acoustics.bands import OctaveFilterBank
+    from sonicspec.acoustics.metrics import edc_db, onset_index
+
+    plt = _pyplot()
+    t = np.arange(rir.size) / sample_rate_hz
+    fig, axes = plt.subplots(3, 1, figsize=(9, 9))
+    axes[0].plot(t, rir, lw=0.6)
+    axes[0].set_title("waveform (pressure, unit point source)")
+    axes[0].set_xlabel("time (s)")
+    bank = OctaveFilterBank(sample_rate_hz, tuple(bands_hz))
+    start = onset_index(rir)
+    for band, x in zip(bank.bands_hz, bank.split(rir), strict=True):
+        curve = edc_db(x[start:] ** 2, sample_rate_hz)
+        axes[1].plot(t[start:], curve, lw=1.0, label=f"{band:g} Hz")
+    axes[1].set_ylim(-80, 3)
+    axes[1].set_title("energy decay curves (Schroeder)")
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_ylabel("dB")
+    axes[1].legend(fontsize=8, ncol=3)
+    early = slice(0, min(rir.size, int(0.1 * sample_rate_hz)))
+    level = 20 * np.log10(np.maximum(np.abs(rir[early]), 1e-12))
+    axes[2].plot(1000 * t[early], level, lw=0.7)
+    axes[2].set_ylim(level.max() - 60, level.max() + 3)
+    axes[2].set_title("first 100 ms (arrivals)")
+    axes[2].set_xlabel("time (ms)")
+    axes[2].set_ylabel("dB")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

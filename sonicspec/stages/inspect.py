@@ -27,8 +27,8 @@ def scene_ids(loaded: LoadedSpec) -> list[str]:
     return [e.id for e in expand_scenes(loaded.spec, loaded.base_dir.resolve())]
 
 
-def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
-    """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
+def build_scene(loaded: LoadedSpec, scene_id: str):
+    """One scene's repaired mesh, the mesh stage's report, its jobs, and warnings raised."""
     spec = loaded.spec
     base = loaded.base_dir.resolve()
     entries = expand_scenes(spec, base)
@@ -42,6 +42,13 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         warnings.simplefilter("always", SonicspecWarning)
         mesh, report = build_scene_mesh(dict(mesh_job.params), dict(mesh_job.paths),
                                         rng_for(spec.seed, "mesh", mesh_job.key))
+    return mesh, report, mesh_job, nav_job, [str(w.message) for w in caught]
+
+
+def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
+    """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
+    spec = loaded.spec
+    mesh, report, _, nav_job, caught = build_scene(loaded, scene_id)
     nav = build_navigation(mesh, nav_settings(dict(nav_job.params)))
     areas = mesh.face_areas
     by_material: dict[str, float] = {}
@@ -72,7 +79,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         "air_volume_m3": float(mesh.air_volume()),
         "repair": report.get("repair"),
         "leak": report.get("leak"),
-        "warnings": [str(w.message) for w in caught] + report.get("warnings", []),
+        "warnings": caught + report.get("warnings", []),
         "materials_m2": dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
         "labels": list(mesh.labels),
         "floors": [g.to_dict() for g in nav.grids],

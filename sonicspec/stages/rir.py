@@ -1,0 +1,192 @@
+"""From a scene and the spec's acoustics settings to RIRs: the glue over the tracer libraries.
+
+For one microphone and many source positions (a trajectory), the ray tracer runs once, from
+the microphone, with every position as a receiver (reciprocity: the RIR from A to B equals the
+RIR from B to A for omnidirectional ends). Direct sound and image sources are exact and cheap,
+so they are computed per position. Each position's RIR is then synthesised
+(:mod:`sonicspec.acoustics.synthesis`).
+
+Receivers: omnidirectional (``mono``) today; arrays, ambisonics and binaural rendering are
+not in this version and are refused with a clear error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sonicspec.acoustics.air import air_energy_coefficient_per_m
+from sonicspec.acoustics.arrivals import Arrivals
+from sonicspec.acoustics.bands import default_bands
+from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.errors import AcousticsError
+from sonicspec.geometry.materials import custom_material, load_library
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.units import OCTAVE_BANDS_HZ
+
+
+@dataclass(frozen=True)
+class RirSettings:
+    """What the tracer needs from the spec (``acoustics``, sample rate, speed of sound)."""
+
+    sample_rate_hz: int
+    bands_hz: tuple[float, ...]
+    rays: int
+    image_source_order: int
+    max_rir_length_s: float
+    energy_threshold_db: float
+    air_absorption: bool
+    temperature_c: float
+    relative_humidity_pct: float
+    transmission: bool
+    diffuse_rain: bool
+    receiver_radius_m: float
+    histogram_bin_s: float
+    speed_of_sound_m_s: float
+
+    @classmethod
+    def from_spec(cls, acoustics: dict[str, Any], sample_rate_hz: int,
+                  speed_of_sound_m_s: float) -> RirSettings:
+        bands = acoustics["bands_hz"]
+        bands = default_bands(sample_rate_hz) if bands == "auto" else tuple(
+            float(b) for b in bands)
+        return cls(sample_rate_hz=sample_rate_hz, bands_hz=bands, rays=acoustics["rays"],
+                   image_source_order=acoustics["image_source_order"],
+                   max_rir_length_s=acoustics["max_rir_length_s"],
+                   energy_threshold_db=acoustics["energy_threshold_db"],
+                   air_absorption=acoustics["air_absorption"],
+                   temperature_c=acoustics["temperature_c"],
+                   relative_humidity_pct=acoustics["relative_humidity_pct"],
+                   transmission=acoustics["transmission"],
+                   diffuse_rain=acoustics["detection"] == "diffuse_rain",
+                   receiver_radius_m=acoustics["receiver_radius_m"],
+                   histogram_bin_s=acoustics["histogram_bin_s"],
+                   speed_of_sound_m_s=speed_of_sound_m_s)
+
+    def air(self) -> np.ndarray | None:
+        if not self.air_absorption:
+            return None
+        return air_energy_coefficient_per_m(self.bands_hz, self.temperature_c,
+                                            self.relative_humidity_pct)
+
+
+def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSettings
+                   ) -> AcousticScene:
+    """The mesh with per-face coefficients from the library and the spec's own materials."""
+    lib = load_library(materials["library"])
+    custom = {
+        name: custom_material(name, m["absorption"], m["scattering"], m["transmission"],
+                              OCTAVE_BANDS_HZ, m.get("description", ""))
+        for name, m in materials.get("custom", {}).items()
+    }
+    lib = lib.with_materials(custom)
+    a, s, t = lib.coefficients(mesh.materials, settings.bands_hz)
+    if not settings.transmission:
+        t = np.zeros_like(t)
+    index = np.asarray(mesh.face_material)
+    return AcousticScene(mesh.vertices, mesh.faces, a[index], s[index], t[index])
+
+
+def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                  settings: RirSettings, rng: np.random.Generator,
+                  regions=None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """Omnidirectional RIRs from every source position to the microphone, and trace facts."""
+    mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    air = settings.air()
+    c = settings.speed_of_sound_m_s
+    regions = regions if regions is not None else planar_regions(scene)
+    direct = direct_sound(scene, mic, points, air, c)
+    ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
+                        max_path_length_m=c * settings.max_rir_length_s)
+    ray_settings = RayTraceSettings(
+        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
+        energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
+        receiver_radius_m=settings.receiver_radius_m,
+        specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
+        diffuse_rain=settings.diffuse_rain)
+    traces = trace_rays(scene, mic, points, rng, ray_settings, air)
+    blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    rirs, facts = [], []
+    for k in range(len(points)):
+        arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+        rirs.append(synthesize_rir(arrivals, traces[k].histogram, settings.sample_rate_hz, rng,
+                                   max_length_s=settings.max_rir_length_s,
+                                   bands_hz=settings.bands_hz).astype(np.float32))
+        path = "visible" if not blocked[k] else (
+            "through walls" if len(direct[k]) else "blocked")
+        facts.append({"arrivals": len(arrivals), "direct": path,
+                      "image_source_order": ism.max_order,
+                      "escaped_ray_fraction": traces[k].escaped_ray_fraction})
+    return rirs, facts
+
+
+def check_receiver(microphone: dict[str, Any]) -> None:
+    """Refuse receivers this version cannot render."""
+    if microphone["kind"] != "mono":
+        raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are not "
+                             "in this version of sonicspec; use kind: mono")
+    if microphone["trajectory"]["kind"] != "static":
+        raise AcousticsError("microphone.trajectory: a moving microphone is not in this version "
+                             "of sonicspec; use kind: static")
+
+
+def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
+    """One RIR in a spec's scene (``sonicspec rir``), and the facts to report with it."""
+    from sonicspec.acoustics.metrics import room_acoustic_figures
+    from sonicspec.plan.hashing import rng_for
+    from sonicspec.stages.inspect import build_scene
+
+    spec = loaded.spec
+    check_receiver(spec.microphone.model_dump(mode="json"))
+    mesh, _, mesh_job, _, warnings = build_scene(loaded, scene_id)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    for name, p in (("--source", source_m), ("--mic", mic_m)):
+        if np.any(np.asarray(p) < lo) or np.any(np.asarray(p) > hi):
+            raise AcousticsError(f"{name}: {list(p)} is outside scene {scene_id!r} "
+                                 f"(bounds {lo.round(2).tolist()} .. {hi.round(2).tolist()})")
+    settings = RirSettings.from_spec(spec.acoustics.model_dump(mode="json"),
+                                     spec.sample_rate_hz, spec.speed_of_sound_m_s)
+    scene = acoustic_scene(mesh, spec.materials.model_dump(mode="json"), settings)
+    rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
+    (rir,), (facts,) = simulate_rirs(scene, np.asarray(mic_m), np.asarray([source_m]),
+                                     settings, rng)
+    figures = room_acoustic_figures(rir, spec.sample_rate_hz, settings.bands_hz)
+    facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
+             "distance_m": float(np.linalg.norm(np.subtract(source_m, mic_m))),
+             "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.size),
+             "figures": figures.to_dict(), "warnings": warnings}
+    return rir, facts
+
+
+def format_rir_facts(facts: dict[str, Any]) -> str:
+    fig = facts["figures"]
+
+    def num(v, fmt):
+        return "—" if v is None else format(v, fmt)
+
+    lines = [
+        f"RIR in {facts['scene_id']}: source {facts['source_m']} -> mic {facts['mic_m']} "
+        f"({facts['distance_m']:.2f} m), {facts['samples']} samples at "
+        f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
+        f"order {facts['image_source_order']}), direct path {facts['direct']}",
+        f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
+        f"{'T30 (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["t30_s"]),
+        f"{'EDT (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["edt_s"]),
+        f"{'C50 (dB)':>10} " + " ".join(f"{num(v, '7.2f')}" for v in fig["c50_db"]),
+        f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
+        f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
+        f" dB, DRR {num(fig['drr_db'], '.2f')} dB; escaped rays "
+        f"{facts['escaped_ray_fraction']:.2e}",
+    ]
+    if "output" in facts:
+        lines.append(f"written: {facts['output']}")
+    if "plot" in facts:
+        lines.append(f"plot: {facts['plot']}")
+    return "\n".join(lines)

@@ -1,0 +1,96 @@
+"""`sonicspec rir`: one RIR end to end (spec -> mesh -> tracer -> synthesis -> ISO 3382)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from sonicspec.acoustics.air import air_energy_coefficient_per_m
+from sonicspec.acoustics.theory import eyring_t60
+from sonicspec.cli import main
+
+SPEC = """\
+sonicspec: 1
+name: rirtest
+seed: 5
+scenes:
+  - kind: shoebox
+    id: box
+    size_m: [10, 7, 3]
+    materials: {walls: panel, floor: panel, ceiling: panel}
+  - kind: l_shape
+    id: ell
+    size_m: [8, 8, 3]
+    cutout_m: [5, 5]
+materials:
+  custom:
+    panel: {absorption: 0.2, scattering: 0.5}
+acoustics: {rays: 4000, image_source_order: 2, max_rir_length_s: 1.2}
+mixture: {speakers: 1, tasks: []}
+corpora: {speech: {kind: generated}}
+splits: {train: {groups: 1, scenes: [box]}, test: {groups: 1, scenes: [ell]}}
+"""
+
+
+def run(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture
+def spec(tmp_path: Path) -> Path:
+    path = tmp_path / "rir.yaml"
+    path.write_text(SPEC)
+    return path
+
+
+def test_shoebox_rir_matches_eyring_and_free_field(spec: Path, tmp_path: Path, capsys) -> None:
+    wav = tmp_path / "rir.wav"
+    code, out, _ = run(capsys, "rir", str(spec), "--scene", "box", "--source", "2", "2", "1.5",
+                       "--mic", "7", "4.5", "1.6", "-o", str(wav), "--plot",
+                       str(tmp_path / "rir.png"), "--json")
+    assert code == 0
+    facts = json.loads(out)
+    bands = facts["figures"]["bands_hz"]
+    m = air_energy_coefficient_per_m(bands)
+    expected = eyring_t60(210.0, 2 * (70 + 30 + 21), 0.2, m)
+    t30 = np.array(facts["figures"]["t30_s"])
+    assert t30 == pytest.approx(expected, rel=0.10)
+    # The file holds the RIR: float32 WAV at the spec rate, the direct sound at r/c.
+    rir, rate = sf.read(wav, dtype="float32")
+    assert rate == 16000 and rir.dtype == np.float32
+    r = facts["distance_m"]
+    onset = int(np.argmax(np.abs(rir) > 0.5 / (4 * math.pi * r)))
+    assert abs(onset - r / 343 * 16000) <= 3
+    assert (tmp_path / "rir.png").stat().st_size > 10_000
+
+
+def test_no_line_of_sight_means_no_direct_sound(spec: Path, capsys) -> None:
+    # Source in the lower-right arm, mic in the upper-left arm of the L: the corner occludes.
+    code, out, _ = run(capsys, "rir", str(spec), "--scene", "ell", "--source", "7", "1.5", "1.5",
+                       "--mic", "1.5", "7", "1.5")
+    assert code == 0 and "direct path through walls" in out
+    opaque = spec.with_name("opaque.yaml")
+    opaque.write_text(SPEC.replace("max_rir_length_s: 1.2}", "max_rir_length_s: 1.2, "
+                                   "transmission: false}"))
+    code, out, _ = run(capsys, "rir", str(opaque), "--scene", "ell", "--source", "7", "1.5",
+                       "1.5", "--mic", "1.5", "7", "1.5", "--json")
+    facts = json.loads(out)
+    assert facts["direct"] == "blocked"
+
+
+def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path, capsys) -> None:
+    code, _, err = run(capsys, "rir", str(spec), "--scene", "box", "--source", "20", "2", "1",
+                       "--mic", "5", "5", "1")
+    assert code == 1 and "--source: [20.0, 2.0, 1.0] is outside scene 'box'" in err
+    binaural = tmp_path / "b.yaml"
+    binaural.write_text(SPEC.replace("acoustics:", "microphone: {kind: binaural}\nacoustics:"))
+    code, _, err = run(capsys, "rir", str(binaural), "--scene", "box", "--source", "2", "2", "1",
+                       "--mic", "5", "5", "1")
+    assert code == 1 and "not in this version" in err
