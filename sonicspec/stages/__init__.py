@@ -20,6 +20,7 @@ STAGES: dict[str, str] = {
     "mesh": "sonicspec.stages.mesh:run",
     "navigation": "sonicspec.stages.navigation:run",
     "placement": "sonicspec.stages.placement:run",
+    "rir": "sonicspec.stages.rir:run",
     "dataset": "sonicspec.stages.dataset:run",
 }
 """Step name -> ``module:function`` taking a :class:`JobContext`."""

@@ -190,3 +190,57 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
     if "plot" in facts:
         lines.append(f"plot: {facts['plot']}")
     return "\n".join(lines)
+
+
+def _source_points(placement: dict[str, Any]) -> list[tuple[str, np.ndarray]]:
+    """(name, RIR points) of every source of a group: speech1..N, then noise and music."""
+    out = [(f"source{k + 1}", np.asarray(s["rir_points_m"], dtype=np.float64))
+           for k, s in enumerate(placement["speech"])]
+    for kind in ("noise", "music"):
+        if placement.get(kind) is not None:
+            out.append((kind, np.asarray(placement[kind]["rir_points_m"], dtype=np.float64)))
+    return out
+
+
+def run(ctx) -> None:
+    """Stage ``rir``: every source's RIRs along its path, for every group of a shard."""
+    from sonicspec.acoustics.metrics import room_acoustic_figures
+    from sonicspec.stages.mesh import load_scene_mesh
+
+    params = ctx.params
+    check_receiver(params["microphone"])
+    mesh_art = ctx.input("mesh")
+    mesh = load_scene_mesh(mesh_art.arrays, mesh_art.data)
+    settings = RirSettings.from_spec(params["acoustics"], params["sample_rate_hz"],
+                                     params["speed_of_sound_m_s"])
+    materials = dict(params["materials"])
+    scene = acoustic_scene(mesh, materials, settings)
+    regions = planar_regions(scene)
+    placements = ctx.input_data("placement")[0]["groups"]
+    arrays: dict[str, np.ndarray] = {}
+    groups = []
+    for g, placement in enumerate(placements):
+        sources = _source_points(placement)
+        points = np.concatenate([p for _, p in sources])
+        rng = ctx.rng("rir", ctx.job.key, placement["group"])
+        rirs, facts = simulate_rirs(scene, np.asarray(placement["mic_m"]), points, settings,
+                                    rng, regions)
+        entries, start = [], 0
+        for s, (name, pts) in enumerate(sources):
+            block = rirs[start:start + len(pts)]
+            length = max(r.size for r in block)
+            stack = np.zeros((len(block), 1, length), dtype=np.float32)
+            for i, r in enumerate(block):
+                stack[i, 0, :r.size] = r
+            key = f"g{g}_s{s}"
+            arrays[key] = stack
+            first = room_acoustic_figures(block[0], settings.sample_rate_hz,
+                                          settings.bands_hz).to_dict()  # NaN -> None
+            entries.append({"name": name, "array": key, "points": len(pts),
+                            "t30_s": first["broadband"]["t30_s"], "drr_db": first["drr_db"],
+                            "direct": facts[start]["direct"],
+                            "escaped_ray_fraction": facts[start]["escaped_ray_fraction"]})
+            start += len(pts)
+        groups.append({"group": placement["group"], "sources": entries})
+    ctx.write(arrays, {"groups": groups, "bands_hz": list(settings.bands_hz),
+                       "sample_rate_hz": settings.sample_rate_hz})
