@@ -227,38 +227,37 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return EXIT_FAILURE if problems else EXIT_OK
 
 
-def cmd_scene_inspect(args: argparse.Namespace) -> int:
-    from sonicspec.stages.inspect import format_facts, inspect_scene, scene_ids
+def _choose_scene(loaded, args: argparse.Namespace) -> bool:
+    """Fill ``args.scene`` when the spec has one scene; False (after a message) if ambiguous."""
+    from sonicspec.stages.inspect import scene_ids
 
-    loaded = _load_or_exit(args.spec)
-    if loaded is None:
-        return EXIT_INVALID
     if args.scene is None:
         ids = scene_ids(loaded)
         if len(ids) != 1:
             print(f"sonicspec: error: --scene: the spec has {len(ids)} scenes; choose one of "
                   f"{', '.join(ids)}", file=sys.stderr)
-            return EXIT_INVALID
+            return False
         args.scene = ids[0]
+    return True
+
+
+def cmd_scene_inspect(args: argparse.Namespace) -> int:
+    from sonicspec.stages.inspect import format_facts, inspect_scene
+
+    loaded = _load_or_exit(args.spec)
+    if loaded is None or not _choose_scene(loaded, args):
+        return EXIT_INVALID
     facts = inspect_scene(loaded, args.scene, plot=Path(args.plot) if args.plot else None)
     print(json.dumps(facts, indent=2) if args.json else format_facts(facts))
     return EXIT_OK
 
 
 def cmd_rir(args: argparse.Namespace) -> int:
-    from sonicspec.stages.inspect import scene_ids
     from sonicspec.stages.rir import format_rir_facts, rir_from_spec
 
     loaded = _load_or_exit(args.spec)
-    if loaded is None:
+    if loaded is None or not _choose_scene(loaded, args):
         return EXIT_INVALID
-    if args.scene is None:
-        ids = scene_ids(loaded)
-        if len(ids) != 1:
-            print(f"sonicspec: error: --scene: the spec has {len(ids)} scenes; choose one of "
-                  f"{', '.join(ids)}", file=sys.stderr)
-            return EXIT_INVALID
-        args.scene = ids[0]
     rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
     if args.output:
         from sonicspec.export.files import write_audio
