@@ -280,3 +280,13 @@ def test_edge_keys_do_not_overflow_int32_on_large_meshes() -> None:
     stats = mesh_stats(repaired.faces, len(repaired.vertices))
     assert stats.inconsistent_edges == 0 and report.watertight
     assert repaired.air_volume() == pytest.approx(240.0, rel=1e-6)
+
+
+def test_a_crack_walk_through_a_shared_vertex_splits_into_simple_loops() -> None:
+    """Regression: boundary walks that revisit a vertex (cracks meeting at a T-junction) were
+    skipped as non-simple, leaving those holes open."""
+    from sonicspec.geometry.repair import _simple_loops
+
+    assert _simple_loops([0, 1, 2, 3, 1, 4, 5]) == [[1, 2, 3], [0, 1, 4, 5]]
+    assert _simple_loops([0, 1, 2]) == [[0, 1, 2]]
+    assert _simple_loops([0, 1, 0, 2]) == []  # degenerate pieces are dropped

@@ -383,8 +383,9 @@ def _boundary_loops(faces: np.ndarray, n_vertices: int) -> list[list[int]]:
     """Closed loops of boundary edges, ordered so a patch with these edges fits the hole.
 
     A boundary edge a→b (used by one face) needs a patch face using b→a, so the loops follow
-    the reversed edges. Loops through a vertex with several boundary edges are split
-    arbitrarily; such loops may repeat a vertex and are then left open.
+    the reversed edges. A walk through a vertex with several boundary edges (two cracks
+    meeting, as T-junctions leave them) may come back to that vertex before its start: such a
+    walk is cut into simple loops at every repeated vertex (:func:`_simple_loops`).
     """
     keys, _ = _edge_keys(faces, n_vertices)
     und, _ = _undirected(faces, n_vertices)
@@ -411,7 +412,26 @@ def _boundary_loops(faces: np.ndarray, n_vertices: int) -> list[list[int]]:
                 break
             loop.append(nxt)
             current = nxt
-    return loops
+    return [simple for loop in loops for simple in _simple_loops(loop)]
+
+
+def _simple_loops(loop: list[int]) -> list[list[int]]:
+    """Cut a closed walk that repeats vertices into simple closed loops, keeping direction."""
+    out: list[list[int]] = []
+    stack: list[int] = []
+    position: dict[int, int] = {}
+    for v in loop:
+        if v in position:
+            i = position[v]
+            out.append(stack[i:])  # v ... back to v: one simple loop
+            for w in stack[i + 1:]:
+                del position[w]
+            stack = stack[:i + 1]
+        else:
+            position[v] = len(stack)
+            stack.append(v)
+    out.append(stack)
+    return [sub for sub in out if len(sub) >= 3]
 
 
 def _fill_hole(vertices: np.ndarray, loop: list[int]) -> tuple[np.ndarray, np.ndarray | None]:
