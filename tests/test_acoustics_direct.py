@@ -8,41 +8,10 @@ import pytest
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
+from sonicspec.testing.rooms import extruded_room, shoebox, uniform_scene
 
 FS_HZ = 16_000
 C = 343.0
-
-
-def extruded_room(polygon_ccw, floor_triangles, height):
-    """Closed prism over a CCW floor polygon, normals into the room (the mesh convention)."""
-    poly = np.asarray(polygon_ccw, dtype=float)
-    n = len(poly)
-    verts = np.vstack([np.c_[poly, np.zeros(n)], np.c_[poly, np.full(n, height)]])
-    faces = []
-    for a, b, c in floor_triangles:
-        faces.append((a, b, c))  # CCW from above: normal +z, into the room
-        faces.append((a + n, c + n, b + n))  # ceiling: normal -z
-    for i in range(n):
-        j = (i + 1) % n
-        # wall over edge i->j; the room lies left of the edge, so (a, c, b) faces inward
-        faces.append((i, j + n, j))
-        faces.append((i, i + n, j + n))
-    return verts, np.array(faces)
-
-
-def shoebox(lx, ly, lz):
-    return extruded_room([(0, 0), (lx, 0), (lx, ly), (0, ly)], [(0, 1, 2), (0, 2, 3)], lz)
-
-
-def uniform_scene(verts, faces, alpha=0.2, s=0.0, tau=0.0, n_bands=7):
-    f = len(faces)
-    return AcousticScene(
-        verts,
-        faces,
-        np.full((f, n_bands), alpha),
-        np.full((f, n_bands), s),
-        np.full((f, n_bands), tau),
-    )
 
 
 def test_mesh_helper_normals_point_into_the_room():

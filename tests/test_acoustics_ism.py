@@ -10,40 +10,15 @@ import trimesh
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
+from sonicspec.testing import rooms
+from sonicspec.testing.rooms import extruded_room, shoebox
 
 FS_HZ = 16_000
 C = 343.0
 
 
-def extruded_room(polygon_ccw, floor_triangles, height):
-    """Closed prism over a CCW floor polygon, normals into the room (the mesh convention)."""
-    poly = np.asarray(polygon_ccw, dtype=float)
-    n = len(poly)
-    verts = np.vstack([np.c_[poly, np.zeros(n)], np.c_[poly, np.full(n, height)]])
-    faces = []
-    for a, b, c in floor_triangles:
-        faces.append((a, b, c))
-        faces.append((a + n, c + n, b + n))
-    for i in range(n):
-        j = (i + 1) % n
-        faces.append((i, j + n, j))
-        faces.append((i, i + n, j + n))
-    return verts, np.array(faces)
-
-
-def shoebox(lx, ly, lz):
-    return extruded_room([(0, 0), (lx, 0), (lx, ly), (0, ly)], [(0, 1, 2), (0, 2, 3)], lz)
-
-
 def uniform_scene(verts, faces, alpha=0.2, s=0.0, tau=0.0, n_bands=1):
-    f = len(faces)
-    return AcousticScene(
-        verts,
-        faces,
-        np.full((f, n_bands), alpha),
-        np.full((f, n_bands), s),
-        np.full((f, n_bands), tau),
-    )
+    return rooms.uniform_scene(verts, faces, alpha, s, tau, n_bands)
 
 
 def pra_images(size, src, mic, alpha, max_order):

@@ -13,39 +13,14 @@ from sonicspec.acoustics.image_sources import image_sources
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
+from sonicspec.testing import rooms
+from sonicspec.testing.rooms import extruded_room, shoebox
 
 BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
 
 
-def extruded_room(polygon_ccw, floor_triangles, height):
-    """Closed prism over a CCW floor polygon, normals into the room (the mesh convention)."""
-    poly = np.asarray(polygon_ccw, dtype=float)
-    n = len(poly)
-    verts = np.vstack([np.c_[poly, np.zeros(n)], np.c_[poly, np.full(n, height)]])
-    faces = []
-    for a, b, c in floor_triangles:
-        faces.append((a, b, c))
-        faces.append((a + n, c + n, b + n))
-    for i in range(n):
-        j = (i + 1) % n
-        faces.append((i, j + n, j))
-        faces.append((i, i + n, j + n))
-    return verts, np.array(faces)
-
-
-def shoebox(lx, ly, lz):
-    return extruded_room([(0, 0), (lx, 0), (lx, ly), (0, ly)], [(0, 1, 2), (0, 2, 3)], lz)
-
-
 def uniform_scene(verts, faces, alpha, s, tau=0.0, n_bands=7):
-    f = len(faces)
-    return AcousticScene(
-        verts,
-        faces,
-        np.full((f, n_bands), alpha),
-        np.full((f, n_bands), s),
-        np.full((f, n_bands), tau),
-    )
+    return rooms.uniform_scene(verts, faces, alpha, s, tau, n_bands)
 
 
 def iso9613_energy_per_m(f_hz, temperature_c=20.0, rh_pct=50.0):

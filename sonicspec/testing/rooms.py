@@ -1,0 +1,41 @@
+"""Tiny rooms as plain arrays, for the acoustics tests and benchmarks (no geometry import)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from sonicspec.acoustics.scene import AcousticScene
+
+
+def extruded_room(polygon_ccw: Sequence[Sequence[float]],
+                  floor_triangles: Sequence[Sequence[int]],
+                  height: float) -> tuple[np.ndarray, np.ndarray]:
+    """Closed prism over a CCW floor polygon, normals into the room (the mesh convention)."""
+    poly = np.asarray(polygon_ccw, dtype=float)
+    n = len(poly)
+    verts = np.vstack([np.c_[poly, np.zeros(n)], np.c_[poly, np.full(n, height)]])
+    faces = []
+    for a, b, c in floor_triangles:
+        faces.append((a, b, c))  # CCW from above: normal +z, into the room
+        faces.append((a + n, c + n, b + n))  # ceiling: normal -z
+    for i in range(n):
+        j = (i + 1) % n
+        # wall over edge i->j; the room lies left of the edge, so (a, c, b) faces inward
+        faces.append((i, j + n, j))
+        faces.append((i, i + n, j + n))
+    return verts, np.array(faces)
+
+
+def shoebox(lx: float, ly: float, lz: float) -> tuple[np.ndarray, np.ndarray]:
+    """The [0, lx] × [0, ly] × [0, lz] box as (vertices, faces)."""
+    return extruded_room([(0, 0), (lx, 0), (lx, ly), (0, ly)], [(0, 1, 2), (0, 2, 3)], lz)
+
+
+def uniform_scene(verts: np.ndarray, faces: np.ndarray, alpha: float = 0.2, s: float = 0.0,
+                  tau: float = 0.0, n_bands: int = 7) -> AcousticScene:
+    """Every face with the same absorption, scattering and transmission in every band."""
+    f = len(faces)
+    return AcousticScene(verts, faces, np.full((f, n_bands), alpha), np.full((f, n_bands), s),
+                         np.full((f, n_bands), tau))
