@@ -74,17 +74,24 @@ def render_sample_crossfade(dry: np.ndarray, rirs: np.ndarray, path_position: np
     total = dry.size + length - 1
     p = _weights_track(position, length - 1)
     out = np.zeros((c, total))
-    lo = np.floor(p).astype(np.int64)
+    lo = np.minimum(np.floor(p).astype(np.int64), n - 1)
+    # First and last output sample at each integer part of p (one pass, not one per RIR):
+    # RIR j has weight where floor(p) is j - 1 or j.
+    t = np.arange(total)
+    first = np.full(n + 1, total)
+    last = np.full(n + 1, -1)
+    np.minimum.at(first, lo, t)
+    np.maximum.at(last, lo, t)
     for j in range(n):
-        # Output samples where RIR j has weight: p within (j − 1, j + 1).
-        active = np.flatnonzero((lo == j) | (lo == j - 1) | (p == j))
-        if active.size == 0:
+        prev = max(j - 1, 0)
+        t0 = int(min(first[prev], first[j]))
+        t1 = int(max(last[prev], last[j]))
+        if t1 < t0:
             continue
-        t0, t1 = int(active[0]), int(active[-1])
         w = np.maximum(0.0, 1.0 - np.abs(p[t0:t1 + 1] - j))
         # Input samples that reach outputs t0..t1 through an L-sample RIR.
         k0, k1 = max(0, t0 - length + 1), min(dry.size, t1 + 1)
-        if k0 >= k1:
+        if k0 >= k1 or not np.any(w):
             continue
         part = fftconvolve(dry[None, k0:k1], rirs[j], axes=-1)  # output index k0 + m
         a, b = t0 - k0, min(t1 - k0 + 1, part.shape[-1])
