@@ -98,8 +98,13 @@ def synthesize_late(histogram: EnergyHistogram, bank: OctaveFilterBank, n_sample
                                    minlength=e.shape[0])
         with np.errstate(divide="ignore", invalid="ignore"):
             gain = np.where(noise_energy > 0, np.sqrt(e[:, b] / noise_energy), 0.0)
-        envelope = np.interp(t, centres, gain) * valid
-        out += noise_bands[b] * envelope
+        band = noise_bands[b] * np.interp(t, centres, gain) * valid
+        # Interpolating the gains between bin centres moves energy between neighbouring bins
+        # of a steep decay; one correction pass puts each bin's energy back on the histogram.
+        got = np.bincount(k[valid], weights=band[valid] ** 2, minlength=e.shape[0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fix = np.where(got > 0, np.sqrt(e[:, b] / got), 0.0)
+        out += band * np.interp(t, centres, fix)
     return out
 
 

@@ -1,0 +1,133 @@
+"""Receivers beyond one omni capsule: microphone arrays and ambisonics (library level).
+
+Both render from one set of arrivals whose directions are *directions of arrival at the
+microphone* (unit vectors from the mic towards where the sound comes from, scene frame, z up).
+
+* **Arrays** of omnidirectional capsules: every arrival is a plane wave (far field), so capsule
+  ``m`` at offset ``p_m`` from the array centre hears it ``−(p_m · d)/c`` seconds relative to the
+  centre — earlier when the capsule points towards the source. The late tail is independent
+  noise per capsule with the mono tail's per-band energy (a diffuse field is treated as
+  incoherent between capsules; the true coherence ``sinc(k·d)`` is neglected, which matters
+  below ``c / (2 d)`` for capsule distance ``d``).
+* **Ambisonics**, orders 1–3, ACN channel order, SN3D normalisation (AmbiX): every arrival is
+  encoded with the real spherical harmonics of its direction (:func:`sh_sn3d`). The late tail
+  is independent noise per channel, with the diffuse-field energy of SN3D channels: a channel
+  of order ``l`` carries ``1/(2l + 1)`` of the W channel's energy.
+
+Capsule offsets follow the spec: linear arrays along the array's local y axis (its left, looking
+along +x), circular arrays in the horizontal plane, custom offsets as given; all rotated by yaw
+(about z) and pitch.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
+from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.synthesis import (
+    DEFAULT_TAPS,
+    rir_length_samples,
+    synthesize_early,
+    synthesize_late,
+)
+from sonicspec.errors import AcousticsError
+
+
+def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
+    """Rotation taking the array's local frame to the scene: pitch about y, then yaw about z."""
+    y, p = math.radians(yaw_deg), math.radians(pitch_deg)
+    rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
+    ry = np.array([[math.cos(p), 0, -math.sin(p)], [0, 1, 0], [math.sin(p), 0, math.cos(p)]])
+    return rz @ ry
+
+
+def capsule_offsets(kind: str, *, n: int = 0, spacing_m: float = 0.0, radius_m: float = 0.0,
+                    positions_m: Sequence[Sequence[float]] = (), yaw_deg: float = 0.0,
+                    pitch_deg: float = 0.0) -> np.ndarray:
+    """Offsets ``(M, 3)`` of the capsules from the array centre in the scene frame, metres."""
+    if kind == "mono":
+        local = np.zeros((1, 3))
+    elif kind == "linear_array":
+        local = np.zeros((n, 3))
+        local[:, 1] = (np.arange(n) - (n - 1) / 2) * spacing_m
+    elif kind == "circular_array":
+        a = 2 * np.pi * np.arange(n) / n
+        local = np.column_stack([radius_m * np.cos(a), radius_m * np.sin(a), np.zeros(n)])
+    elif kind == "custom":
+        local = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+    else:
+        raise AcousticsError(f"array kind: expected mono, linear_array, circular_array or custom, "
+                             f"got {kind!r}")
+    return local @ rotation(yaw_deg, pitch_deg).T
+
+
+def sh_sn3d(order: int, directions: np.ndarray) -> np.ndarray:
+    """Real spherical harmonics, ACN order, SN3D, up to ``order`` (≤ 3): ``(n, (order+1)²)``."""
+    if not 0 <= order <= 3:
+        raise AcousticsError(f"ambisonic order: expected 0..3, got {order!r}")
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    s3, s15 = math.sqrt(3), math.sqrt(15)
+    columns = [np.ones_like(x)]
+    if order >= 1:
+        columns += [y, z, x]
+    if order >= 2:
+        columns += [s3 * x * y, s3 * y * z, (3 * z**2 - 1) / 2, s3 * x * z,
+                    s3 / 2 * (x**2 - y**2)]
+    if order >= 3:
+        columns += [math.sqrt(5 / 8) * y * (3 * x**2 - y**2), s15 * x * y * z,
+                    math.sqrt(3 / 8) * y * (5 * z**2 - 1), z * (5 * z**2 - 3) / 2,
+                    math.sqrt(3 / 8) * x * (5 * z**2 - 1), s15 / 2 * z * (x**2 - y**2),
+                    math.sqrt(5 / 8) * x * (x**2 - 3 * y**2)]
+    return np.column_stack(columns)
+
+
+def _scaled(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arrivals:
+    return Arrivals(arrivals.times_s + delays_s, arrivals.amplitudes * gains[:, None],
+                    arrivals.directions, arrivals.order, arrivals.kind, arrivals.path_length_m)
+
+
+def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
+                         offsets_m: np.ndarray, sample_rate_hz: float,
+                         rng: np.random.Generator, *, speed_of_sound_m_s: float = 343.0,
+                         max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
+                         taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """RIRs of omni capsules at ``offsets_m`` around the centre, ``(M, n_samples)``."""
+    offsets = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
+    bank = OctaveFilterBank(sample_rate_hz, bands_hz)
+    reach = float(np.max(np.linalg.norm(offsets, axis=1))) / speed_of_sound_m_s
+    n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s + reach, taps,
+                           bank.padding() // 4)
+    out = np.zeros((len(offsets), n))
+    for m, p in enumerate(offsets):
+        delays = -(arrivals.directions @ p) / speed_of_sound_m_s
+        out[m] = synthesize_early(_scaled(arrivals, np.ones(len(arrivals)), delays), bank, n,
+                                  taps)
+        if histogram is not None:
+            out[m] += synthesize_late(histogram, bank, n, rng)
+    return out
+
+
+def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
+                             order: int, sample_rate_hz: float, rng: np.random.Generator, *,
+                             max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
+                             taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """Ambisonic RIR, ACN/SN3D, ``((order + 1)², n_samples)``."""
+    bank = OctaveFilterBank(sample_rate_hz, bands_hz)
+    n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s, taps,
+                           bank.padding() // 4)
+    gains = sh_sn3d(order, arrivals.directions) if len(arrivals) else np.zeros(
+        (0, (order + 1) ** 2))
+    out = np.zeros(((order + 1) ** 2, n))
+    for ch in range(out.shape[0]):
+        out[ch] = synthesize_early(_scaled(arrivals, gains[:, ch], np.zeros(len(arrivals))),
+                                   bank, n, taps)
+        if histogram is not None:
+            degree = int(math.isqrt(ch))
+            out[ch] += synthesize_late(histogram, bank, n, rng) / math.sqrt(2 * degree + 1)
+    return out

@@ -1,0 +1,100 @@
+"""Arrays and ambisonics: inter-capsule delays, SN3D spherical harmonics, diffuse energy."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals, EnergyHistogram
+from sonicspec.acoustics.receivers import (
+    capsule_offsets,
+    sh_sn3d,
+    synthesize_ambisonic_rir,
+    synthesize_array_rir,
+)
+from sonicspec.errors import AcousticsError
+
+FS = 16000
+
+
+def plane_wave(direction: tuple[float, float, float], t_s: float = 0.02) -> Arrivals:
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    return Arrivals(np.array([t_s]), np.full((1, 6), 0.1), d[None], np.array([0]),
+                    np.array([KIND_DIRECT], np.int8), np.array([t_s * 343]))
+
+
+def peak_time(x: np.ndarray, up: int = 64) -> float:
+    """Sub-sample peak position: band-limited (FFT) upsampling by ``up``, then the maximum."""
+    n = x.size
+    spectrum = np.fft.rfft(x)
+    fine = np.fft.irfft(spectrum, n * up) * up
+    return float(np.argmax(fine)) / up
+
+
+def test_sh_closed_forms() -> None:
+    front, left, up = sh_sn3d(3, np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1]]))
+    assert front[[0, 1, 2, 3]] == pytest.approx([1, 0, 0, 1])
+    assert front[6] == pytest.approx(-0.5) and front[8] == pytest.approx(math.sqrt(3) / 2)
+    assert front[13] == pytest.approx(-math.sqrt(3 / 8)) and front[15] == pytest.approx(
+        math.sqrt(5 / 8))
+    assert left[1] == pytest.approx(1) and left[8] == pytest.approx(-math.sqrt(3) / 2)
+    assert left[9] == pytest.approx(-math.sqrt(5 / 8))
+    assert up[2] == pytest.approx(1) and up[6] == pytest.approx(1) and up[12] == pytest.approx(1)
+
+
+def test_sn3d_orthogonality() -> None:
+    """∫ Y_i Y_j dΩ = 4π / (2l + 1) δ_ij for SN3D real harmonics."""
+    el = (np.arange(400) + 0.5) / 400 * np.pi - np.pi / 2
+    az = (np.arange(800) + 0.5) / 800 * 2 * np.pi
+    e, a = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], -1).reshape(-1, 3)
+    w = (np.cos(e) * (np.pi / 400) * (2 * np.pi / 800)).ravel()
+    y = sh_sn3d(3, d)
+    gram = (y * w[:, None]).T @ y
+    degree = np.floor(np.sqrt(np.arange(16))).astype(int)
+    assert gram == pytest.approx(np.diag(4 * np.pi / (2 * degree + 1)), abs=2e-4)
+
+
+@pytest.mark.parametrize(("kind", "kw"), [("linear_array", {"n": 4, "spacing_m": 0.05}),
+                                          ("circular_array", {"n": 6, "radius_m": 0.05})])
+def test_array_delays_of_a_plane_wave(kind: str, kw: dict) -> None:
+    direction = np.array([0.3, 0.9, 0.2])
+    direction /= np.linalg.norm(direction)
+    offsets = capsule_offsets(kind, yaw_deg=30.0, **kw)
+    rir = synthesize_array_rir(plane_wave(tuple(direction)), None, offsets, FS,
+                               np.random.default_rng(0))
+    got = np.array([peak_time(ch) for ch in rir]) / FS
+    expected = 0.02 - offsets @ direction / 343
+    assert got == pytest.approx(expected, abs=0.05 / FS)
+
+
+def test_ambisonics_encodes_with_sh_gains() -> None:
+    direction = (0.2, -0.5, 0.6)
+    rir = synthesize_ambisonic_rir(plane_wave(direction), None, 3, FS, np.random.default_rng(0))
+    gains = sh_sn3d(3, np.array([direction]))[0]
+    assert rir.shape[0] == 16
+    for ch in range(16):
+        assert np.allclose(rir[ch], gains[ch] * rir[0], atol=1e-12)
+
+
+def test_diffuse_tail_energy_per_order() -> None:
+    t = np.arange(600) * 0.001
+    energy = 1e-4 * np.exp(-13.8 * t / 0.5)[:, None] * np.ones((1, 6)) * 0.001
+    hist = EnergyHistogram(0.001, energy, np.zeros((600, 3)), np.zeros((600, 3)))
+    empty = Arrivals.empty(6)
+    rir = synthesize_ambisonic_rir(empty, hist, 2, FS, np.random.default_rng(1))
+    e = (rir**2).sum(axis=1)
+    assert e[0] == pytest.approx(energy.sum(), rel=0.05)
+    assert e[1:4] / e[0] == pytest.approx(np.full(3, 1 / 3), rel=0.1)
+    assert e[4:9] / e[0] == pytest.approx(np.full(5, 1 / 5), rel=0.1)
+    mono_like = synthesize_array_rir(empty, hist, np.zeros((2, 3)), FS, np.random.default_rng(1))
+    assert (mono_like**2).sum(axis=1) == pytest.approx([energy.sum()] * 2, rel=0.05)
+
+
+def test_bad_receivers() -> None:
+    with pytest.raises(AcousticsError, match="order: expected 0..3"):
+        sh_sn3d(4, np.array([[1.0, 0, 0]]))
+    with pytest.raises(AcousticsError, match="array kind"):
+        capsule_offsets("tetrahedral")
