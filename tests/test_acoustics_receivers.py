@@ -94,7 +94,7 @@ def test_diffuse_tail_energy_per_order() -> None:
 
 
 def test_bad_receivers() -> None:
-    with pytest.raises(AcousticsError, match="order: expected 0..3"):
+    with pytest.raises(AcousticsError, match=r"order: expected 0\.\.3"):
         sh_sn3d(4, np.array([[1.0, 0, 0]]))
     with pytest.raises(AcousticsError, match="array kind"):
         capsule_offsets("tetrahedral")

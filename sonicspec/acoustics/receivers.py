@@ -128,6 +128,6 @@ def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | No
         out[ch] = synthesize_early(_scaled(arrivals, gains[:, ch], np.zeros(len(arrivals))),
                                    bank, n, taps)
         if histogram is not None:
-            degree = int(math.isqrt(ch))
+            degree = math.isqrt(ch)
             out[ch] += synthesize_late(histogram, bank, n, rng) / math.sqrt(2 * degree + 1)
     return out
