@@ -262,13 +262,13 @@ def cmd_rir(args: argparse.Namespace) -> int:
     if args.output:
         from sonicspec.export.files import write_audio
 
-        write_audio(Path(args.output), rir[None, :], loaded.spec.sample_rate_hz,
+        write_audio(Path(args.output), rir, loaded.spec.sample_rate_hz,
                     audio_format="wav", subtype="FLOAT")
         facts["output"] = args.output
     if args.plot:
         from sonicspec.export.plots import plot_rir
 
-        plot_rir(rir, loaded.spec.sample_rate_hz, facts["figures"]["bands_hz"], Path(args.plot),
+        plot_rir(rir[0], loaded.spec.sample_rate_hz, facts["figures"]["bands_hz"], Path(args.plot),
                  title=f"{args.scene}: source {args.source} -> mic {args.mic}")
         facts["plot"] = args.plot
     print(json.dumps(facts, indent=2) if args.json else format_rir_facts(facts))

@@ -89,6 +89,16 @@ def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path,
     code, _, err = run(capsys, "rir", str(spec), "--scene", "box", "--source", "20", "2", "1",
                        "--mic", "5", "5", "1")
     assert code == 1 and "--source: [20.0, 2.0, 1.0] is outside scene 'box'" in err
+    # Arrays and ambisonics render one channel per capsule / ACN channel.
+    for mic, channels in (("{kind: circular_array, n: 6, radius_m: 0.05}", 6),
+                          ("{kind: ambisonics, order: 1}", 4)):
+        other = tmp_path / "m.yaml"
+        other.write_text(SPEC.replace("acoustics:", f"microphone: {mic}\nacoustics:"))
+        wav = tmp_path / "m.wav"
+        code, out, _ = run(capsys, "rir", str(other), "--scene", "box", "--source", "2", "2",
+                           "1.5", "--mic", "7", "4.5", "1.6", "-o", str(wav), "--json")
+        assert code == 0 and json.loads(out)["channels"] == channels
+        assert sf.info(str(wav)).channels == channels
     binaural = tmp_path / "b.yaml"
     binaural.write_text(SPEC.replace("acoustics:", "microphone: {kind: binaural}\nacoustics:"))
     code, _, err = run(capsys, "rir", str(binaural), "--scene", "box", "--source", "2", "2", "1",

@@ -6,8 +6,9 @@ RIR from B to A for omnidirectional ends). Direct sound and image sources are ex
 so they are computed per position. Each position's RIR is then synthesised
 (:mod:`sonicspec.acoustics.synthesis`).
 
-Receivers: omnidirectional (``mono``) today; arrays, ambisonics and binaural rendering are
-not in this version and are refused with a clear error.
+Receivers: mono, linear/circular/custom arrays and ambisonics
+(:mod:`sonicspec.acoustics.receivers`); binaural rendering is not in this version and is
+refused with a clear error.
 """
 
 from __future__ import annotations
@@ -95,8 +96,16 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
 
 def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                   settings: RirSettings, rng: np.random.Generator,
-                  regions=None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
-    """Omnidirectional RIRs from every source position to the microphone, and trace facts."""
+                  regions=None, microphone: dict[str, Any] | None = None
+                  ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """RIRs ``(channels, samples)`` from every source position to the microphone, and facts.
+
+    ``microphone`` is the spec's microphone section (default: mono). For directional
+    receivers the early arrivals are traced from each source to the microphone, so their
+    directions are directions of arrival at the microphone.
+    """
+    microphone = microphone or {"kind": "mono", "trajectory": {"kind": "static"}}
+    check_receiver(microphone)
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
@@ -113,12 +122,17 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         diffuse_rain=settings.diffuse_rain)
     traces = trace_rays(scene, mic, points, rng, ray_settings, air)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    render = _renderer(microphone, settings)
     rirs, facts = [], []
     for k in range(len(points)):
-        arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
-        rirs.append(synthesize_rir(arrivals, traces[k].histogram, settings.sample_rate_hz, rng,
-                                   max_length_s=settings.max_rir_length_s,
-                                   bands_hz=settings.bands_hz).astype(np.float32))
+        if microphone["kind"] == "mono":
+            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+        else:  # the same paths, traced towards the mic: directions of arrival at the mic
+            (d,) = direct_sound(scene, points[k], mic[None], air, c)
+            early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
+                                  max_path_length_m=c * settings.max_rir_length_s)
+            arrivals = Arrivals.concatenate([d, early.arrivals[0]])
+        rirs.append(render(arrivals, traces[k].histogram, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
             "through walls" if len(direct[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
@@ -127,11 +141,39 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     return rirs, facts
 
 
+def _renderer(microphone: dict[str, Any], settings: RirSettings):
+    """A function (arrivals, histogram, rng) -> (channels, samples) for the receiver kind."""
+    from sonicspec.acoustics.receivers import (
+        capsule_offsets,
+        synthesize_ambisonic_rir,
+        synthesize_array_rir,
+    )
+
+    common = {"max_length_s": settings.max_rir_length_s, "bands_hz": settings.bands_hz}
+    fs = settings.sample_rate_hz
+    kind = microphone["kind"]
+    if kind == "mono":
+        return lambda a, h, rng: synthesize_rir(a, h, fs, rng, **common)[None, :]
+    if kind == "ambisonics":
+        return lambda a, h, rng: synthesize_ambisonic_rir(a, h, microphone["order"], fs, rng,
+                                                          **common)
+    offsets = capsule_offsets(
+        kind, n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
+        radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
+        yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
+    return lambda a, h, rng: synthesize_array_rir(
+        a, h, offsets, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **common)
+
+
+RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics")
+
+
 def check_receiver(microphone: dict[str, Any]) -> None:
     """Refuse receivers this version cannot render."""
-    if microphone["kind"] != "mono":
-        raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are not "
-                             "in this version of sonicspec; use kind: mono")
+    if microphone["kind"] not in RENDERED_KINDS:
+        raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are "
+                             "not in this version of sonicspec; use one of "
+                             f"{', '.join(RENDERED_KINDS)}")
     if microphone["trajectory"]["kind"] != "static":
         raise AcousticsError("microphone.trajectory: a moving microphone is not in this version "
                              "of sonicspec; use kind: static")
@@ -156,9 +198,12 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     scene = acoustic_scene(mesh, spec.materials.model_dump(mode="json"), settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
     (rir,), (facts,) = simulate_rirs(scene, np.asarray(mic_m), np.asarray([source_m]),
-                                     settings, rng)
-    figures = room_acoustic_figures(rir, spec.sample_rate_hz, settings.bands_hz)
+                                     settings, rng,
+                                     microphone=spec.microphone.model_dump(mode="json"))
+    # Figures of the first channel (the omni W channel for ambisonics).
+    figures = room_acoustic_figures(rir[0], spec.sample_rate_hz, settings.bands_hz)
     facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
+             "channels": int(rir.shape[0]),
              "distance_m": float(np.linalg.norm(np.subtract(source_m, mic_m))),
              "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.size),
              "figures": figures.to_dict(), "warnings": warnings}
@@ -224,17 +269,17 @@ def run(ctx) -> None:
         points = np.concatenate([p for _, p in sources])
         rng = ctx.rng("rir", ctx.job.key, placement["group"])
         rirs, facts = simulate_rirs(scene, np.asarray(placement["mic_m"]), points, settings,
-                                    rng, regions)
+                                    rng, regions, params["microphone"])
         entries, start = [], 0
         for s, (name, pts) in enumerate(sources):
             block = rirs[start:start + len(pts)]
-            length = max(r.size for r in block)
-            stack = np.zeros((len(block), 1, length), dtype=np.float32)
+            length = max(r.shape[-1] for r in block)
+            stack = np.zeros((len(block), block[0].shape[0], length), dtype=np.float32)
             for i, r in enumerate(block):
-                stack[i, 0, :r.size] = r
+                stack[i, :, :r.shape[-1]] = r
             key = f"g{g}_s{s}"
             arrays[key] = stack
-            first = room_acoustic_figures(block[0], settings.sample_rate_hz,
+            first = room_acoustic_figures(block[0][0], settings.sample_rate_hz,
                                           settings.bands_hz).to_dict()  # NaN -> None
             entries.append({"name": name, "array": key, "points": len(pts),
                             "t30_s": first["broadband"]["t30_s"], "drr_db": first["drr_db"],
