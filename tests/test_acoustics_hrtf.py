@@ -16,6 +16,7 @@ from sonicspec.acoustics.hrtf import (
     synthesize_sphere_binaural_rir,
 )
 from sonicspec.errors import AcousticsError
+from sonicspec.testing.hrtf import write_tiny_sofa
 
 FS = 48000
 
@@ -98,26 +99,10 @@ def test_binaural_late_energy_equals_mono_and_is_deterministic() -> None:
     assert abs(np.corrcoef(a[0], a[1])[0, 1]) < 0.1
 
 
-def _tiny_sofa(path: str, fs: float) -> None:
-    import sofar
-
-    sofa = sofar.Sofa("SimpleFreeFieldHRIR")
-    # Four directions (front, left, back, right); each HRIR a distinct pair of impulses so
-    # the chosen direction can be read off the output.
-    sofa.SourcePosition = np.array([[0, 0, 1.0], [90, 0, 1.0], [180, 0, 1.0], [270, 0, 1.0]])
-    ir = np.zeros((4, 2, 32))
-    for m in range(4):
-        ir[m, 0, 2 + m] = 1.0
-        ir[m, 1, 10 + 2 * m] = 0.5
-    sofa.Data_IR = ir
-    sofa.Data_SamplingRate = fs
-    sofar.write_sofa(path, sofa)
-
-
 def test_sofa_nearest_direction(tmp_path) -> None:
     import sofar
 
-    _tiny_sofa(str(tmp_path / "tiny.sofa"), FS)
+    write_tiny_sofa(str(tmp_path / "tiny.sofa"), FS)
     hset = hrir_set_from_sofa(sofar.read_sofa(str(tmp_path / "tiny.sofa")))
     assert hset.directions[1] == pytest.approx([0, 1, 0], abs=1e-12)
     # A source at azimuth 80° is nearest to the "left" measurement (index 1).
@@ -140,7 +125,7 @@ def test_sofa_nearest_direction(tmp_path) -> None:
 def test_sofa_resampled(tmp_path) -> None:
     import sofar
 
-    _tiny_sofa(str(tmp_path / "tiny.sofa"), 2 * FS)
+    write_tiny_sofa(str(tmp_path / "tiny.sofa"), 2 * FS)
     hset = hrir_set_from_sofa(sofar.read_sofa(str(tmp_path / "tiny.sofa")))
     out = synthesize_hrir_binaural_rir(plane_wave((1, 0, 0)), None, hset, FS,
                                        np.random.default_rng(0), max_length_s=0.1)

@@ -13,6 +13,7 @@ import soundfile as sf
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.theory import eyring_t60
 from sonicspec.cli import main
+from sonicspec.testing.hrtf import write_tiny_sofa
 
 SPEC = """\
 sonicspec: 1
@@ -91,7 +92,8 @@ def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path,
     assert code == 1 and "--source: [20.0, 2.0, 1.0] is outside scene 'box'" in err
     # Arrays and ambisonics render one channel per capsule / ACN channel.
     for mic, channels in (("{kind: circular_array, n: 6, radius_m: 0.05}", 6),
-                          ("{kind: ambisonics, order: 1}", 4)):
+                          ("{kind: ambisonics, order: 1}", 4),
+                          ("{kind: binaural}", 2)):
         other = tmp_path / "m.yaml"
         other.write_text(SPEC.replace("acoustics:", f"microphone: {mic}\nacoustics:"))
         wav = tmp_path / "m.wav"
@@ -99,8 +101,21 @@ def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path,
                            "1.5", "--mic", "7", "4.5", "1.6", "-o", str(wav), "--json")
         assert code == 0 and json.loads(out)["channels"] == channels
         assert sf.info(str(wav)).channels == channels
+    # A SOFA HRTF: a missing file is named; a real one renders two ears through its HRIRs.
     binaural = tmp_path / "b.yaml"
-    binaural.write_text(SPEC.replace("acoustics:", "microphone: {kind: binaural}\nacoustics:"))
+    binaural.write_text(SPEC.replace(
+        "acoustics:", "microphone: {kind: binaural, hrtf: {kind: sofa, path: h.sofa}}\nacoustics:"))
     code, _, err = run(capsys, "rir", str(binaural), "--scene", "box", "--source", "2", "2", "1",
                        "--mic", "5", "5", "1")
-    assert code == 1 and "not in this version" in err
+    assert code == 1 and "microphone.hrtf.path: SOFA file" in err and "h.sofa" in err
+    write_tiny_sofa(str(tmp_path / "h.sofa"), 48000.0)
+    wav = tmp_path / "b.wav"
+    code, out, _ = run(capsys, "rir", str(binaural), "--scene", "box", "--source", "2", "2",
+                       "1.5", "--mic", "7", "4.5", "1.6", "-o", str(wav), "--json")
+    assert code == 0 and json.loads(out)["channels"] == 2
+    ears, _ = sf.read(wav, dtype="float64")
+    # The tiny set's right ear is the left one at half gain, a few samples later: compare the
+    # energy of the direct sound (the first reflection comes 37 samples after it).
+    direct = round(json.loads(out)["distance_m"] / 343 * 16000)
+    energy = np.sum(ears[direct - 20: direct + 20] ** 2, axis=0)
+    assert energy[1] / energy[0] == pytest.approx(0.25, rel=0.15)

@@ -123,3 +123,19 @@ def test_missing_corpus_folder_and_meshes_are_compile_errors(tmp_path: Path) -> 
         (tmp_path / d).mkdir(parents=True)
     with pytest.raises(CompileError, match=r"scenes\[0\].path: glob 'data/mp3d/\*/\*.glb' matches"):
         plan_of(text, tmp_path)
+
+
+def test_sofa_hrtf_enters_the_rir_key_by_content(tmp_path: Path) -> None:
+    from sonicspec.testing.hrtf import write_tiny_sofa
+
+    text = DEMO.replace("microphone:\n  kind: mono",
+                        "microphone:\n  kind: binaural\n  hrtf: {kind: sofa, path: h.sofa}")
+    with pytest.raises(CompileError, match=r"microphone.hrtf.path: SOFA file .*h.sofa"):
+        plan_of(text, tmp_path)
+    write_tiny_sofa(str(tmp_path / "h.sofa"), 48000.0)
+    a = plan_of(text, tmp_path)
+    rir = a.by_step()["rir"][0]
+    assert rir.paths["hrtf"] == str(tmp_path / "h.sofa") and len(rir.params["files"]["hrtf"]) == 64
+    write_tiny_sofa(str(tmp_path / "h.sofa"), 44100.0)  # other content, same path
+    assert steps_changed(a, plan_of(text, tmp_path)) == {
+        "rir": 4, "render": 4, "mix": 4, "export": 4, "dataset": 1}

@@ -231,6 +231,18 @@ def _corpus_params(
     return params, paths
 
 
+def _hrtf_file(spec: DatasetSpec, base_dir: Path, digests: FileDigests
+               ) -> tuple[dict[str, str], dict[str, str]]:
+    """The SOFA file of a binaural microphone: (digest by role, path by role), else empty."""
+    hrtf = getattr(spec.microphone, "hrtf", None)
+    if hrtf is None or hrtf.kind != "sofa":
+        return {}, {}
+    path = base_dir / hrtf.path
+    if not path.is_file():
+        raise CompileError(f"microphone.hrtf.path: SOFA file {path} does not exist")
+    return {"hrtf": digests.file(path)}, {"hrtf": str(path)}
+
+
 def scene_jobs(spec: DatasetSpec, entries: list[SceneEntry], base_dir: Path,
                digests: FileDigests) -> list[tuple[SceneEntry, Job, Job]]:
     """The ``mesh`` and ``navigation`` jobs of every concrete scene (no corpus is read)."""
@@ -274,6 +286,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     for entry, mesh, nav in scene_jobs(spec, entries, base, digests):
         jobs.extend([mesh, nav])
         mesh_keys[entry.id], nav_keys[entry.id] = mesh.key, nav.key
+    rir_files, rir_paths = _hrtf_file(spec, base, digests)
     digests.save()
 
     split_scenes = assign_split_scenes(spec, entries)
@@ -341,9 +354,11 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
                         "microphone": mic,
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
                         "sample_rate_hz": spec.sample_rate_hz,
+                        "files": rir_files,
                     },
                     (mesh_keys[scene_id], placement.key),
                     f"rir {tag}",
+                    rir_paths,
                 )
                 render = Job(
                     "render",

@@ -7,14 +7,15 @@ so they are computed per position. Each position's RIR is then synthesised
 (:mod:`sonicspec.acoustics.synthesis`).
 
 Receivers: mono, linear/circular/custom arrays and ambisonics
-(:mod:`sonicspec.acoustics.receivers`); binaural rendering is not in this version and is
-refused with a clear error.
+(:mod:`sonicspec.acoustics.receivers`), and binaural through the rigid-sphere head or a
+measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.hrtf`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from sonicspec.errors import AcousticsError
 from sonicspec.geometry.materials import custom_material, load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.units import OCTAVE_BANDS_HZ
+
+if TYPE_CHECKING:
+    from sonicspec.acoustics.hrtf import HrirSet
 
 
 @dataclass(frozen=True)
@@ -96,16 +100,18 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
 
 def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                   settings: RirSettings, rng: np.random.Generator,
-                  regions=None, microphone: dict[str, Any] | None = None
+                  regions=None, microphone: dict[str, Any] | None = None,
+                  hrirs: HrirSet | None = None
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs ``(channels, samples)`` from every source position to the microphone, and facts.
 
     ``microphone`` is the spec's microphone section (default: mono). For directional
     receivers the early arrivals are traced from each source to the microphone, so their
-    directions are directions of arrival at the microphone.
+    directions are directions of arrival at the microphone. A binaural microphone with a SOFA
+    HRTF needs its measured set in ``hrirs`` (see :func:`load_hrirs`).
     """
     microphone = microphone or {"kind": "mono", "trajectory": {"kind": "static"}}
-    check_receiver(microphone)
+    check_receiver(microphone, hrirs)
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
@@ -122,7 +128,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         diffuse_rain=settings.diffuse_rain)
     traces = trace_rays(scene, mic, points, rng, ray_settings, air)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
-    render = _renderer(microphone, settings)
+    render = _renderer(microphone, settings, hrirs)
     rirs, facts = [], []
     for k in range(len(points)):
         if microphone["kind"] == "mono":
@@ -141,7 +147,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     return rirs, facts
 
 
-def _renderer(microphone: dict[str, Any], settings: RirSettings):
+def _renderer(microphone: dict[str, Any], settings: RirSettings, hrirs: HrirSet | None = None):
     """A function (arrivals, histogram, rng) -> (channels, samples) for the receiver kind."""
     from sonicspec.acoustics.receivers import (
         capsule_offsets,
@@ -157,6 +163,23 @@ def _renderer(microphone: dict[str, Any], settings: RirSettings):
     if kind == "ambisonics":
         return lambda a, h, rng: synthesize_ambisonic_rir(a, h, microphone["order"], fs, rng,
                                                           **common)
+    if kind == "binaural":
+        from sonicspec.acoustics.hrtf import (
+            SphereHead,
+            synthesize_hrir_binaural_rir,
+            synthesize_sphere_binaural_rir,
+        )
+
+        hrtf = microphone["hrtf"]
+        orientation = {"yaw_deg": microphone["yaw_deg"], "pitch_deg": microphone["pitch_deg"]}
+        if hrtf["kind"] == "sofa":
+            return lambda a, h, rng: synthesize_hrir_binaural_rir(
+                a, h, hrirs, fs, rng, **orientation, **common)
+        head = SphereHead(head_radius_m=hrtf["head_radius_m"],
+                          ear_angle_deg=hrtf["ear_angle_deg"])
+        return lambda a, h, rng: synthesize_sphere_binaural_rir(
+            a, h, head, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **orientation,
+            **common)
     offsets = capsule_offsets(
         kind, n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
         radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
@@ -165,11 +188,38 @@ def _renderer(microphone: dict[str, Any], settings: RirSettings):
         a, h, offsets, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **common)
 
 
-RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics")
+RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
+                  "binaural")
 
 
-def check_receiver(microphone: dict[str, Any]) -> None:
-    """Refuse receivers this version cannot render."""
+def load_hrirs(path: str | Path) -> HrirSet:
+    """The measured HRIR set of a SOFA file (SimpleFreeFieldHRIR), read with ``sofar``."""
+    from sonicspec.acoustics.hrtf import hrir_set_from_sofa
+
+    try:
+        import sofar
+    except ImportError:
+        raise AcousticsError("microphone.hrtf: reading SOFA files needs the 'sofar' package; "
+                             "install it with pip install 'sonicspec[sofa]'") from None
+    if not Path(path).is_file():
+        raise AcousticsError(f"microphone.hrtf.path: SOFA file {path} does not exist")
+    try:
+        sofa = sofar.read_sofa(str(path), verify=False, verbose=False)
+    except Exception as exc:  # sofar/netCDF raise many kinds
+        raise AcousticsError(f"microphone.hrtf.path: cannot read SOFA file {path}: "
+                             f"{type(exc).__name__}: {exc}") from exc
+    try:
+        return hrir_set_from_sofa(sofa)
+    except AcousticsError as exc:
+        raise AcousticsError(f"microphone.hrtf.path: {path}: {exc}") from exc
+
+
+def check_receiver(microphone: dict[str, Any], hrirs: HrirSet | None = None) -> None:
+    """Refuse receivers this version cannot render (or that lack their HRIR set)."""
+    if (microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa"
+            and hrirs is None):
+        raise AcousticsError("microphone.hrtf: a SOFA HRTF needs its HRIR set loaded "
+                             "(load_hrirs) before RIRs can be rendered")
     if microphone["kind"] not in RENDERED_KINDS:
         raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are "
                              "not in this version of sonicspec; use one of "
@@ -186,7 +236,11 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     from sonicspec.stages.inspect import build_scene
 
     spec = loaded.spec
-    check_receiver(spec.microphone.model_dump(mode="json"))
+    microphone = spec.microphone.model_dump(mode="json")
+    hrirs = None
+    if microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa":
+        hrirs = load_hrirs(loaded.base_dir / microphone["hrtf"]["path"])
+    check_receiver(microphone, hrirs)
     mesh, _, mesh_job, _, warnings = build_scene(loaded, scene_id)
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     for name, p in (("--source", source_m), ("--mic", mic_m)):
@@ -198,8 +252,7 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     scene = acoustic_scene(mesh, spec.materials.model_dump(mode="json"), settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
     (rir,), (facts,) = simulate_rirs(scene, np.asarray(mic_m), np.asarray([source_m]),
-                                     settings, rng,
-                                     microphone=spec.microphone.model_dump(mode="json"))
+                                     settings, rng, microphone=microphone, hrirs=hrirs)
     # Figures of the first channel (the omni W channel for ambisonics).
     figures = room_acoustic_figures(rir[0], spec.sample_rate_hz, settings.bands_hz)
     facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
@@ -253,7 +306,8 @@ def run(ctx) -> None:
     from sonicspec.stages.mesh import load_scene_mesh
 
     params = ctx.params
-    check_receiver(params["microphone"])
+    hrirs = load_hrirs(ctx.job.paths["hrtf"]) if "hrtf" in ctx.job.paths else None
+    check_receiver(params["microphone"], hrirs)
     mesh_art = ctx.input("mesh")
     mesh = load_scene_mesh(mesh_art.arrays, mesh_art.data)
     settings = RirSettings.from_spec(params["acoustics"], params["sample_rate_hz"],
@@ -269,7 +323,7 @@ def run(ctx) -> None:
         points = np.concatenate([p for _, p in sources])
         rng = ctx.rng("rir", ctx.job.key, placement["group"])
         rirs, facts = simulate_rirs(scene, np.asarray(placement["mic_m"]), points, settings,
-                                    rng, regions, params["microphone"])
+                                    rng, regions, params["microphone"], hrirs)
         entries, start = [], 0
         for s, (name, pts) in enumerate(sources):
             block = rirs[start:start + len(pts)]
