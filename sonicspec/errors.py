@@ -43,6 +43,10 @@ class AudioError(SonicspecError):
     """An audio input (corpus file, track) is missing, unreadable or unusable."""
 
 
+class CorpusError(AudioError):
+    """A corpus is missing, malformed, unreadable or too small for what is asked of it."""
+
+
 class StageError(SonicspecError):
     """A pipeline stage failed; ``key`` names the job's content key."""
 
