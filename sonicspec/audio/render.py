@@ -37,12 +37,14 @@ In the STFT domain this is "multiply each frame's spectrum by the interpolated R
 inverse-transform and overlap-add", with the FFT long enough (``≥ F + L − 1``) that the RIR
 is not cut to one frame. The peers approximate the same operator by a convolutive transfer
 function (the RIR's own STFT frames, FFT of ``2F``, each RIR frame weighted by the
-interpolation weights of the input frame it multiplies), which truncates and aliases; the
-right-hand form above is exact and cheap: ``v_j`` is non-zero only near RIR ``j``, so each
-RIR convolves only its own stretch of input. The weights ``v_j`` are smooth (Hann-interpolated
-frame weights), so the output has no clicks; ``Σ_j v_j = 1``, so a constant position gives
-``s ∗ h(p)`` exactly — the same as ``sample_crossfade``. A moving source differs from
-``sample_crossfade`` by the emission/reception offset (a few ms of path for a walking speaker);
+interpolation weights of the input frame it multiplies), which keeps only the band-to-same-band
+terms of the exact STFT-domain filter. The right-hand form above is exact and cheap: ``v_j``
+is non-zero only near RIR ``j``, so each RIR convolves only its own stretch of input. The
+weights ``v_j`` are smooth (Hann-interpolated frame weights), so the output has no clicks;
+``Σ_j v_j = 1``, so a constant position gives ``s ∗ h(p)`` exactly, as ``sample_crossfade``
+does. A moving source differs from ``sample_crossfade`` in when the position is read: when the
+sound left the source, not when it arrives (earlier by the path's travel time, up to the RIR
+length for late reverberation); with dense RIRs and walking speeds the two are close.
 ``frame_size = hop = 1`` is the per-sample emission-time crossfade.
 
 ``segment_ola`` (gpuRIR ``simulateTrajectory``) — emission time, no interpolation: the dry
