@@ -21,6 +21,11 @@ STAGES: dict[str, str] = {
     "navigation": "sonicspec.stages.navigation:run",
     "placement": "sonicspec.stages.placement:run",
     "rir": "sonicspec.stages.rir:run",
+    "corpus": "sonicspec.stages.corpus:run",
+    "arrange": "sonicspec.stages.arrange:run",
+    "render": "sonicspec.stages.render:run",
+    "mix": "sonicspec.stages.mix:run",
+    "export": "sonicspec.stages.export:run",
     "dataset": "sonicspec.stages.dataset:run",
 }
 """Step name -> ``module:function`` taking a :class:`JobContext`."""

@@ -1,0 +1,86 @@
+"""Stage ``arrange``: which utterances and clips each group's tracks play, and when.
+
+Each group draws from its own generator (spec seed, step, group id): its speakers from the
+split's speakers without replacement, then each track's clips (:mod:`sonicspec.audio.arrange`).
+Lengths are counted at the dataset's rate, as the render stage will resample the files.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
+from sonicspec.audio.corpora import CorpusIndex, CorpusItem
+from sonicspec.stages.context import JobContext
+from sonicspec.stages.corpus import read_index
+
+
+def resampled_length(num_samples: int, from_hz: int, to_hz: int) -> int:
+    """Samples after polyphase resampling from ``from_hz`` to ``to_hz`` (``resample_poly``)."""
+    ratio = Fraction(to_hz, from_hz)
+    return -((-num_samples * ratio.numerator) // ratio.denominator)
+
+
+def _clip(item: CorpusItem, rate: int) -> Clip:
+    return Clip(item.id, resampled_length(item.num_samples, item.sample_rate_hz, rate),
+                item.text, item.speaker)
+
+
+def _files(items: list[CorpusItem], segments) -> dict[str, dict[str, Any]]:
+    by_id = {i.id: i for i in items}
+    return {s.id: {"path": by_id[s.id].path, "sample_rate_hz": by_id[s.id].sample_rate_hz,
+                   "speaker": by_id[s.id].speaker} for s in segments}
+
+
+def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group: str,
+                  rng: np.random.Generator) -> dict[str, Any]:
+    """The tracks of one group as JSON data: name, role, speaker, segments, files."""
+    mix = params["mixture"]
+    rate = params["sample_rate_hz"]
+    split = params["split"]
+    clip_samples = round(mix["duration_s"] * rate)
+    speech = indexes["speech"]
+    speech.require_speakers(split, mix["speakers"], "corpora.speech")
+    by_speaker = speech.speakers(split)
+    names = sorted(by_speaker)
+    chosen = [names[i] for i in rng.choice(len(names), mix["speakers"], replace=False)]
+    tracks = []
+    for k, speaker in enumerate(chosen):
+        items = by_speaker[speaker]
+        segments = arrange_speech([_clip(i, rate) for i in items], clip_samples,
+                                  mix["utterances_per_speaker"], mix["utterance_gap_s"], rate,
+                                  rng, where=f"group {group} source{k + 1} (speaker {speaker})")
+        tracks.append({"name": f"source{k + 1}", "role": "speech", "speaker": speaker,
+                       "segments": [s.to_dict() for s in segments],
+                       "files": _files(items, segments)})
+    for role in ("noise", "music"):
+        if role not in indexes or mix[f"{role}_clips"][1] == 0:
+            continue
+        items = indexes[role].split(split)
+        indexes[role].require_items(split, 1, f"corpora.{role}")
+        segments = arrange_background([_clip(i, rate) for i in items], clip_samples,
+                                      mix[f"{role}_clips"], mix[f"{role}_gap_s"], rate, rng,
+                                      where=f"group {group} {role}")
+        if segments:
+            tracks.append({"name": role, "role": role, "speaker": "",
+                           "segments": [s.to_dict() for s in segments],
+                           "files": _files(items, segments)})
+    return {"group": group, "clip_samples": clip_samples, "tracks": tracks}
+
+
+def run(ctx: JobContext) -> None:
+    jobs = ctx.plan.by_key()
+    indexes: dict[str, CorpusIndex] = {}
+    roots: dict[str, str] = {}
+    for key in ctx.input_keys("corpus"):
+        art = ctx.store.read("corpus", key)
+        role = jobs[key].params["role"]
+        indexes[role] = read_index(art.arrays)
+        roots[role] = art.data["root"]
+    groups = [arrange_group(indexes, ctx.params, g, ctx.rng("arrange", g))
+              for g in ctx.params["groups"]]
+    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
+              {"groups": groups, "corpus_roots": roots})

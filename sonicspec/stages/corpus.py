@@ -1,0 +1,91 @@
+"""Stage ``corpus``: index a corpus (generating it first for the ``generated`` kind).
+
+The index (every usable file with its split, speaker, length and words) is the artifact; it is
+stored as one compressed JSON array so a 100 000-utterance corpus does not bloat the group's
+metadata. A second copy is cached beside the corpus in the spec's ``cache_dir``, so a cleaned
+store re-indexes without re-reading every file header. Files that cannot be used are logged by
+name as warnings and listed in the artifact.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.audio.corpora import (
+    CorpusIndex,
+    cached_index,
+    index_fma,
+    index_folder,
+    index_fsd50k,
+    index_librispeech,
+    index_split_folders,
+)
+from sonicspec.stages.context import JobContext
+
+log = logging.getLogger("sonicspec.stages.corpus")
+
+
+def _generated(params: dict[str, Any], cache: Path, key: str) -> CorpusIndex:
+    from sonicspec.testing.corpora import generate_background_corpus, generate_speech_corpus
+
+    corpus, role, splits = params["corpus"], params["role"], params["splits"]
+    root = cache / "generated" / f"{role}-{key[:16]}"
+    if role == "speech":
+        subsets = generate_speech_corpus(root, splits, corpus["speakers_per_split"],
+                                         corpus["utterances_per_speaker"], seed=params["seed"])
+        return index_librispeech(root, subsets)
+    generate_background_corpus(root, role, splits, corpus["clips_per_split"],
+                               corpus["clip_duration_s"], seed=params["seed"],
+                               sample_rate_hz=params["sample_rate_hz"])
+    return index_split_folders(root, splits)
+
+
+def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
+                rng: np.random.Generator) -> CorpusIndex:
+    """The index a corpus job describes (its folder from ``paths``, ratio splits from ``rng``)."""
+    corpus, role = params["corpus"], params["role"]
+    kind = corpus["kind"]
+    if kind == "generated":
+        return _generated(params, Path(paths["cache"]), key)
+    root = Path(paths["root"])
+    splits = params["splits"]
+    ratios = {s: r for s, r in corpus.get("split_ratios", {}).items() if s in splits}
+    if kind == "librispeech":
+        return index_librispeech(root, {s: v for s, v in corpus["subsets"].items()
+                                        if s in splits})
+    if kind == "fsd50k":
+        return index_fsd50k(root, ratios, corpus["exclude_labels"], rng)
+    if kind == "fma":
+        return index_fma(root, corpus["size"], ratios, corpus["instrumental_only"], rng)
+    return index_folder(root, corpus["extensions"], ratios, rng, by_speaker=role == "speech")
+
+
+def read_index(arrays: dict[str, np.ndarray]) -> CorpusIndex:
+    """The index stored by :func:`run`."""
+    return CorpusIndex.from_dict(json.loads(arrays["index_json"].tobytes().decode("utf-8")))
+
+
+def run(ctx: JobContext) -> None:
+    params = ctx.params
+    cache = Path(ctx.job.paths["cache"])
+    rng = ctx.rng("corpus", params["role"])
+    index = cached_index(cache / "index" / f"{params['role']}-{ctx.job.key}.json",
+                         lambda: build_index(params, dict(ctx.job.paths), ctx.job.key, rng))
+    for problem in index.problems:
+        log.warning("corpora.%s: %s", params["role"], problem)
+    blob = json.dumps(index.to_dict(), sort_keys=True, separators=(",", ":")).encode("utf-8")
+    counts = {}
+    for split in params["splits"]:
+        items = index.split(split)
+        counts[split] = {"items": len(items), "speakers": len(index.speakers(split)),
+                         "hours": round(sum(i.duration_s for i in items) / 3600.0, 6)}
+    root = ctx.job.paths.get("root") or str(
+        cache / "generated" / f"{params['role']}-{ctx.job.key[:16]}")
+    ctx.write({"index_json": np.frombuffer(blob, dtype=np.uint8)},
+              {"role": params["role"], "kind": params["corpus"]["kind"], "root": root,
+               "splits": counts, "problems": list(index.problems)})

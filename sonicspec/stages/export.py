@@ -1,0 +1,169 @@
+"""Stage ``export``: the dataset folder of every group in a shard.
+
+Per group, under ``<output dir>/<split>/<index>/``: each reverberant source (``source1``…),
+``noise`` and ``music``, the training targets (``source1_direct``…), the task mixtures
+(``mixtures/sep_s1s2_noise``…), the RIRs if asked (``rirs/<track>/<point>.wav``, float32) and
+``metadata.json`` in the SonicSet form — ``source1..N: {audio, start_end_points, words}``,
+``noise``, ``music`` — extended with the speaker, trajectory, RIR points, microphone, gains,
+acoustic figures and the content keys. Every file is written atomically. The artifact records
+the files, the manifest entries and the metadata for the ``dataset`` stage.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.export.files import write_audio, write_json
+from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
+from sonicspec.stages.context import JobContext
+
+
+def _relative(path: str, root: str | None) -> str:
+    if root and os.path.commonpath([os.path.abspath(path), os.path.abspath(root)]) == \
+            os.path.abspath(root):
+        return os.path.relpath(path, root)
+    return path
+
+
+class _GroupWriter:
+    """Writes one group's files and keeps the manifest rows."""
+
+    def __init__(self, out: Path, folder: Path, group: str, params: dict[str, Any]) -> None:
+        self.out, self.folder, self.group = out, folder, group
+        self.outputs = params["outputs"]
+        self.rate = params["sample_rate_hz"]
+        self.files: list[dict[str, Any]] = []
+        self.recordings: list[dict[str, Any]] = []
+        self.rec_ids: dict[str, str] = {}
+
+    def audio(self, kind: str, name: str, x: np.ndarray, *, float_wav: bool = False) -> str:
+        ext = "wav" if float_wav else self.outputs["audio_format"]
+        path = self.folder / f"{name}.{ext}"
+        write_audio(path, x, self.rate, audio_format=ext,
+                    subtype="FLOAT" if float_wav else self.outputs["subtype"])
+        rel = path.relative_to(self.out).as_posix()
+        x2 = np.atleast_2d(x)
+        entry = {"kind": kind, "name": name, "path": rel, "channels": int(x2.shape[0]),
+                 "num_samples": int(x2.shape[1]), "sample_rate_hz": self.rate}
+        self.files.append(entry)
+        if not float_wav:
+            rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
+            self.rec_ids[name] = rec_id
+            self.recordings.append(RecordingEntry(rec_id, rel, self.rate, entry["num_samples"],
+                                                  entry["channels"]).to_lhotse())
+        return rel
+
+
+def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray],
+                 render: dict[str, Any], mix: dict[str, Any], arrange: dict[str, Any],
+                 placement: dict[str, Any], rir: dict[str, Any], rir_arrays: dict[str, Any],
+                 roots: dict[str, str], keys: dict[str, str]) -> dict[str, Any]:
+    """Write one group's folder; its record for ``dataset``."""
+    group = render["group"]
+    split, index = group.split("/")
+    w = _GroupWriter(out, out / split / index, group, params)
+    outputs = params["outputs"]
+    gains = mix["gains"]
+    tracks = {t["name"]: t for t in render["tracks"]}
+    arranged = {t["name"]: t for t in arrange["tracks"]}
+    rir_sources = {s["name"]: s for s in rir["sources"]}
+    metadata: dict[str, Any] = {}
+    spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
+    for name, track in tracks.items():
+        role = track["role"]
+        a = arranged[name]
+        signal = gains[name] * np.asarray(arrays[track["arrays"]["reverberant"]],
+                                          dtype=np.float64)
+        if (outputs["sources"] and role == "speech") or (outputs["background"]
+                                                         and role != "speech"):
+            audio_rel = w.audio(role, name, signal)
+        else:
+            audio_rel = None
+        for kind in ("dry", "direct", "early"):
+            if f"{name}_{kind}" in gains:
+                w.audio(f"{role}_{kind}", f"{name}_{kind}",
+                        gains[f"{name}_{kind}"] * np.asarray(arrays[track["arrays"][kind]],
+                                                             dtype=np.float64))
+        if outputs["rirs"]:
+            stack = np.asarray(rir_arrays[rir_sources[name]["array"]])
+            for j in range(stack.shape[0]):
+                w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
+        geometry = (placement["speech"][int(name[6:]) - 1] if role == "speech"
+                    else placement[name])
+        segs = a["segments"]
+        entry: dict[str, Any] = {
+            "audio": [_relative(a["files"][s["id"]]["path"], roots.get(role)) for s in segs],
+            "start_end_points": [[s["start"], s["end"]] for s in segs],
+            "file": audio_rel,
+            "rir_points_m": geometry["rir_points_m"],
+            "t30_s": rir_sources[name]["t30_s"], "drr_db": rir_sources[name]["drr_db"],
+            "direct_path": rir_sources[name]["direct"],
+            "loudness": mix["components"][name],
+        }
+        if role == "speech":
+            entry.update(words=[s["text"] for s in segs], speaker=a["speaker"],
+                         trajectory_m=geometry["path_m"],
+                         path_length_m=geometry.get("path_length_m"))
+            spoken[name] = (a["speaker"], segs)
+        else:
+            entry["position_m"] = geometry["rir_points_m"][0]
+        metadata[name] = entry
+    mixtures = []
+    if outputs["mixtures"]:
+        for m in mix["mixtures"]:
+            total = sum(gains[c] * np.asarray(arrays[tracks[c]["arrays"]["reverberant"]],
+                                              dtype=np.float64) for c in m["components"])
+            rel = w.audio("mixture", f"mixtures/{m['name']}", total)
+            mixtures.append({**m, "file": rel})
+    metadata.update(
+        group=group, split=split, scene_id=params["scene_id"], mic_m=placement["mic_m"],
+        floor=placement.get("floor"), sample_rate_hz=w.rate,
+        num_samples=render["clip_samples"], mixtures=mixtures,
+        group_gain_db=mix["group_gain_db"], keys=keys)
+    if outputs["metadata"]:
+        write_json(w.folder / "metadata.json", metadata)
+        w.files.append({"kind": "metadata", "name": "metadata",
+                        "path": (w.folder / "metadata.json").relative_to(out).as_posix()})
+    # A supervision per utterance on every recording it is heard in: its source's own file
+    # and each mixture that contains the source.
+    rows = []
+    for name, (speaker, segs) in spoken.items():
+        heard_in = [name] + [f"mixtures/{m['name']}" for m in mixtures
+                             if name in m["components"]]
+        for rec_name in heard_in:
+            if rec_name not in w.rec_ids:
+                continue
+            rec = w.rec_ids[rec_name]
+            rows.extend(SupervisionEntry(f"{rec}_{k}", rec, seg["start"], seg["end"], w.rate,
+                                         seg["text"], speaker).to_lhotse()
+                        for k, seg in enumerate(segs))
+    return {"group": group, "split": split, "scene_id": params["scene_id"],
+            "metadata": {"path": f"{split}/{index}/metadata.json" if outputs["metadata"]
+                         else None},
+            "files": w.files, "recordings": w.recordings, "supervisions": rows,
+            "duration_s": render["clip_samples"] / w.rate}
+
+
+def run(ctx: JobContext) -> None:
+    params = ctx.params
+    out = Path(params["output_dir"])
+    mix = ctx.input_data("mix")[0]["groups"]
+    render_art = ctx.input("render")
+    rir_art = ctx.input("rir")
+    arrange_data = ctx.input_data("arrange")[0]
+    placements = ctx.input_data("placement")[0]["groups"]
+    keys = {step: ctx.input_keys(step)[0]
+            for step in ("placement", "arrange", "rir", "render", "mix")}
+    groups = []
+    for render, m, arr, placement, rir in zip(render_art.data["groups"], mix,
+                                              arrange_data["groups"], placements,
+                                              rir_art.data["groups"], strict=True):
+        groups.append(export_group(out, params, render_art.arrays, render, m, arr, placement,
+                                   rir, rir_art.arrays, arrange_data["corpus_roots"],
+                                   {**keys, "export": ctx.job.key}))
+    ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
+              {"groups": groups})

@@ -1,0 +1,80 @@
+"""Stage ``mix``: the gain of every track and the task mixtures of every group.
+
+Each component is brought to its target loudness (speech, noise, music; each target drawn in
+target ± jitter from the group's own generator), measured on the reverberant track at the
+microphone or on the dry source (``mixture.loudness.stage``). The ``dry`` training target is
+brought to the same target on its own (a dry source is 20–40 dB louder than its reverberant
+image, so the reverberant gain would clip it); ``direct`` and ``early`` share their track's
+gain, being parts of it. Then one group gain keeps every written signal and every mixture under
+the peak limit. The result is a description (gains and mixture lists): the export applies it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from sonicspec.audio.mix import gain_to_loudness, integrated_loudness, peak_guard, task_mixtures
+from sonicspec.stages.context import JobContext
+
+
+def _db(gain: float) -> float | None:
+    """Decibels, or None for silence (JSON has no infinity)."""
+    return 20.0 * math.log10(gain) if gain > 0 else None
+
+
+def mix_group(render_group: dict[str, Any], arrays: dict[str, np.ndarray],
+              params: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
+    """Gains, loudness and mixtures of one group as JSON data."""
+    loud = params["loudness"]
+    rate = params["sample_rate_hz"]
+    group = render_group["group"]
+    signals: dict[str, np.ndarray] = {}
+    gains: dict[str, float] = {}
+    report: dict[str, dict[str, Any]] = {}
+    for track in render_group["tracks"]:
+        name, role = track["name"], track["role"]
+        base = loud[f"{role}_lufs"]
+        jitter = loud["jitter_lu"]
+        target = base + (rng.uniform(-jitter, jitter) if jitter > 0 else 0.0)
+        reverberant = np.asarray(arrays[track["arrays"]["reverberant"]], dtype=np.float64)
+        dry = np.asarray(arrays[track["arrays"]["dry"]], dtype=np.float64)
+        where = f"group {group} {name}"
+        measured_on = dry if loud["stage"] == "dry" else reverberant
+        gain, measured = gain_to_loudness(measured_on, rate, target, where=where,
+                                          binaural=params["binaural"] and measured_on.shape[0] == 2)
+        signals[name], gains[name] = reverberant, gain
+        for kind in ("direct", "early"):
+            if kind in track["arrays"]:
+                signals[f"{name}_{kind}"] = np.asarray(arrays[track["arrays"][kind]])
+                gains[f"{name}_{kind}"] = gain
+        if "dry" in params["targets"]:
+            dry_gain, _ = gain_to_loudness(dry, rate, target, where=f"{where} (dry target)")
+            signals[f"{name}_dry"], gains[f"{name}_dry"] = dry, dry_gain
+        report[name] = {"role": role, "target_lufs": target, "measured_lufs": measured,
+                        "measured_on": loud["stage"]}
+    speakers = [t["name"] for t in render_group["tracks"] if t["role"] == "speech"]
+    available = [t["name"] for t in render_group["tracks"] if t["role"] != "speech"]
+    mixtures = task_mixtures(params["tasks"], speakers, available)
+    group_gain, peak = peak_guard(signals, gains, mixtures, loud["peak_limit_dbfs"])
+    final = {k: g * group_gain for k, g in gains.items()}
+    for name, entry in report.items():
+        entry["gain_db"] = _db(final[name])
+        entry["output_lufs"] = integrated_loudness(
+            final[name] * (signals[name]), rate, where=f"group {group} {name}",
+            binaural=params["binaural"] and signals[name].shape[0] == 2)
+    return {"group": group, "gains": final, "group_gain_db": _db(group_gain),
+            "peak_before_guard_dbfs": _db(peak), "components": report,
+            "mixtures": [m.to_dict() for m in mixtures]}
+
+
+def run(ctx: JobContext) -> None:
+    art = ctx.input("render")
+    groups = [mix_group(g, art.arrays, ctx.params, ctx.rng("mix", g["group"]))
+              for g in art.data["groups"]]
+    names = sorted({k for g in groups for k in g["gains"]})
+    table = np.array([[g["gains"].get(k, np.nan) for k in names] for g in groups])
+    ctx.write({"gains": table}, {"groups": groups, "gain_columns": names,
+                                 "sample_rate_hz": ctx.params["sample_rate_hz"]})
