@@ -570,6 +570,41 @@ def test_writers_are_deterministic_and_atomic(tmp_path: Path) -> None:
     assert len(list((a / "FSD50K.eval_audio").glob("*.wav"))) == 1
 
 
+def test_interrupted_generation_leaves_no_half_file_and_no_marker(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    real_write = sf.write
+    calls: list[str] = []
+
+    def write_then_die(path: str, *args: object, **kw: object) -> None:
+        calls.append(path)
+        real_write(path, *args, **kw)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # killed after writing the third file's temporary
+
+    monkeypatch.setattr(tc.sf, "write", write_then_die)
+    root = tmp_path / "fsd"
+    with pytest.raises(KeyboardInterrupt):
+        tc.write_fsd50k(root, 4, 2, clip_duration_s=0.2, seed=5)
+    monkeypatch.undo()
+    assert not (root / tc.MARKER).exists()
+    assert not [p for p in root.rglob(".*")]  # the temporary was removed
+    assert len(list(root.rglob("*.wav"))) == 2  # two finished files, the third never renamed
+    for wav in root.rglob("*.wav"):
+        assert sf.info(wav).frames == round(0.2 * 44100)
+    tc.write_fsd50k(root, 4, 2, clip_duration_s=0.2, seed=5)
+    fresh = tc.write_fsd50k(tmp_path / "fresh", 4, 2, clip_duration_s=0.2, seed=5)
+    assert file_bytes(root) == file_bytes(fresh)
+
+
+@needs_espeak
+def test_speech_and_music_writers_are_deterministic(tmp_path: Path) -> None:
+    for name in ("a", "b"):
+        tc.write_librispeech(tmp_path / name / "ls", {"dev-clean": 1}, 2, seed=3)
+        if tc.mp3_writable():
+            tc.write_fma(tmp_path / name / "fma", 2, clip_duration_s=0.5, seed=3)
+    assert file_bytes(tmp_path / "a") == file_bytes(tmp_path / "b")
+
+
 def test_writer_argument_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(CorpusError, match=r"dev_clips, eval_clips: expected >= 0 and not both"):
         tc.write_fsd50k(tmp_path, 0, 0)

@@ -58,7 +58,8 @@ FMA_INSTRUMENTAL_GENRE_ID = 1235
 RESAMPLE_PASSBAND = 0.9
 """Resampling keeps 0 … 0.9 × the lower Nyquist frequency flat (ripple < 0.001 dB)."""
 RESAMPLE_STOPBAND_DB = 90.0
-"""… and attenuates everything at and above the lower Nyquist frequency by at least this."""
+"""… and attenuates everything at and above the lower Nyquist frequency by this much (the
+Kaiser design target; 89.7 dB measured for 44.1 → 16 kHz)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -694,7 +695,7 @@ def cached_index(cache_file: Path, build: Callable[[], CorpusIndex]) -> CorpusIn
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         pass  # absent, unreadable, corrupt or stale: rebuild
     index = build()
-    text = json.dumps(index.to_dict(), indent=1, sort_keys=True)
+    text = json.dumps(index.to_dict(), separators=(",", ":"), sort_keys=True)
     write_atomic(cache_file, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return index
 
@@ -707,7 +708,7 @@ def cached_index(cache_file: Path, build: Callable[[], CorpusIndex]) -> CorpusIn
 def _antialias_filter(from_hz: int, to_hz: int) -> np.ndarray:
     """Kaiser-window low-pass at the upsampled rate for :func:`resample`.
 
-    Flat to ``RESAMPLE_PASSBAND`` × the lower Nyquist, at least ``RESAMPLE_STOPBAND_DB`` down
+    Flat to ``RESAMPLE_PASSBAND`` × the lower Nyquist, about ``RESAMPLE_STOPBAND_DB`` down
     from the lower Nyquist on, so nothing above the output's Nyquist aliases back (scipy's
     default filter is centred on Nyquist and lets a tone 2 kHz above it alias at −57 dB).
     """
@@ -736,7 +737,7 @@ def resample(x: np.ndarray, from_hz: int, to_hz: int) -> np.ndarray:
     -------
     array (..., ceil(T * to / from)), float64
         The band below 0.9 × the lower Nyquist frequency is kept (ripple < 0.001 dB);
-        everything at or above the lower Nyquist is attenuated by at least 90 dB; no delay.
+        everything at or above the lower Nyquist is attenuated by about 90 dB; no delay.
     """
     for name, rate in (("from_hz", from_hz), ("to_hz", to_hz)):
         if isinstance(rate, bool) or not float(rate).is_integer() or rate <= 0:
