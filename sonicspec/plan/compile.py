@@ -392,7 +392,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
                     {
                         **common,
                         "outputs": outputs,
-                        "output_dir": str(output_dir),
+                        "output_dir": spec.outputs.dir,  # as written: keys do not depend on where
                         "sample_rate_hz": spec.sample_rate_hz,
                         "scene_id": scene_id,
                     },
@@ -408,7 +408,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
             "dataset",
             {
                 "spec": spec_json,
-                "output_dir": str(output_dir),
+                "output_dir": spec.outputs.dir,  # as written: keys do not depend on where
                 "manifests": list(spec.outputs.manifests),
                 "splits": {s: spec.splits[s].groups for s in spec.splits},
             },

@@ -37,7 +37,8 @@ def _files(items: list[CorpusItem], segments) -> dict[str, dict[str, Any]]:
 
 def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group: str,
                   rng: np.random.Generator) -> dict[str, Any]:
-    """The tracks of one group as JSON data: name, role, speaker, segments, files."""
+    """The tracks of one group as JSON data: name, role, speaker, segments, files (paths
+    relative to the corpus root of the track's role)."""
     mix = params["mixture"]
     rate = params["sample_rate_hz"]
     split = params["split"]
@@ -74,13 +75,8 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group
 def run(ctx: JobContext) -> None:
     jobs = ctx.plan.by_key()
     indexes: dict[str, CorpusIndex] = {}
-    roots: dict[str, str] = {}
     for key in ctx.input_keys("corpus"):
-        art = ctx.store.read("corpus", key)
-        role = jobs[key].params["role"]
-        indexes[role] = read_index(art.arrays)
-        roots[role] = art.data["root"]
+        indexes[jobs[key].params["role"]] = read_index(ctx.store.read("corpus", key).arrays)
     groups = [arrange_group(indexes, ctx.params, g, ctx.rng("arrange", g))
               for g in ctx.params["groups"]]
-    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
-              {"groups": groups, "corpus_roots": roots})
+    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)}, {"groups": groups})

@@ -1,6 +1,7 @@
 """Stage ``corpus``: index a corpus (generating it first for the ``generated`` kind).
 
-The index (every usable file with its split, speaker, length and words) is the artifact; it is
+The index (every usable file with its split, speaker, length and words; paths relative to the
+corpus root, so the artifact is the same wherever the corpus lives) is the artifact; it is
 stored as one compressed JSON array so a 100 000-utterance corpus does not bloat the group's
 metadata. A second copy is cached beside the corpus in the spec's ``cache_dir``, so a cleaned
 store re-indexes without re-reading every file header. Files that cannot be used are logged by
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +28,7 @@ from sonicspec.audio.corpora import (
     index_librispeech,
     index_split_folders,
 )
+from sonicspec.plan.model import Job
 from sonicspec.stages.context import JobContext
 
 log = logging.getLogger("sonicspec.stages.corpus")
@@ -65,6 +69,27 @@ def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
     return index_folder(root, corpus["extensions"], ratios, rng, by_speaker=role == "speech")
 
 
+def corpus_root(job: Job) -> Path:
+    """The folder a corpus job's item paths are relative to."""
+    if "root" in job.paths:
+        return Path(job.paths["root"])
+    return Path(job.paths["cache"]) / "generated" / f"{job.params['role']}-{job.key[:16]}"
+
+
+def corpus_roots(ctx: JobContext) -> dict[str, Path]:
+    """Role -> root of every corpus a job reads."""
+    jobs = ctx.plan.by_key()
+    return {jobs[k].params["role"]: corpus_root(jobs[k]) for k in ctx.input_keys("corpus")}
+
+
+def _portable(index: CorpusIndex, root: Path) -> CorpusIndex:
+    """Item paths relative to the corpus root, so the artifact does not depend on where the
+    corpus (or the spec) lives and two machines store the same bytes."""
+    prefix = str(root).rstrip("/") + "/"
+    items = tuple(replace(i, path=os.path.relpath(i.path, root)) for i in index.items)
+    return CorpusIndex(index.kind, items, tuple(p.replace(prefix, "") for p in index.problems))
+
+
 def read_index(arrays: dict[str, np.ndarray]) -> CorpusIndex:
     """The index stored by :func:`run`."""
     return CorpusIndex.from_dict(json.loads(arrays["index_json"].tobytes().decode("utf-8")))
@@ -74,8 +99,10 @@ def run(ctx: JobContext) -> None:
     params = ctx.params
     cache = Path(ctx.job.paths["cache"])
     rng = ctx.rng("corpus", params["role"])
-    index = cached_index(cache / "index" / f"{params['role']}-{ctx.job.key}.json",
-                         lambda: build_index(params, dict(ctx.job.paths), ctx.job.key, rng))
+    root = corpus_root(ctx.job)
+    index = cached_index(
+        cache / "index" / f"{params['role']}-{ctx.job.key}.json",
+        lambda: _portable(build_index(params, dict(ctx.job.paths), ctx.job.key, rng), root))
     for problem in index.problems:
         log.warning("corpora.%s: %s", params["role"], problem)
     blob = json.dumps(index.to_dict(), sort_keys=True, separators=(",", ":")).encode("utf-8")
@@ -84,8 +111,6 @@ def run(ctx: JobContext) -> None:
         items = index.split(split)
         counts[split] = {"items": len(items), "speakers": len(index.speakers(split)),
                          "hours": round(sum(i.duration_s for i in items) / 3600.0, 6)}
-    root = ctx.job.paths.get("root") or str(
-        cache / "generated" / f"{params['role']}-{ctx.job.key[:16]}")
     ctx.write({"index_json": np.frombuffer(blob, dtype=np.uint8)},
-              {"role": params["role"], "kind": params["corpus"]["kind"], "root": root,
+              {"role": params["role"], "kind": params["corpus"]["kind"],
                "splits": counts, "problems": list(index.problems)})

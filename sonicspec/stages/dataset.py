@@ -18,7 +18,7 @@ CSV_COLUMNS = ("split", "group", "kind", "name", "path", "channels", "num_sample
 
 def run(ctx: JobContext) -> None:
     params = ctx.params
-    out = Path(params["output_dir"])
+    out = Path(ctx.plan.output_dir)
     exports: list[dict[str, Any]] = ctx.input_data("export")
     groups = sorted((g for e in exports for g in e["groups"]), key=lambda g: g["group"])
     files_written: list[str] = []
@@ -55,5 +55,5 @@ def run(ctx: JobContext) -> None:
     }
     write_json(out / "dataset.json", summary)
     ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
-              {"dataset_json": str(out / "dataset.json"), "manifests": files_written,
+              {"dataset_json": "dataset.json", "manifests": files_written,
                "splits": counts})

@@ -11,7 +11,6 @@ the files, the manifest entries and the metadata for the ``dataset`` stage.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -20,13 +19,6 @@ import numpy as np
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.stages.context import JobContext
-
-
-def _relative(path: str, root: str | None) -> str:
-    if root and os.path.commonpath([os.path.abspath(path), os.path.abspath(root)]) == \
-            os.path.abspath(root):
-        return os.path.relpath(path, root)
-    return path
 
 
 class _GroupWriter:
@@ -61,7 +53,7 @@ class _GroupWriter:
 def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray],
                  render: dict[str, Any], mix: dict[str, Any], arrange: dict[str, Any],
                  placement: dict[str, Any], rir: dict[str, Any], rir_arrays: dict[str, Any],
-                 roots: dict[str, str], keys: dict[str, str]) -> dict[str, Any]:
+                 keys: dict[str, str]) -> dict[str, Any]:
     """Write one group's folder; its record for ``dataset``."""
     group = render["group"]
     split, index = group.split("/")
@@ -96,7 +88,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
                     else placement[name])
         segs = a["segments"]
         entry: dict[str, Any] = {
-            "audio": [_relative(a["files"][s["id"]]["path"], roots.get(role)) for s in segs],
+            "audio": [a["files"][s["id"]]["path"] for s in segs],
             "start_end_points": [[s["start"], s["end"]] for s in segs],
             "file": audio_rel,
             "rir_points_m": geometry["rir_points_m"],
@@ -121,7 +113,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             mixtures.append({**m, "file": rel})
     metadata.update(
         group=group, split=split, scene_id=params["scene_id"], mic_m=placement["mic_m"],
-        floor=placement.get("floor"), sample_rate_hz=w.rate,
+        floor=placement.get("floor_index"), sample_rate_hz=w.rate,
         num_samples=render["clip_samples"], mixtures=mixtures,
         group_gain_db=mix["group_gain_db"], keys=keys)
     if outputs["metadata"]:
@@ -150,7 +142,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
 
 def run(ctx: JobContext) -> None:
     params = ctx.params
-    out = Path(params["output_dir"])
+    out = Path(ctx.plan.output_dir)
     mix = ctx.input_data("mix")[0]["groups"]
     render_art = ctx.input("render")
     rir_art = ctx.input("rir")
@@ -163,7 +155,6 @@ def run(ctx: JobContext) -> None:
                                               arrange_data["groups"], placements,
                                               rir_art.data["groups"], strict=True):
         groups.append(export_group(out, params, render_art.arrays, render, m, arr, placement,
-                                   rir, rir_art.arrays, arrange_data["corpus_roots"],
-                                   {**keys, "export": ctx.job.key}))
+                                   rir, rir_art.arrays, {**keys, "export": ctx.job.key}))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})

@@ -13,6 +13,7 @@ small): the mixer may normalise on it, and the ``dry`` target exports it.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import path_position_from_distances, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.stages.context import JobContext
+from sonicspec.stages.corpus import corpus_roots
 
 
 class _AudioCache:
@@ -47,14 +49,15 @@ def _source_geometry(placement: dict[str, Any], name: str) -> dict[str, Any]:
 
 def render_track(track: dict[str, Any], rirs: np.ndarray, source: dict[str, Any],
                  mic_m: np.ndarray, params: dict[str, Any], cache: _AudioCache,
-                 clip_samples: int) -> dict[str, np.ndarray]:
+                 clip_samples: int, corpus_root: Path) -> dict[str, np.ndarray]:
     """``{"reverberant", "dry", and any targets}`` arrays of one track."""
     rate = params["sample_rate_hz"]
     segments = [Segment.from_dict(s) for s in track["segments"]]
     audio = {}
     for seg in segments:
         info = track["files"][seg.id]
-        audio[seg.id] = cache.clip(info["path"], seg.offset + seg.end - seg.start)
+        audio[seg.id] = cache.clip(str(corpus_root / info["path"]),
+                                   seg.offset + seg.end - seg.start)
     dry = assemble(segments, audio, clip_samples)
     points = np.asarray(source["rir_points_m"], dtype=np.float64)
     if len(points) != rirs.shape[0]:
@@ -89,6 +92,7 @@ def run(ctx: JobContext) -> None:
     placements = ctx.input_data("placement")[0]["groups"]
     rir_art = ctx.input("rir")
     cache = _AudioCache(params["sample_rate_hz"])
+    roots = corpus_roots(ctx)
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -106,7 +110,7 @@ def run(ctx: JobContext) -> None:
                                  f"track {name}")
             rirs = np.asarray(rir_art.arrays[rir_by_name[name]["array"]], dtype=np.float64)
             signals = render_track(track, rirs, _source_geometry(placement, name), mic, params,
-                                   cache, arr["clip_samples"])
+                                   cache, arr["clip_samples"], roots[track["role"]])
             keys = {}
             for kind, x in signals.items():
                 key = f"g{g}_{name}_{kind}"
