@@ -62,3 +62,17 @@ def test_lhotse_shapes() -> None:
     lines = jsonl([r, s]).splitlines()
     assert [json.loads(x)["id"] for x in lines] == [rec.id, sup.id]
     assert csv_text([{"a": 1}], ["a", "b"]) == "a,b\n1,\n"
+
+
+def test_float_wav_bytes_do_not_depend_on_the_time_of_writing(tmp_path: Path) -> None:
+    """Regression: libsndfile's PEAK chunk stamped float WAVs with the clock, so two builds of
+    the same RIRs differed in bytes."""
+    import time
+
+    x = np.sin(np.linspace(0, 20, 1000))[None, :] * 3.0  # floats may exceed full scale
+    write_audio(tmp_path / "a.wav", x, 16000, audio_format="wav", subtype="FLOAT")
+    time.sleep(1.1)  # the PEAK chunk's clock counts seconds
+    write_audio(tmp_path / "b.wav", x, 16000, audio_format="wav", subtype="FLOAT")
+    assert (tmp_path / "a.wav").read_bytes() == (tmp_path / "b.wav").read_bytes()
+    y, rate = sf.read(str(tmp_path / "a.wav"), dtype="float32", always_2d=True)
+    assert rate == 16000 and np.array_equal(y.T, x.astype(np.float32))

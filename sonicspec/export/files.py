@@ -71,8 +71,16 @@ def write_audio(path: Path, audio: np.ndarray, sample_rate_hz: int, *, audio_for
     if subtype != "FLOAT" and peak > 1.0:
         raise StoreError(f"{path.name}: peak {peak:.3f} exceeds full scale and would clip")
     with atomic_path(path) as tmp:
-        sf.write(str(tmp), data.T, int(sample_rate_hz), subtype=subtype,
-                 format=FORMATS[audio_format])
+        if subtype == "FLOAT":
+            # libsndfile stamps float WAVs with the time of writing (PEAK chunk); scipy writes
+            # the plain RIFF/fmt/data layout, so the same samples give the same bytes.
+            from scipy.io import wavfile
+
+            with open(tmp, "wb") as fh:
+                wavfile.write(fh, int(sample_rate_hz), data.T.astype(np.float32))
+        else:
+            sf.write(str(tmp), data.T, int(sample_rate_hz), subtype=subtype,
+                     format=FORMATS[audio_format])
     return path
 
 

@@ -4,9 +4,10 @@ Each component is brought to its target loudness (speech, noise, music; each tar
 target ± jitter from the group's own generator), measured on the reverberant track at the
 microphone or on the dry source (``mixture.loudness.stage``). The ``dry`` training target is
 brought to the same target on its own (a dry source is 20–40 dB louder than its reverberant
-image, so the reverberant gain would clip it); ``direct`` and ``early`` share their track's
-gain, being parts of it. Then one group gain keeps every written signal and every mixture under
-the peak limit. The result is a description (gains and mixture lists): the export applies it.
+image, so the reverberant gain would clip it), or lower if its peak would pass the limit;
+``direct`` and ``early`` share their track's gain, being parts of it. Then one group gain keeps
+every other written signal and every mixture under the peak limit. The result is a
+description (gains and mixture lists): the export applies it.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ def mix_group(render_group: dict[str, Any], arrays: dict[str, np.ndarray],
     group = render_group["group"]
     signals: dict[str, np.ndarray] = {}
     gains: dict[str, float] = {}
+    dry_gains: dict[str, float] = {}
     report: dict[str, dict[str, Any]] = {}
     for track in render_group["tracks"]:
         name, role = track["name"], track["role"]
@@ -51,15 +53,19 @@ def mix_group(render_group: dict[str, Any], arrays: dict[str, np.ndarray],
                 signals[f"{name}_{kind}"] = np.asarray(arrays[track["arrays"][kind]])
                 gains[f"{name}_{kind}"] = gain
         if "dry" in params["targets"]:
+            # The dry target has its own level and its own guard: its peaks (no room to
+            # smooth them) must not pull the whole group down.
             dry_gain, _ = gain_to_loudness(dry, rate, target, where=f"{where} (dry target)")
-            signals[f"{name}_dry"], gains[f"{name}_dry"] = dry, dry_gain
+            limit = 10.0 ** (loud["peak_limit_dbfs"] / 20.0)
+            dry_gain = min(dry_gain, limit / float(np.max(np.abs(dry))))
+            dry_gains[f"{name}_dry"] = dry_gain
         report[name] = {"role": role, "target_lufs": target, "measured_lufs": measured,
                         "measured_on": loud["stage"]}
     speakers = [t["name"] for t in render_group["tracks"] if t["role"] == "speech"]
     available = [t["name"] for t in render_group["tracks"] if t["role"] != "speech"]
     mixtures = task_mixtures(params["tasks"], speakers, available)
     group_gain, peak = peak_guard(signals, gains, mixtures, loud["peak_limit_dbfs"])
-    final = {k: g * group_gain for k, g in gains.items()}
+    final = {k: g * group_gain for k, g in gains.items()} | dry_gains
     for name, entry in report.items():
         entry["gain_db"] = _db(final[name])
         entry["output_lufs"] = integrated_loudness(

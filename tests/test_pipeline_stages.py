@@ -1,0 +1,252 @@
+"""The stages from corpus to dataset, run in-process on one tiny group, checked by their output.
+
+What a user of the dataset relies on: every exported component at its target loudness, the
+mixtures are the sums of their parts, utterances sit where the metadata says, training targets
+line up with the reverberant track, manifests point at real files, and a failing job names
+itself and keeps what was finished.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from sonicspec.audio.mix import integrated_loudness
+from sonicspec.errors import StageError
+from sonicspec.plan.compile import compile_spec
+from sonicspec.plan.model import Plan
+from sonicspec.spec import load_spec
+from sonicspec.stages import run_job
+from sonicspec.store import ArtifactStore
+
+SPEC = """\
+sonicspec: 1
+name: tiny
+seed: 11
+sample_rate_hz: 16000
+scenes:
+  - kind: shoebox
+    id: room
+    size_m: [6.0, 5.0, 3.0]
+    materials: {walls: plaster_on_brick, floor: carpet_on_concrete, ceiling: acoustic_ceiling_tile}
+placement:
+  source_start_distance_m: [1.0, 3.0]
+  source_end_distance_m: [1.0, 3.0]
+  source_travel_distance_m: [1.0, 2.0]
+  noise_distance_m: [1.0, 3.0]
+  music_distance_m: [1.0, 3.0]
+trajectory: {kind: shortest_path, rir_spacing_m: 0.5}
+acoustics: {rays: 500, image_source_order: 1, max_rir_length_s: 0.3}
+corpora:
+  speech: {kind: generated, speakers_per_split: 2, utterances_per_speaker: 2}
+  noise: {kind: generated, clips_per_split: 2, clip_duration_s: 2.0}
+  music: {kind: generated, clips_per_split: 2, clip_duration_s: 2.0}
+mixture:
+  duration_s: 8.0
+  speakers: 2
+  utterances_per_speaker: [1, 2]
+  utterance_gap_s: [0.0, 1.0]
+  noise_clips: [2, 3]
+  noise_gap_s: [0.0, 0.5]
+  music_clips: [2, 3]
+  music_gap_s: [0.0, 0.5]
+  targets: [dry, direct, early]
+  tasks:
+    - {kind: separation, speakers: 2, background: music}
+    - {kind: enhancement, background: noise}
+splits:
+  train: {groups: 1, scenes: [room]}
+outputs: {dir: out, store_dir: store, manifests: [lhotse, csv], rirs: true}
+"""
+
+
+def build(tmp: Path, text: str = SPEC) -> Plan:
+    (tmp / "spec.yaml").write_text(text)
+    plan = compile_spec(load_spec(tmp / "spec.yaml"))
+    for job in plan.jobs:
+        run_job(plan, job.key)
+    return plan
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> Plan:
+    return build(tmp_path_factory.mktemp("tiny"))
+
+
+def group_folder(plan: Plan) -> Path:
+    return Path(plan.output_dir) / "train" / "000000"
+
+
+def read(path: Path) -> np.ndarray:
+    x, rate = sf.read(str(path), dtype="float64", always_2d=True)
+    assert rate == 16000
+    return x.T
+
+
+def test_components_are_at_their_target_loudness(built: Plan) -> None:
+    meta = json.loads((group_folder(built) / "metadata.json").read_text())
+    # espeak's peaky speech at -17 LUFS over noise peaks above -1 dBFS in a mixture: the
+    # guard lowers the whole group by one recorded gain, keeping the levels between parts.
+    guard = meta["group_gain_db"]
+    assert -6.0 < guard < 0.0
+    peaks = [np.max(np.abs(read(p))) for p in group_folder(built).rglob("*.flac")]
+    assert max(peaks) == pytest.approx(10 ** (-1 / 20), abs=1e-4)
+    for name, target in (("source1", -17), ("source2", -17), ("noise", -21), ("music", -24)):
+        x = read(group_folder(built) / f"{name}.flac")
+        assert integrated_loudness(x, 16000) == pytest.approx(target + guard, abs=0.1), name
+        assert meta[name]["loudness"]["output_lufs"] == pytest.approx(target + guard, abs=1e-6)
+        assert meta[name]["loudness"]["target_lufs"] == target
+    # The dry target is brought to the same level on its own, or lower to keep its peaks
+    # under the limit (-1 dBFS).
+    for name in ("source1", "source2"):
+        dry = read(group_folder(built) / f"{name}_dry.flac")
+        level, peak = integrated_loudness(dry, 16000), float(np.max(np.abs(dry)))
+        assert level == pytest.approx(-17, abs=0.1) or (
+            level < -17 and peak == pytest.approx(10 ** (-1 / 20), abs=1e-4)), (level, peak)
+
+
+def test_mixtures_are_the_sums_of_their_parts(built: Plan) -> None:
+    folder = group_folder(built)
+    meta = json.loads((folder / "metadata.json").read_text())
+    names = [m["name"] for m in meta["mixtures"]]
+    assert names == ["sep_s1s2_music", "enh_s1_noise", "enh_s2_noise"]
+    for m in meta["mixtures"]:
+        total = sum(read(folder / f"{c}.flac") for c in m["components"])
+        mixture = read(Path(built.output_dir) / m["file"])
+        # Each file is rounded to 16 bits on its own: at most one LSB per part apart.
+        assert np.max(np.abs(mixture - total)) <= (len(m["components"]) + 1) / 32768
+
+
+def test_utterances_sit_where_the_metadata_says(built: Plan) -> None:
+    folder = group_folder(built)
+    meta = json.loads((folder / "metadata.json").read_text())
+    for name in ("source1", "source2"):
+        entry = meta[name]
+        dry = read(folder / f"{name}_dry.flac")[0]
+        assert len(entry["audio"]) == len(entry["start_end_points"]) == len(entry["words"])
+        inside = np.zeros(dry.size, dtype=bool)
+        for (start, end), words, rel in zip(entry["start_end_points"], entry["words"],
+                                            entry["audio"], strict=True):
+            assert 0 <= start < end <= 8 * 16000
+            assert words == words.upper() and len(words.split()) >= 3
+            assert rel.startswith(f"generated-train/{entry['speaker']}/")
+            assert np.max(np.abs(dry[start:start + 1600])) > 1e-3  # speech starts there
+            inside[start:end] = True
+        assert np.all(dry[~inside] == 0.0)  # and nothing plays elsewhere
+        assert len(entry["rir_points_m"]) >= 3  # a moving source, RIRs every 0.5 m
+
+
+def test_targets_line_up_with_the_reverberant_track(built: Plan) -> None:
+    folder = group_folder(built)
+    full = read(folder / "source1.flac")[0]
+    direct = read(folder / "source1_direct.flac")[0]
+    early = read(folder / "source1_early.flac")[0]
+    e_full, e_direct, e_early = (float(np.sum(x**2)) for x in (full, direct, early))
+    assert e_direct < e_early < e_full
+    # The direct sound arrives first: the reverberant track and the direct target start
+    # together (and the early target too), and until the first reflection they are equal.
+    threshold = 0.05 * float(np.max(np.abs(direct)))
+    onsets = [int(np.argmax(np.abs(x) > threshold)) for x in (full, direct, early)]
+    assert max(onsets) - min(onsets) <= 2, onsets
+    start = onsets[0]
+    assert np.max(np.abs(full[start:start + 8] - early[start:start + 8])) <= 2 / 32768
+
+
+def test_rirs_and_manifests_point_at_real_files(built: Plan) -> None:
+    out = Path(built.output_dir)
+    rir = read(group_folder(built) / "rirs" / "source1" / "000.wav")
+    assert rir.shape[0] == 1 and 0.2 * 16000 < rir.shape[1] <= 0.3 * 16000 + 200
+    recordings = [json.loads(line) for line in
+                  (out / "manifests" / "train_recordings.jsonl").read_text().splitlines()]
+    supervisions = [json.loads(line) for line in
+                    (out / "manifests" / "train_supervisions.jsonl").read_text().splitlines()]
+    by_id = {r["id"]: r for r in recordings}
+    for r in recordings:
+        info = sf.info(str(out / r["sources"][0]["source"]))
+        assert info.frames == r["num_samples"] and info.channels == len(r["channel_ids"])
+    meta = json.loads((group_folder(built) / "metadata.json").read_text())
+    spoken = sum(len(meta[s]["words"]) for s in ("source1", "source2"))
+    # Each utterance is supervised on its source, its dry/direct/early targets are not
+    # recordings of the task, and on every mixture containing it (1 separation + 1 enhancement).
+    assert len(supervisions) == 3 * spoken
+    assert all(s["recording_id"] in by_id for s in supervisions)
+    summary = json.loads((out / "dataset.json").read_text())
+    assert summary["splits"]["train"]["groups"] == 1 and summary["spec"]["name"] == "tiny"
+    assert (out / "manifests" / "train.csv").read_text().count("\n") == 1 + len(
+        [f for f in summary_files(out)])
+
+
+def summary_files(out: Path) -> list[Path]:
+    return [p for p in (out / "train").rglob("*") if p.is_file()]
+
+
+def test_same_spec_same_bytes_in_another_folder(built: Plan, tmp_path: Path) -> None:
+    other = build(tmp_path)
+    for p in sorted(Path(built.output_dir).rglob("*")):
+        if p.is_file() and p.suffix in (".flac", ".wav", ".jsonl"):
+            twin = Path(other.output_dir) / p.relative_to(built.output_dir)
+            assert twin.read_bytes() == p.read_bytes(), p
+
+
+def test_impossible_placement_names_the_job_and_keeps_finished_work(tmp_path: Path) -> None:
+    text = SPEC.replace("source_start_distance_m: [1.0, 3.0]", "source_start_distance_m: "
+                        "[7.9, 8.2]")
+    (tmp_path / "spec.yaml").write_text(text)
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    store = ArtifactStore(plan.store_dir)
+    done = []
+    with pytest.raises(StageError, match=r"placement train/room#0: .*room"):
+        for job in plan.jobs:
+            run_job(plan, job.key)
+            done.append(job)
+    assert done and all(store.exists(j.step, j.key) for j in done)
+    assert store.verify() == []
+
+
+def test_unreadable_mesh_names_the_job(tmp_path: Path) -> None:
+    (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nend_header\n"
+                                         "0 0\n")
+    text = SPEC.replace("  - kind: shoebox\n    id: room\n    size_m: [6.0, 5.0, 3.0]\n",
+                        "  - kind: mesh\n    id: room\n    path: broken.ply\n")
+    text = text.replace("    materials: {walls: plaster_on_brick, floor: carpet_on_concrete, "
+                        "ceiling: acoustic_ceiling_tile}\n", "")
+    (tmp_path / "spec.yaml").write_text(text)
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    mesh = next(j for j in plan.jobs if j.step == "mesh")
+    with pytest.raises(StageError, match=r"mesh room: .*broken.ply"):
+        run_job(plan, mesh.key)
+    assert not ArtifactStore(plan.store_dir).exists("mesh", mesh.key)
+
+
+def test_full_disk_during_export_names_the_job_and_file(built: Plan, tmp_path: Path,
+                                                        monkeypatch) -> None:
+    """A full disk while writing the dataset folder stops the export job with a message
+    naming it and the file; the files already there keep their content."""
+    before = (group_folder(built) / "source1.flac").read_bytes()
+    plan = build(tmp_path)  # a finished build; now make its export run again
+    export = next(j for j in plan.jobs if j.step == "export")
+    store = ArtifactStore(plan.store_dir)
+    import shutil
+
+    shutil.rmtree(store.path("export", export.key))
+    real_replace = os.replace
+
+    def full(src, dst):
+        if str(dst).endswith(".flac"):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(StageError, match=r"export train/room#0: cannot write .*\.flac.*the disk "
+                                         "is full"):
+        run_job(plan, export.key)
+    monkeypatch.undo()
+    assert not store.exists("export", export.key)
+    assert (group_folder(plan) / "source1.flac").read_bytes() == before
+    assert [p for p in Path(plan.output_dir).rglob(".*tmp*")] == []
