@@ -107,6 +107,8 @@ CASES = [
      "mixture.utterances_per_speaker[0]", 39, True),
     ("loudness-positive", "speech_lufs: -17", "speech_lufs: 5", "mixture.loudness.speech_lufs", 40,
      True),
+    ("loudness-preset-clash", "speech_lufs: -17", "preset: sonicset_release, speech_lufs: -20",
+     "mixture.loudness", 40, False),
     ("task-kind", "{kind: separation,", "{kind: seperation,", "mixture.tasks[0].kind", 42, True),
     ("task-background", "background: noise}", "background: nois}", "mixture.tasks[0].background",
      42, True),

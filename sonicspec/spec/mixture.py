@@ -4,15 +4,49 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
+from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.base import SpecModel, value_range
 
 Background = Literal["noise", "music", "both", "none"]
 
 
+LOUDNESS_PRESETS: dict[str, dict[str, float]] = {
+    # The SonicSim paper's text: fixed levels.
+    "sonicsim_paper": {"speech_lufs": -17.0, "noise_lufs": -21.0, "music_lufs": -24.0,
+                       "jitter_lu": 0.0},
+    # The released SonicSet scripts: uniform in -17 ± 2, -24 ± 2, -29 ± 2 LUFS.
+    "sonicset_release": {"speech_lufs": -17.0, "noise_lufs": -24.0, "music_lufs": -29.0,
+                         "jitter_lu": 2.0},
+}
+
+
 class LoudnessSpec(SpecModel):
     """Target loudness of each component (ITU-R BS.1770), before mixing."""
+
+    preset: Literal["sonicsim_paper", "sonicset_release"] | None = Field(
+        None,
+        description="Named levels: 'sonicsim_paper' (-17/-21/-24 LUFS, as the paper states) or "
+        "'sonicset_release' (-17/-24/-29 LUFS ± 2 LU, as the released scripts draw them); sets "
+        "the four level fields, which then must not disagree with it.",
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _apply_preset(cls, data: object) -> object:
+        if not isinstance(data, dict) or data.get("preset") not in LOUDNESS_PRESETS:
+            return data
+        levels = LOUDNESS_PRESETS[data["preset"]]
+        clash = sorted(k for k, v in levels.items() if k in data and data[k] != v)
+        if clash:
+            raise PydanticCustomError(
+                "preset_conflict",
+                "preset '{preset}' sets {fields}; remove {them} or the preset",
+                {"preset": data["preset"], "fields": ", ".join(clash),
+                 "them": "it" if len(clash) == 1 else "them"},
+            )
+        return {**data, **levels}
 
     speech_lufs: float = Field(-17.0, ge=-70, le=0, description="Each speech track, LUFS.")
     noise_lufs: float = Field(-21.0, ge=-70, le=0, description="The noise track, LUFS.")
