@@ -250,3 +250,32 @@ def test_full_disk_during_export_names_the_job_and_file(built: Plan, tmp_path: P
     assert not store.exists("export", export.key)
     assert (group_folder(plan) / "source1.flac").read_bytes() == before
     assert [p for p in Path(plan.output_dir).rglob(".*tmp*")] == []
+
+
+def test_real_corpus_layouts_feed_a_build(tmp_path: Path) -> None:
+    """LibriSpeech, FSD50K and FMA as they are laid out on disk (written by the fixtures)
+    go through the real readers into a dataset; the metadata names their files."""
+    from sonicspec.testing import corpora as tc
+
+    data = tmp_path / "data"
+    tc.write_librispeech(data / "LibriSpeech", {"train-clean-360": 3}, 2, seed=1)
+    tc.write_fsd50k(data / "FSD50K", 6, 2, clip_duration_s=2.0, seed=2)
+    tc.write_fma(data / "fma", 10, clip_duration_s=2.0, seed=3)
+    text = SPEC.replace(
+        "  speech: {kind: generated, speakers_per_split: 2, utterances_per_speaker: 2}\n"
+        "  noise: {kind: generated, clips_per_split: 2, clip_duration_s: 2.0}\n"
+        "  music: {kind: generated, clips_per_split: 2, clip_duration_s: 2.0}\n",
+        "  speech: {kind: librispeech, root: data/LibriSpeech, subsets: {train: "
+        "[train-clean-360]}}\n"
+        "  noise: {kind: fsd50k, root: data/FSD50K, split_ratios: {train: 1.0}}\n"
+        "  music: {kind: fma, root: data/fma, split_ratios: {train: 1.0}}\n")
+    assert "librispeech" in text
+    plan = build(tmp_path, text)
+    meta = json.loads((group_folder(plan) / "metadata.json").read_text())
+    assert all(p.startswith("train-clean-360/") and p.endswith(".flac")
+               for p in meta["source1"]["audio"])
+    assert all(p.startswith("FSD50K.") and p.endswith(".wav") for p in meta["noise"]["audio"])
+    assert all(p.startswith("fma_small/") and p.endswith(".mp3") for p in meta["music"]["audio"])
+    music = read(group_folder(plan) / "music.flac")
+    assert integrated_loudness(music, 16000) == pytest.approx(-24 + meta["group_gain_db"],
+                                                              abs=0.1)
