@@ -274,8 +274,12 @@ def test_edge_keys_do_not_overflow_int32_on_large_meshes() -> None:
     fresh = np.arange(len(vertices), len(vertices) + 3 * len(split)).reshape(-1, 3)
     vertices = np.concatenate([vertices, vertices[faces[split]].reshape(-1, 3)])
     faces[split] = fresh
-    mesh = SceneMesh(vertices=vertices, faces=faces,
-                     face_material=np.zeros(len(faces), np.int32), materials=("m",))
+    mesh = SceneMesh(
+        vertices=vertices,
+        faces=faces,
+        face_material=np.zeros(len(faces), np.int32),
+        materials=("m",),
+    )
     repaired, report = repair_mesh(mesh, RepairSettings())
     stats = mesh_stats(repaired.faces, len(repaired.vertices))
     assert stats.inconsistent_edges == 0 and report.watertight
@@ -290,3 +294,180 @@ def test_a_crack_walk_through_a_shared_vertex_splits_into_simple_loops() -> None
     assert _simple_loops([0, 1, 2, 3, 1, 4, 5]) == [[1, 2, 3], [0, 1, 4, 5]]
     assert _simple_loops([0, 1, 2]) == [[0, 1, 2]]
     assert _simple_loops([0, 1, 0, 2]) == []  # degenerate pieces are dropped
+
+
+# --------------------------------------------------------------------------- T-junctions
+def _grid_patch(origin, u, v, nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
+    """A rectangle origin + [0, 1]·u + [0, 1]·v cut into nu × nv quads, normal along u × v."""
+    s, t = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="ij")
+    vertices = np.asarray(origin) + s.reshape(-1, 1) * u + t.reshape(-1, 1) * v
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a = (i * (nv + 1) + j).ravel()
+    b, c, d = a + nv + 1, a + nv + 2, a + 1
+    return vertices, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def _box_halves_with_t_junctions(offset_m: float = 0.0) -> SceneMesh:
+    """A closed unit cube (normals inward) in two halves that meet at z = 0.5.
+
+    The lower half's walls are cut in 2 along the seam, the upper half's in 3: every seam edge
+    of one half has a vertex of the other half inside it (T-junctions, no shared vertices but
+    the corners). The upper half's seam vertices between corners sit ``offset_m`` off the
+    lower half's edges, into the room.
+    """
+    x, y, z = np.eye(3)
+    parts = []
+    for z0, n, floor in ((0.0, 2, True), (0.5, 3, False)):
+        h = 0.5 * z
+        walls = [
+            ((0, 0, z0), h, x),  # y = 0, normal +y
+            ((0, 1, z0), x, h),  # y = 1, normal -y
+            ((0, 0, z0), y, h),  # x = 0, normal +x
+            ((1, 0, z0), h, y),  # x = 1, normal -x
+        ]
+        for origin, u, v in walls:
+            nu, nv = (1, n) if np.allclose(u, h) else (n, 1)
+            parts.append(_grid_patch(origin, u, v, nu, nv))
+        parts.append(
+            _grid_patch((0, 0, 0), x, y, n, n) if floor else _grid_patch((0, 0, 1), y, x, n, n)
+        )
+    sizes = [len(v) for v, _ in parts]
+    starts = np.cumsum([0, *sizes[:-1]])
+    vertices = np.concatenate([v for v, _ in parts])
+    faces = np.concatenate([f + start for (_, f), start in zip(parts, starts, strict=True)])
+    upper_start = starts[5]  # parts 0-4: the lower half's four walls and floor
+    # upper-half seam vertices that are not cube corners move into the room
+    seam = (np.abs(vertices[:, 2] - 0.5) < 1e-12) & (np.arange(len(vertices)) >= upper_start)
+    on_edge = seam & ~np.all(np.isclose(vertices[:, :2] % 1.0, 0.0), axis=1)
+    inward = np.where(np.isclose(vertices[:, :2], 0.0), 1.0, 0.0) - np.isclose(vertices[:, :2], 1.0)
+    vertices[on_edge, :2] += offset_m * inward[on_edge]
+    return SceneMesh(vertices, faces, np.zeros(len(faces), np.int32), ("plaster",))
+
+
+@pytest.mark.parametrize("offset_m", [0.0, 3e-4])
+def test_t_junction_crack_is_stitched_watertight(offset_m) -> None:
+    """Regression: two sides of a seam tessellated differently (T-junctions) stayed open."""
+    cube = _box_halves_with_t_junctions(offset_m)
+    raw = mesh_stats(cube.faces, cube.vertices.shape[0])
+    assert raw.boundary_edges > 0
+    # Hole closing alone made it "watertight" with patches across the room (13 % leak); the
+    # stitching leaves no hole to close.
+    settings = RepairSettings(max_hole_size_m=2.0, leak_test_rays=20_000, if_not_watertight="error")
+    fixed, report = repair_mesh(cube, settings, np.random.default_rng(0))
+    # per wall: 1/3 into the lower edge (0, 1/2), 2/3 into (1/2, 1), 1/2 into (1/3, 2/3)
+    assert report.t_junctions_stitched == 12
+    assert report.watertight and report.after.inconsistent_edges == 0
+    assert report.holes_found == 0 and report.components_flipped == 0
+    assert fixed.to_trimesh().is_watertight
+    assert report.leak.leak_fraction == 0.0
+    assert fixed.air_volume() == pytest.approx(1.0, abs=1e-3)
+
+
+def test_t_junction_farther_than_the_merge_distance_is_not_stitched() -> None:
+    cube = _box_halves_with_t_junctions(offset_m=5e-3)  # 5 mm off, merge distance 1 mm
+    settings = RepairSettings(max_hole_size_m=0.0)
+    with pytest.warns(SonicspecWarning, match=r"got 20 open and 0 non-manifold edges"):
+        _, report = repair_mesh(cube, settings)
+    assert report.t_junctions_stitched == 0 and not report.watertight
+
+
+def test_t_junction_stitching_keeps_attributes_and_winding() -> None:
+    cube = _box_halves_with_t_junctions()
+    labels = np.where(cube.face_centroids[:, 2] < 0.5, 0, 1).astype(np.int32)
+    cube = cube.replace(face_label=labels, labels=("lower", "upper"))
+    fixed, report = repair_mesh(cube, RepairSettings(max_hole_size_m=0.0))
+    assert report.watertight and report.faces_flipped_coherent == 0
+    lower = np.array(fixed.labels)[fixed.face_label] == "lower"
+    np.testing.assert_array_equal(lower, fixed.face_centroids[:, 2] < 0.5)
+    # every face still points into the cube (the original winding)
+    inside = fixed.face_centroids + 1e-3 * fixed.face_normals
+    assert np.all((inside > 0) & (inside < 1))
+
+
+# --------------------------------------------------------------------------- touching pieces
+def _welded(mesh: SceneMesh) -> SceneMesh:
+    """The mesh with coincident vertices welded into one (as a scan or a careless export)."""
+    unique, inverse = np.unique(np.round(mesh.vertices, 9), axis=0, return_inverse=True)
+    return mesh.replace(vertices=unique, faces=inverse.reshape(-1)[mesh.faces])
+
+
+@pytest.mark.parametrize(
+    ("second_box", "shared_vertices", "non_manifold_edges"),
+    [
+        (((2.0, 2.0, 0.5), (1.0, 1.0, 1.0)), 2, 1),  # boxes share a vertical edge
+        (((2.0, 2.0, 1.5), (1.0, 1.0, 1.0)), 1, 0),  # boxes share a corner only (a pinch)
+    ],
+)
+def test_welded_touching_boxes_are_split_not_torn(second_box, shared_vertices, non_manifold_edges):
+    """Regression: four faces on an edge where two welded closed pieces touch lost two faces
+    (the smallest), tearing both pieces and scrambling their orientation."""
+    room = shoebox((3.0, 3.0, 2.5))
+    first = box_obstacle((1.0, 1.0, 0.5), (1.0, 1.0, 1.0))
+    scene = add_obstacles(room, [first, box_obstacle(*second_box)])
+    welded = _welded(scene)
+    stats = mesh_stats(welded.faces, welded.vertices.shape[0])
+    assert stats.non_manifold_edges == non_manifold_edges
+    assert stats.components == 2  # the boxes are one piece through their shared vertices
+    settings = RepairSettings(leak_test_rays=20_000, if_not_watertight="error")
+    fixed, report = repair_mesh(welded, settings, np.random.default_rng(0))
+    assert report.touching_vertices_split == shared_vertices
+    assert report.non_manifold_faces_removed == 0 and report.watertight
+    assert report.after.components == 3 and report.leak.leak_fraction == 0.0
+    np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
+    assert fixed.air_volume() == pytest.approx(scene.air_volume())
+
+
+def test_a_fin_on_an_edge_is_not_split_but_dropped():
+    # a piece with an open edge on the crowded edge is not a closed piece touching another
+    room = shoebox((3.0, 3.0, 3.0))
+    v = np.vstack([room.vertices, [[1.5, 0.0, 0.2]]])
+    faces = np.vstack([room.faces, [[0, 1, 8]]])
+    fixed, report = repair_mesh(SceneMesh(v, faces, 0, ("x",)), RepairSettings())
+    assert report.touching_vertices_split == 0 and report.non_manifold_faces_removed == 1
+    assert report.watertight and fixed.n_faces == 12
+
+
+def test_close_vertices_of_a_closed_surface_are_not_merged():
+    """Regression: merging two close vertices of an already closed surface (a fine or noisy
+    tessellation) collapsed it into fins, non-manifold edges and open edges."""
+    room = shoebox((3.0, 3.0, 3.0))
+    # a wall vertex pair 0.5 mm apart, on a closed surface: split a wall triangle at a point
+    # 0.5 mm from its corner
+    a, b, c = room.faces[0]
+    pa, pb, pc = room.vertices[[a, b, c]]
+    near = (
+        pa + 5e-4 * (pb - pa) / np.linalg.norm(pb - pa) + 1e-4 * (pc - pa) / np.linalg.norm(pc - pa)
+    )
+    v = np.vstack([room.vertices, near])
+    m = len(v) - 1
+    faces = np.vstack([room.faces[1:], [[a, b, m], [b, c, m], [c, a, m]]])
+    mesh = SceneMesh(v, faces, 0, ("x",))
+    assert mesh_stats(mesh.faces, len(v)).watertight
+    fixed, report = repair_mesh(mesh, RepairSettings(merge_distance_m=1e-3))
+    assert report.merged_vertices == 0 and report.degenerate_faces_removed == 0
+    assert report.watertight and fixed.n_faces == 14
+
+
+# --------------------------------------------------------------------------- intersecting obstacles
+def test_leak_test_origins_are_not_taken_inside_intersecting_obstacles():
+    """Regression: a point inside two intersecting boxes crosses three surfaces (odd), so the
+    leak test took it for air and counted its rays, which hit back faces, as leaks."""
+    room = shoebox((4.0, 4.0, 2.5))
+    table = box_obstacle((2.0, 2.0, 0.4), (1.5, 1.5, 0.8))
+    cabinet = box_obstacle((2.6, 2.6, 0.6), (1.0, 1.0, 1.2), yaw_deg=30.0)  # through the table
+    scene = add_obstacles(room, [table, cabinet])
+    report = leak_test(scene, np.random.default_rng(0), 20_000)
+    assert report.leak_fraction == 0.0
+
+
+def test_a_post_through_a_table_keeps_its_orientation():
+    """Regression: the faces of a post mostly inside a table voted from points inside both,
+    which parity took for air, and the post was turned inside out."""
+    room = shoebox((4.0, 4.0, 2.5))
+    table = box_obstacle((2.0, 2.0, 0.4), (1.5, 1.5, 0.8))
+    post = box_obstacle((2.0, 2.0, 0.5), (0.2, 0.2, 1.0))  # 0.2 m of it above the table
+    scene = add_obstacles(room, [table, post])
+    settings = RepairSettings(leak_test_rays=20_000, if_not_watertight="error")
+    fixed, report = repair_mesh(scene, settings, np.random.default_rng(0))
+    assert report.components_flipped == 0 and report.leak.leak_fraction == 0.0
+    np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)

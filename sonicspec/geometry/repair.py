@@ -5,20 +5,28 @@ debris, edges shared by more than two faces, holes where the scanner saw nothing
 wound either way. A ray tracer needs a closed surface whose normals all face the air
 (:mod:`sonicspec.geometry.mesh`). :func:`repair_mesh` runs, in order:
 
-1. merge vertices closer than ``merge_distance_m`` (closes cracks);
+1. merge vertices closer than ``merge_distance_m`` (closes cracks), unless both are
+   sealed (every edge at them already shared by two faces: merging would fold the surface);
 2. drop degenerate faces (repeated vertex, near-zero area) and duplicate faces (same three
    vertices, either winding: a two-sided sheet of zero thickness keeps one side);
-3. make edges manifold: where more than two faces share an edge, drop the smallest ones;
-4. drop connected pieces smaller than ``min_component_area_m2`` (debris);
-5. orient faces coherently within each connected piece (neighbours traverse their shared edge
+3. stitch T-junctions: a vertex of an open edge that lies within ``merge_distance_m`` of the
+   inside of another open edge (the two sides of a crack were tessellated differently) splits
+   that edge's face there, so both sides share vertices and edges;
+4. make edges manifold: where closed pieces touch or cross at shared vertices (a line of
+   edges with four faces, two from each piece, or a single pinch vertex), give each piece its
+   own copies of those vertices; elsewhere, where more than two faces share an edge, drop the
+   smallest ones;
+5. drop connected pieces smaller than ``min_component_area_m2`` (debris);
+6. orient faces coherently within each connected piece (neighbours traverse their shared edge
    in opposite directions);
-6. close holes whose boundary loop spans at most ``max_hole_size_m``: the loop is projected to
+7. close holes whose boundary loop spans at most ``max_hole_size_m``: the loop is projected to
    its best-fit plane and triangulated by ear clipping (a fan around its centroid when the
    projection is not simple); new faces take the material, label and object of the bordering
    face whose normal is closest to the patch's;
-7. point each piece's normals into the air, decided by ray parity: a point just in front of a
-   face is in the air when a ray from it crosses the whole surface an odd number of times
-   (one envelope around it, obstacles entered and left in pairs).
+8. point each piece's normals into the air. Which points are in the air is decided by ray
+   parity per piece (:class:`_AirTest`): inside a piece that no other piece encloses (an
+   envelope) and inside no other piece (an obstacle), so that obstacles which intersect each
+   other do not turn their common volume into air.
 
 The per-face material, label and object id follow their faces throughout. Vertex merging and
 the topology steps are numpy/scipy; ray casting uses trimesh's Embree backend (embreex) when
@@ -154,13 +162,21 @@ class LeakReport:
 
 @dataclass(frozen=True)
 class RepairReport:
-    """What :func:`repair_mesh` found and changed (counts)."""
+    """What :func:`repair_mesh` found and changed (counts).
+
+    ``t_junctions_stitched`` counts vertices inserted into open edges (one per vertex and edge);
+    ``touching_vertices_split`` counts vertices shared by closed pieces that touch or cross,
+    each piece given its own copy; ``non_manifold_faces_removed`` counts faces dropped on the
+    edges with more than two faces that remained.
+    """
 
     before: MeshStats
     after: MeshStats
     merged_vertices: int
     degenerate_faces_removed: int
     duplicate_faces_removed: int
+    t_junctions_stitched: int
+    touching_vertices_split: int
     non_manifold_faces_removed: int
     debris_components_removed: int
     debris_faces_removed: int
@@ -254,9 +270,26 @@ def _areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- repair steps
 def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
+    """Merge vertices closer than ``distance_m``, except two sealed ones.
+
+    A crack has open edges on both sides, so its vertices are unsealed. A vertex is sealed
+    when every edge at it is shared by exactly two faces: two sealed vertices that are close
+    lie on a surface that is already closed there (fine or noisy tessellation, a fold of a
+    scan's surface), and merging them would collapse an edge or glue two parts of the surface
+    into a fin or a pinch.
+    """
     if distance_m <= 0 or len(vertices) < 2:
         return vertices, faces, 0
     pairs = cKDTree(vertices).query_pairs(distance_m, output_type="ndarray")
+    if len(pairs) == 0:
+        return vertices, faces, 0
+    n = len(vertices)
+    keys, _ = _undirected(faces, n)
+    unique, faces_per_edge = np.unique(keys, return_counts=True)
+    sealed = np.zeros(n, bool)
+    sealed[np.unique(faces)] = True
+    sealed[np.concatenate(np.divmod(unique[faces_per_edge != 2], n))] = False
+    pairs = pairs[~(sealed[pairs[:, 0]] & sealed[pairs[:, 1]])]
     if len(pairs) == 0:
         return vertices, faces, 0
     n = len(vertices)
@@ -284,6 +317,137 @@ def _drop_duplicates(faces, keep_attrs, n_vertices):
     _, first = np.unique(key, return_index=True)
     first = np.sort(first)
     return faces[first], keep_attrs[first], len(faces) - len(first)
+
+
+def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
+    """Split faces at the T-junctions of cracks, so both sides of a crack share vertices.
+
+    Where the two sides of a seam were tessellated differently, an open edge a→b on one side
+    faces a chain of open edges a–m1–…–b on the other, whose inner vertices lie on a→b. Merging
+    cannot close such a crack (no two vertices coincide); splitting the face (a, b, c) into the
+    fan (a, m1, c), (m1, m2, c), …, (mk, b, c) makes every edge of the seam shared by two
+    faces. A vertex counts as on an edge when it is an end of an open edge, lies within
+    ``tolerance_m`` of the edge's line and more than ``tolerance_m`` from both of its ends.
+
+    Candidates come from one KD-tree query over the open edges' vertices (a ball around each
+    open edge's midpoint). A face is split along one edge per pass; a face with T-vertices on
+    several edges is finished by the next passes (at most three).
+
+    Returns (faces, keep_attrs, number of vertex-in-edge insertions).
+    """
+    n_vertices = len(vertices)
+    stitched = 0
+    for _ in range(3):
+        keys, _ = _undirected(faces, n_vertices)
+        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        slot = np.flatnonzero(counts[inverse] == 1)  # open edges, as 3·face + corner
+        if len(slot) == 0:
+            break
+        face, corner = np.divmod(slot, 3)
+        a, b = faces[face, corner], faces[face, (corner + 1) % 3]
+        ends = np.unique(np.concatenate([a, b]))
+        pa, pb = vertices[a], vertices[b]
+        length = np.linalg.norm(pb - pa, axis=1)
+        balls = cKDTree(vertices[ends]).query_ball_point(
+            0.5 * (pa + pb), 0.5 * length + tolerance_m
+        )
+        sizes = np.fromiter(map(len, balls), np.int64, len(balls))
+        edge = np.repeat(np.arange(len(slot)), sizes)
+        vertex = ends[np.fromiter(itertools.chain.from_iterable(balls), np.int64, sizes.sum())]
+        # position along the edge (metres from a) and distance from its line
+        direction = (pb - pa) / np.maximum(length, 1e-300)[:, None]
+        offset = vertices[vertex] - pa[edge]
+        along = np.einsum("ij,ij->i", offset, direction[edge])
+        across = np.linalg.norm(offset - along[:, None] * direction[edge], axis=1)
+        on_edge = (
+            (vertex != a[edge])
+            & (vertex != b[edge])
+            & (across <= tolerance_m)
+            & (along > tolerance_m)
+            & (along < length[edge] - tolerance_m)
+        )
+        edge, vertex, along = edge[on_edge], vertex[on_edge], along[on_edge]
+        if len(edge) == 0:
+            break
+        # one edge per face and pass: the face's first open edge that has T-vertices
+        order = np.lexsort((along, slot[edge]))
+        edge, vertex = edge[order], vertex[order]
+        first_slot = np.full(len(faces), np.iinfo(np.int64).max)
+        np.minimum.at(first_slot, face[edge], slot[edge])
+        chosen = slot[edge] == first_slot[face[edge]]
+        edge, vertex = edge[chosen], vertex[chosen]
+        # the fan a, m1, …, mk, b around the opposite corner c, in the face's winding
+        start = np.r_[True, edge[1:] != edge[:-1]]
+        last = np.r_[edge[1:] != edge[:-1], True]
+        previous = np.where(start, a[edge], np.roll(vertex, 1))
+        c = faces[face[edge], (corner[edge] + 2) % 3]
+        fan = np.column_stack([previous, vertex, c])
+        closing = np.column_stack([vertex[last], b[edge[last]], c[last]])
+        split_faces = face[edge[last]]
+        new_faces = np.concatenate([fan, closing])
+        new_attrs = np.concatenate([keep_attrs[face[edge]], keep_attrs[split_faces]])
+        untouched = np.ones(len(faces), bool)
+        untouched[split_faces] = False
+        faces = np.concatenate([faces[untouched], new_faces])
+        keep_attrs = np.concatenate([keep_attrs[untouched], new_attrs])
+        stitched += len(vertex)
+    return faces, keep_attrs, stitched
+
+
+def _split_touching_pieces(vertices, faces, n_vertices):
+    """Give each closed piece its own copy of the vertices where pieces touch or cross.
+
+    Two closed surfaces welded where they meet (a partition whose end lies flush on a wall,
+    two boxes whose faces cross, an object's corner on the floor) share vertices: along a line
+    of them every edge has four faces, two from each surface, and at a single shared vertex
+    the pieces are pinched together. Dropping faces there would tear both surfaces, and a
+    pinch makes the two pieces one for the air test. So at every vertex where several pieces
+    (joined by manifold edges) meet, and each piece's edges at that vertex are shared by
+    exactly two of its own faces (a closed fan), each piece but the first gets a fresh copy.
+    Vertices of a crack or a fin (a piece with an open edge there) are left alone; edges with
+    more than two faces that remain go to :func:`_fix_non_manifold`.
+
+    Returns (vertices, faces, number of vertices split).
+    """
+    n_pieces, piece = connected_components(_manifold_edge_graph(faces, n_vertices), directed=False)
+    if n_pieces < 2:
+        return vertices, faces, 0
+    # vertices used by faces of more than one piece (few): look only at the faces around them
+    corner_piece = np.repeat(piece, 3)
+    lowest = np.full(n_vertices, n_pieces)
+    highest = np.full(n_vertices, -1)
+    np.minimum.at(lowest, faces.ravel(), corner_piece)
+    np.maximum.at(highest, faces.ravel(), corner_piece)
+    shared = (highest >= 0) & (lowest != highest)
+    if not shared.any():
+        return vertices, faces, 0
+    near = np.flatnonzero(shared[faces].any(axis=1))
+    near_faces, near_piece = faces[near], piece[near]
+    # faces of each piece on each edge (slot order: 3·face + corner, edge corner→corner+1)
+    keys, face_of = _undirected(near_faces, n_vertices)
+    _, edge_id = np.unique(keys, return_inverse=True)
+    edge_piece = edge_id.astype(np.int64) * n_pieces + near_piece[face_of]
+    _, which, per_piece = np.unique(edge_piece, return_inverse=True, return_counts=True)
+    paired = (per_piece[which] == 2).reshape(-1, 3)
+    # a corner is closed when both of the face's edges at it are paired within the piece
+    corner_closed = paired & np.roll(paired, 1, axis=1)
+    vertex_piece = near_faces.astype(np.int64) * n_pieces + near_piece[:, None]
+    vp, vp_index = np.unique(vertex_piece.ravel(), return_inverse=True)
+    open_fan = np.bincount(vp_index, weights=~corner_closed.ravel(), minlength=len(vp)) > 0
+    vp_vertex = vp // n_pieces
+    open_at = np.bincount(vp_vertex, weights=open_fan, minlength=n_vertices) > 0
+    split_vertex = shared & ~open_at
+    if not split_vertex.any():
+        return vertices, faces, 0
+    # the first piece at a vertex keeps it, each other piece gets a copy
+    first = np.r_[True, vp_vertex[1:] != vp_vertex[:-1]]
+    copy = split_vertex[vp_vertex] & ~first
+    target = vp_vertex.copy()
+    target[copy] = n_vertices + np.arange(np.count_nonzero(copy))
+    faces = faces.copy()
+    faces[near] = target[vp_index].reshape(near_faces.shape)
+    vertices = np.concatenate([vertices, vertices[vp_vertex[copy]]])
+    return vertices, faces, int(np.count_nonzero(split_vertex))
 
 
 def _fix_non_manifold(vertices, faces, keep_attrs, n_vertices):
@@ -424,9 +588,9 @@ def _simple_loops(loop: list[int]) -> list[list[int]]:
         if v in position:
             i = position[v]
             out.append(stack[i:])  # v ... back to v: one simple loop
-            for w in stack[i + 1:]:
+            for w in stack[i + 1 :]:
                 del position[w]
-            stack = stack[:i + 1]
+            stack = stack[: i + 1]
         else:
             position[v] = len(stack)
             stack.append(v)
@@ -465,7 +629,12 @@ def _close_holes(vertices, faces, keep_attrs, n_vertices, max_size_m):
         return vertices, faces, keep_attrs, len(loops), 0, 0
     # The face across each boundary edge: a loop edge u→v borders the face that runs v→u.
     directed, face_of = _edge_keys(faces, n_vertices)
-    across = dict(zip(directed.tolist(), face_of.tolist(), strict=True))
+    by_key = np.argsort(directed)
+    directed_sorted = directed[by_key]
+
+    def across(keys: list[int]) -> np.ndarray:
+        return face_of[by_key[np.searchsorted(directed_sorted, keys)]]
+
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     face_normal = np.cross(b - a, c - a)
     face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
@@ -490,7 +659,7 @@ def _close_holes(vertices, faces, keep_attrs, n_vertices, max_size_m):
         # The patch continues the surface it lies in: it takes the material, label and object
         # of the bordering face whose normal is closest to its own (a wall panel's neighbours
         # on the wall, not the floor it meets).
-        ring = [across[v * n_vertices + u] for u, v in itertools.pairwise([*loop, loop[0]])]
+        ring = across([v * n_vertices + u for u, v in itertools.pairwise([*loop, loop[0]])])
         best = ring[int(np.argmax(face_normal[ring] @ patch_normal))]
         new_faces.append(tris)
         new_attrs.append(np.full(len(tris), keep_attrs[best]))
@@ -517,15 +686,95 @@ def _ray_intersector(vertices: np.ndarray, faces: np.ndarray):
     return mesh.ray
 
 
-def _parity_in_air(intersector, points: np.ndarray) -> np.ndarray:
-    """Majority vote over fixed directions: a point is in the air when rays from it cross the
-    surface an odd number of times (one envelope around it; obstacles entered and left)."""
-    origins = np.repeat(points, len(_PARITY_DIRECTIONS), axis=0)
-    directions = np.tile(_PARITY_DIRECTIONS, (len(points), 1))
-    _, ray_index, _ = intersector.intersects_location(origins, directions, multiple_hits=True)
-    crossings = np.bincount(ray_index, minlength=len(origins))
-    odd = (crossings % 2 == 1).reshape(len(points), len(_PARITY_DIRECTIONS))
-    return odd.sum(axis=1) * 2 > len(_PARITY_DIRECTIONS)
+def _layers(lo: np.ndarray, hi: np.ndarray, margin: float) -> np.ndarray:
+    """Colour boxes so that boxes of one colour do not overlap (greedy, largest first)."""
+    n = len(lo)
+    colour = np.full(n, -1)
+    for i in np.argsort(-np.prod(hi - lo, axis=1), kind="stable"):
+        overlaps = np.all((lo - margin <= hi[i]) & (hi + margin >= lo[i]), axis=1)
+        used = np.unique(colour[overlaps & (colour >= 0)])
+        free = np.setdiff1d(np.arange(len(used) + 1), used)
+        colour[i] = free[0]
+    return colour
+
+
+class _AirTest:
+    """Which points are in the air, by ray parity counted per piece (vertex-connected part).
+
+    One parity over the whole surface (odd: inside the envelope and outside the obstacles)
+    fails where obstacles intersect: a point inside two boxes crosses three surfaces and would
+    count as air. Instead each piece's crossings are counted on their own; a piece more than
+    half of whose sample points (face centroids) lie inside one other piece is enclosed (an
+    obstacle, or anything inside the building), the others are envelopes. A point is in the
+    air when it is inside an envelope and inside no enclosed piece. Every parity is a majority
+    vote over the fixed directions; none depends on the faces' orientation.
+
+    Pieces in contact have coincident faces (a partition's top on the ceiling, a box on the
+    floor). A ray through such a place meets both at one distance, and a multiple-hit query
+    reports only one of them, which flips one piece's parity. So rays are cast separately
+    against layers of pieces whose bounding boxes do not overlap (:func:`_layers`): within a
+    layer no two pieces touch.
+    """
+
+    samples_per_piece = 31
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        self.n_pieces, self.piece = _face_components(faces, len(vertices))
+        corners = vertices[faces]
+        lo = np.full((self.n_pieces, 3), np.inf)
+        hi = np.full((self.n_pieces, 3), -np.inf)
+        np.minimum.at(lo, self.piece, corners.min(axis=1))
+        np.maximum.at(hi, self.piece, corners.max(axis=1))
+        scale = float(np.linalg.norm(hi.max(axis=0) - lo.min(axis=0)))
+        layer = _layers(lo, hi, 1e-3 * scale)[self.piece]
+        self.layers = []
+        for k in range(int(layer.max()) + 1):
+            in_layer = np.flatnonzero(layer == k)
+            self.layers.append((_ray_intersector(vertices, faces[in_layer]), in_layer))
+        # sample faces spread over each piece: evenly spaced ranks of the piece's faces
+        order = np.argsort(self.piece, kind="stable")
+        size = np.bincount(self.piece, minlength=self.n_pieces)
+        start = np.cumsum(size) - size
+        k = np.minimum(size, self.samples_per_piece)
+        owner = np.repeat(np.arange(self.n_pieces), k)
+        rank = np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+        step = size[owner] / k[owner]
+        sample = order[start[owner] + (rank * step).astype(np.int64)]
+        point, container = self.inside(corners[sample].mean(axis=1))
+        other = container != owner[point]
+        pair = owner[point[other]].astype(np.int64) * self.n_pieces + container[other]
+        pairs, votes = np.unique(pair, return_counts=True)
+        enclosed_pieces = pairs[2 * votes > k[pairs // self.n_pieces]] // self.n_pieces
+        self.enclosed = np.zeros(self.n_pieces, bool)
+        self.enclosed[enclosed_pieces] = True
+
+    def inside(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point index, piece index) pairs with the point inside the piece (majority vote)."""
+        n_dirs = len(_PARITY_DIRECTIONS)
+        origins = np.repeat(points, n_dirs, axis=0)
+        directions = np.tile(_PARITY_DIRECTIONS, (len(points), 1))
+        keys = []
+        for intersector, layer_faces in self.layers:
+            tri, ray = intersector.intersects_id(origins, directions, multiple_hits=True)
+            keys.append(ray.astype(np.int64) * self.n_pieces + self.piece[layer_faces[tri]])
+        # crossings per (ray, piece), then odd ones per (point, piece) over the directions
+        keys, crossings = np.unique(np.concatenate(keys), return_counts=True)
+        odd = keys[crossings % 2 == 1]
+        ray_of, piece_of = np.divmod(odd, self.n_pieces)
+        point_piece, n_odd = np.unique(
+            (ray_of // n_dirs) * self.n_pieces + piece_of, return_counts=True
+        )
+        point_piece = point_piece[2 * n_odd > n_dirs]
+        return point_piece // self.n_pieces, point_piece % self.n_pieces
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """True for points in the air."""
+        point, container = self.inside(points)
+        in_envelope = np.zeros(len(points), bool)
+        in_envelope[point[~self.enclosed[container]]] = True
+        in_solid = np.zeros(len(points), bool)
+        in_solid[point[self.enclosed[container]]] = True
+        return in_envelope & ~in_solid
 
 
 def _orient_to_air(vertices, faces, n_vertices):
@@ -541,7 +790,7 @@ def _orient_to_air(vertices, faces, n_vertices):
     centroid = (a + b + c) / 3
     extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     offset = 1e-4 * extent
-    intersector = _ray_intersector(vertices, faces)
+    in_air = _AirTest(vertices, faces)
     # the 15 largest faces of each piece (their centroids are far from edges), found for all
     # pieces at once: sort by piece, then by decreasing area, and keep the first ranks
     order = np.lexsort((-area, label))
@@ -549,8 +798,8 @@ def _orient_to_air(vertices, faces, n_vertices):
     rank = np.arange(len(order)) - start[label[order]]
     chosen = order[rank < 15]
     owners = label[chosen]
-    front_air = _parity_in_air(intersector, centroid[chosen] + offset * normal[chosen])
-    back_air = _parity_in_air(intersector, centroid[chosen] - offset * normal[chosen])
+    front_air = in_air(centroid[chosen] + offset * normal[chosen])
+    back_air = in_air(centroid[chosen] - offset * normal[chosen])
     # +1: air in front only (right way); -1: air behind only; 0 abstains (a face in contact
     # with another surface, e.g. the underside of a box on the floor, has air on neither side)
     votes = np.bincount(owners, weights=front_air.astype(int) - back_air.astype(int), minlength=n)
@@ -615,6 +864,15 @@ def repair_mesh(
     n_vertices = len(vertices)
     faces, keep, degenerate = _drop_degenerate(vertices, faces, keep, scale_m)
     faces, keep, duplicates = _drop_duplicates(faces, keep, n_vertices)
+    # exact T-junctions are stitched even when merging is off
+    faces, keep, stitched = _stitch_t_junctions(
+        vertices, faces, keep, max(settings.merge_distance_m, 1e-9 * scale_m)
+    )
+    if stitched:
+        faces, keep, more_degenerate = _drop_degenerate(vertices, faces, keep, scale_m)
+        degenerate += more_degenerate
+    vertices, faces, split_vertices = _split_touching_pieces(vertices, faces, n_vertices)
+    n_vertices = len(vertices)
     faces, keep, non_manifold = _fix_non_manifold(vertices, faces, keep, n_vertices)
     faces, keep, debris_pieces, debris_faces = _drop_debris(
         vertices, faces, keep, n_vertices, settings.min_component_area_m2
@@ -652,6 +910,8 @@ def repair_mesh(
         merged_vertices=merged,
         degenerate_faces_removed=degenerate,
         duplicate_faces_removed=duplicates,
+        t_junctions_stitched=stitched,
+        touching_vertices_split=split_vertices,
         non_manifold_faces_removed=non_manifold,
         debris_components_removed=debris_pieces,
         debris_faces_removed=debris_faces,
@@ -710,8 +970,9 @@ def leak_test(
         Number of rays.
     interior_points : (P, 3) array, optional
         Points known to be in the air, used in turn as ray origins. Without them, origins are
-        uniform random points of the bounding box kept when a ray-parity vote puts them in the
-        air (an odd number of surface crossings: inside the envelope, outside obstacles).
+        uniform random points of the bounding box kept when ray parity, counted per piece,
+        puts them in the air: inside an envelope and inside no obstacle, also where
+        obstacles intersect (:class:`_AirTest`).
 
     A ray leaks when it hits nothing (escaped to infinity) or first hits a face from behind
     (it left the air through a hole, or the face points out of the air).
@@ -730,9 +991,10 @@ def leak_test(
     mesh.validate()
     if mesh.n_faces == 0:
         raise GeometryError("leak_test: expected a mesh with faces, got an empty mesh")
-    intersector = _ray_intersector(np.array(mesh.vertices), np.array(mesh.faces))
+    vertices, faces = np.array(mesh.vertices), np.array(mesh.faces)
+    intersector = _ray_intersector(vertices, faces)
     if interior_points is None:
-        origins = _origins_in_air(mesh, intersector, rng, n_rays)
+        origins = _origins_in_air(mesh, _AirTest(vertices, faces), rng, n_rays)
     else:
         interior = np.asarray(interior_points, dtype=np.float64)
         if interior.ndim != 2 or interior.shape[1] != 3 or len(interior) == 0:
@@ -752,8 +1014,8 @@ def leak_test(
     )
 
 
-def _origins_in_air(mesh, intersector, rng, n_rays: int) -> np.ndarray:
-    """Uniform points of the bounding box that a ray-parity vote puts in the air.
+def _origins_in_air(mesh, in_air: _AirTest, rng, n_rays: int) -> np.ndarray:
+    """Uniform points of the bounding box that ray parity puts in the air (:class:`_AirTest`).
 
     Points in general position rather than on the surface: rays from them meet coincident
     faces (a box standing flush on the floor) only within a small solid angle, which the
@@ -765,7 +1027,7 @@ def _origins_in_air(mesh, intersector, rng, n_rays: int) -> np.ndarray:
     for _ in range(6):  # resample until enough candidates pass (a handful of rounds)
         n_candidates = max(2 * (n_rays - n_kept), 64)
         candidates = rng.uniform(lo, hi, size=(n_candidates, 3))
-        good = candidates[_parity_in_air(intersector, candidates)]
+        good = candidates[in_air(candidates)]
         kept.append(good)
         n_kept += len(good)
         n_tried += n_candidates
