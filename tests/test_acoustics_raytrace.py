@@ -8,10 +8,14 @@ import numpy as np
 import pytest
 import trimesh
 
+from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources
+from sonicspec.acoustics.metrics import room_acoustic_figures
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.acoustics.theory import barron_clarity_db
 from sonicspec.errors import AcousticsError
 from sonicspec.testing import rooms
 from sonicspec.testing.rooms import extruded_room, shoebox
@@ -99,6 +103,66 @@ def test_t30_within_10_percent_of_eyring_with_air_absorption():
     eyring = np.array([eyring_t60(210.0, 242.0, 0.2, m) for m in air])
     assert np.all(np.abs(t30 / eyring - 1) < 0.10), (t30, eyring)
     assert res.escaped_ray_fraction == 0.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="synthesize_late gives each band's noise the band's whole histogram energy, while "
+    "an early tap's band carries only its share of a flat spectrum: the late tail is ~8 dB "
+    "too loud against the direct sound and image sources (issue 4); remove this mark with the fix",
+)
+def test_c50_follows_barrons_revised_theory():
+    """C50 of synthesised RIRs (our ISO 3382-1 routine) against Barron & Lee's revised theory.
+
+    Tolerance, 1.5 dB on the ISO 3382-1 single number (mean of the 500 Hz and 1 kHz bands),
+    against a JND of 1 dB. What the physics adds to the JND, as measured in this room:
+    * Barron's theory is a diffuse-field idealisation: reflected energy decaying exponentially
+      from the direct sound on. The tracer's own histograms (20 000 rays, no synthesis) match
+      an exact image-lattice sum for specular walls to 0.3 % in both windows, and with s = 0.5
+      give C50 0.6 dB below the theory at 5.35 m (scattering moves early energy later); at
+      1.6 m, where the direct sound weighs more, 0.05 dB.
+    * One band-noise realisation of the tail fluctuates in a 50 ms window (bandwidth × time is
+      9 at 250 Hz, 35 at 1 kHz): C50 per realisation varies by 1–2 dB per band. The mean over
+      24 realisations (the equivalent of ISO 3382-1's averaging over positions) leaves ±0.2 dB.
+    * Our per-band time zero (first sample within 20 dB of the band's peak) falls before the
+      direct sound where the zero-phase band filters ring ahead of it: 3 ms early at 500 Hz,
+      5 ms at 250 Hz, which lowers C50 there by 0.4 and 0.8 dB.
+    T for the theory is the RIRs' own T30 (as Barron used measured T): the T30-vs-Eyring error,
+    tested above, is kept out of the clarity comparison. 125 Hz is left out: the Schroeder
+    frequency 2000·sqrt(T/V) is 110 Hz here, so the 88–177 Hz band is modal, not diffuse.
+    Measured with a correct tail: the single number within 0.4 dB (1.6 m) and 1.1 dB
+    (5.35 m) of the theory over 6 seeds; per band 500 Hz–4 kHz within 1.5 dB.
+    Broken early/late splits miss by 1.9–3.7 dB (80 ms or 35 ms instead of 50 ms; time zero at
+    the RIR's first sample), and so does the current tail level (about −2.2 and −3.0 dB).
+    """
+    fs, bands = 16_000, tuple(BANDS_HZ[:6])  # 8 kHz is not below Nyquist at 16 kHz
+    verts, faces = shoebox(10.0, 7.0, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.5, n_bands=len(bands))
+    air = iso9613_energy_per_m(np.array(bands))
+    rcvs = np.array([RCV[0], [3.5, 4.0, 1.2]])  # 5.35 m and 1.58 m from the source
+    direct = direct_sound(scene, SRC, rcvs, air_m_per_band=air)
+    ism = image_sources(scene, SRC, rcvs, max_order=3, air_m_per_band=air)
+    settings = RayTraceSettings(n_rays=2000, max_time_s=1.2, specular_order_excluded=ism.max_order)
+    traces = trace_rays(scene, SRC, rcvs, np.random.default_rng(7), settings, air_m_per_band=air)
+    rng = np.random.default_rng(8)
+    for k, rcv in enumerate(rcvs):
+        early = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+        figs = [
+            room_acoustic_figures(
+                synthesize_rir(early, traces[k].histogram, fs, rng, max_length_s=1.2,
+                               bands_hz=bands),
+                fs, bands,
+            )
+            for _ in range(24)
+        ]  # fmt: skip
+        c50 = np.mean([f.c50_db for f in figs], axis=0)
+        t30 = np.mean([f.t30_s for f in figs], axis=0)
+        r = float(np.linalg.norm(rcv - SRC))
+        theory_mid = barron_clarity_db(r, 210.0, float(t30[2:4].mean()))
+        assert abs(c50[2:4].mean() - theory_mid) < 1.5, (r, c50, theory_mid)
+        # Single bands from 500 Hz: 0.5 dB more for the per-band time zero and noise.
+        theory = np.array([barron_clarity_db(r, 210.0, t) for t in t30])
+        assert np.all(np.abs(c50[2:] - theory[2:]) < 2.0), (r, c50, theory)
 
 
 def test_specular_shoebox_decays_slower_than_eyring():
