@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -69,28 +70,28 @@ def build_digest(plan: Plan) -> dict[str, str]:
     return out
 
 
-def test_two_builds_from_empty_stores_are_byte_identical(tmp_path: Path) -> None:
-    digests = []
-    for name in ("a", "b"):
-        folder = tmp_path / name
-        folder.mkdir()
-        plan = plan_for(write_spec(folder))
-        assert run_build(plan, cores=2) == 0
-        digests.append(build_digest(plan))
-        assert ArtifactStore(plan.store_dir).verify({j.key: j.step for j in plan.jobs}) == []
-    assert digests[0] == digests[1]
-    out = [k for k in digests[0] if k.startswith("out/")]
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> tuple[Plan, dict[str, str]]:
+    """One finished build of the test spec and its digests, shared by the tests below."""
+    folder = tmp_path_factory.mktemp("reference")
+    plan = plan_for(write_spec(folder))
+    assert run_build(plan, cores=2) == 0
+    return plan, build_digest(plan)
+
+
+def test_two_builds_from_empty_stores_are_byte_identical(reference, tmp_path: Path) -> None:
+    plan = plan_for(write_spec(tmp_path))
+    assert run_build(plan, cores=2) == 0
+    assert ArtifactStore(plan.store_dir).verify({j.key: j.step for j in plan.jobs}) == []
+    digest = build_digest(plan)
+    assert digest == reference[1]
+    out = [k for k in digest if k.startswith("out/")]
     # 4 groups x (2 sources, noise, music, 3 mixtures, metadata), dataset.json, 6 manifests.
     assert len(out) == 4 * 8 + 1 + 6, out
 
 
-def test_killed_build_resumes_to_the_same_result(tmp_path: Path) -> None:
-    clean = tmp_path / "clean"
-    clean.mkdir()
-    plan = plan_for(write_spec(clean))
-    assert run_build(plan, cores=1) == 0
-    expected = build_digest(plan)
-
+def test_killed_build_resumes_to_the_same_result(reference, tmp_path: Path) -> None:
+    expected = reference[1]
     killed = tmp_path / "killed"
     killed.mkdir()
     plan = plan_for(write_spec(killed))
@@ -128,29 +129,25 @@ def test_killed_build_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert leftovers == []
 
 
-def test_verify_command_catches_a_damaged_artifact(tmp_path: Path) -> None:
-    plan = plan_for(write_spec(tmp_path))
-    assert run_build(plan, cores=2) == 0
-    store = ArtifactStore(plan.store_dir)
+def test_verify_command_catches_a_damaged_artifact(reference, tmp_path: Path) -> None:
+    plan = reference[0]
+    shutil.copytree(plan.store_dir, tmp_path / "store")
+    store = ArtifactStore(tmp_path / "store")
     job = next(j for j in plan.jobs if j.step == "mesh")
     chunk = next(p for p in (store.path("mesh", job.key) / "vertices").rglob("*")
                  if p.is_file() and p.name != "zarr.json")
     chunk.write_bytes(chunk.read_bytes()[:-7])
-    result = subprocess.run([sys.executable, "-m", "sonicspec.cli", "verify", plan.store_dir],
+    result = subprocess.run([sys.executable, "-m", "sonicspec.cli", "verify", str(store.root)],
                             capture_output=True, text=True)
     assert result.returncode == 1
     assert f"mesh {job.key}" in result.stderr and "1 problem" in result.stderr
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="the test SLURM cluster needs root")
-def test_slurm_build_gives_the_same_bytes(tmp_path: Path) -> None:
+def test_slurm_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
     from sonicspec.testing.slurm import SlurmUnavailable, single_node_slurm
 
-    local = tmp_path / "local"
-    local.mkdir()
-    plan = plan_for(write_spec(local))
-    assert run_build(plan, cores=2) == 0
-    expected = build_digest(plan)
+    expected = reference[1]
     cluster = tmp_path / "cluster"
     cluster.mkdir()
     plan = plan_for(write_spec(cluster))
