@@ -5,8 +5,8 @@ debris, edges shared by more than two faces, holes where the scanner saw nothing
 wound either way. A ray tracer needs a closed surface whose normals all face the air
 (:mod:`sonicspec.geometry.mesh`). :func:`repair_mesh` runs, in order:
 
-1. merge vertices closer than ``merge_distance_m`` (closes cracks), unless both are
-   sealed (every edge at them already shared by two faces: merging would fold the surface);
+1. merge vertices closer than ``merge_distance_m`` that are two sides of a crack (both on
+   open edges; merging a vertex of an already closed surface would fold it);
 2. drop degenerate faces (repeated vertex, near-zero area) and duplicate faces (same three
    vertices, either winding: a two-sided sheet of zero thickness keeps one side);
 3. stitch T-junctions: a vertex of an open edge that lies within ``merge_distance_m`` of the
@@ -270,12 +270,13 @@ def _areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- repair steps
 def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
-    """Merge vertices closer than ``distance_m``, except two sealed ones.
+    """Merge vertices closer than ``distance_m`` when they are two sides of a crack.
 
-    A crack has open edges on both sides, so its vertices are unsealed. A vertex is sealed
-    when every edge at it is shared by exactly two faces: two sealed vertices that are close
-    lie on a surface that is already closed there (fine or noisy tessellation, a fold of a
-    scan's surface), and merging them would collapse an edge or glue two parts of the surface
+    A crack has open edges on both sides, so both of its vertices are on open (or otherwise
+    unpaired) edges; vertices used by no face may merge with anything. Two close vertices of
+    which one is sealed (every edge at it shared by exactly two faces) lie on a surface that
+    is already closed there (fine or noisy tessellation, a fold of a scan's surface, perhaps
+    beside a crack): merging them would collapse an edge or glue two parts of the surface
     into a fin or a pinch.
     """
     if distance_m <= 0 or len(vertices) < 2:
@@ -286,13 +287,14 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
     n = len(vertices)
     keys, _ = _undirected(faces, n)
     unique, faces_per_edge = np.unique(keys, return_counts=True)
-    sealed = np.zeros(n, bool)
-    sealed[np.unique(faces)] = True
-    sealed[np.concatenate(np.divmod(unique[faces_per_edge != 2], n))] = False
-    pairs = pairs[~(sealed[pairs[:, 0]] & sealed[pairs[:, 1]])]
+    used = np.zeros(n, bool)
+    used[np.unique(faces)] = True
+    unpaired = np.zeros(n, bool)
+    unpaired[np.concatenate(np.divmod(unique[faces_per_edge != 2], n))] = True
+    u, v = pairs[:, 0], pairs[:, 1]
+    pairs = pairs[(unpaired[u] & unpaired[v]) | ~used[u] | ~used[v]]
     if len(pairs) == 0:
         return vertices, faces, 0
-    n = len(vertices)
     graph = sparse.coo_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), (n, n))
     n_clusters, cluster = connected_components(graph, directed=False)
     # Each cluster moves to its mean position.
@@ -327,10 +329,14 @@ def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
     cannot close such a crack (no two vertices coincide); splitting the face (a, b, c) into the
     fan (a, m1, c), (m1, m2, c), …, (mk, b, c) makes every edge of the seam shared by two
     faces. A vertex counts as on an edge when it is an end of an open edge, lies within
-    ``tolerance_m`` of the edge's line and more than ``tolerance_m`` from both of its ends.
+    ``tolerance_m`` of the edge's line and more than ``tolerance_m`` from both of its ends;
+    it goes into the nearest such edge only.
+    Edges with more than two faces are split too (every face on them): there the whole side
+    of a T-junction lies on a line where two closed pieces touch, which
+    :func:`_split_touching_pieces` separates afterwards.
 
     Candidates come from one KD-tree query over the open edges' vertices (a ball around each
-    open edge's midpoint). A face is split along one edge per pass; a face with T-vertices on
+    edge's midpoint). A face is split along one edge per pass; a face with T-vertices on
     several edges is finished by the next passes (at most three).
 
     Returns (faces, keep_attrs, number of vertex-in-edge insertions).
@@ -340,12 +346,20 @@ def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
     for _ in range(3):
         keys, _ = _undirected(faces, n_vertices)
         _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        slot = np.flatnonzero(counts[inverse] == 1)  # open edges, as 3·face + corner
-        if len(slot) == 0:
+        open_edge = counts[inverse] == 1
+        if not open_edge.any():
             break
+        # edges to split: open ones, and crowded ones (where the whole side of a T-junction
+        # lies on a line along which two pieces touch); as 3·face + corner
+        slot = np.flatnonzero(counts[inverse] != 2)
         face, corner = np.divmod(slot, 3)
         a, b = faces[face, corner], faces[face, (corner + 1) % 3]
-        ends = np.unique(np.concatenate([a, b]))
+        open_faces, open_corners = np.divmod(np.flatnonzero(open_edge), 3)
+        ends = np.unique(
+            np.concatenate(
+                [faces[open_faces, open_corners], faces[open_faces, (open_corners + 1) % 3]]
+            )
+        )
         pa, pb = vertices[a], vertices[b]
         length = np.linalg.norm(pb - pa, axis=1)
         balls = cKDTree(vertices[ends]).query_ball_point(
@@ -369,7 +383,17 @@ def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
         edge, vertex, along = edge[on_edge], vertex[on_edge], along[on_edge]
         if len(edge) == 0:
             break
-        # one edge per face and pass: the face's first open edge that has T-vertices
+        # A vertex goes into the nearest edge only: where a sliver face is thinner than the
+        # tolerance, a T-vertex lies near both of its long edges but belongs to one.
+        by_distance = np.lexsort((across[on_edge], vertex))
+        first_of_vertex = np.r_[True, vertex[by_distance][1:] != vertex[by_distance][:-1]]
+        nearest_key = np.zeros(n_vertices, np.int64)
+        nearest_key[vertex[by_distance][first_of_vertex]] = keys[
+            slot[edge[by_distance][first_of_vertex]]
+        ]
+        nearest = keys[slot[edge]] == nearest_key[vertex]
+        edge, vertex, along = edge[nearest], vertex[nearest], along[nearest]
+        # one edge per face and pass: the face's first unpaired edge with T-vertices
         order = np.lexsort((along, slot[edge]))
         edge, vertex = edge[order], vertex[order]
         first_slot = np.full(len(faces), np.iinfo(np.int64).max)
@@ -390,7 +414,8 @@ def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
         untouched[split_faces] = False
         faces = np.concatenate([faces[untouched], new_faces])
         keep_attrs = np.concatenate([keep_attrs[untouched], new_attrs])
-        stitched += len(vertex)
+        # a T-junction on a crowded edge splits every face there: count (edge, vertex) pairs
+        stitched += len(np.unique(np.column_stack([keys[slot[edge]], vertex]), axis=0))
     return faces, keep_attrs, stitched
 
 
@@ -413,12 +438,11 @@ def _split_touching_pieces(vertices, faces, n_vertices):
     if n_pieces < 2:
         return vertices, faces, 0
     # vertices used by faces of more than one piece (few): look only at the faces around them
-    corner_piece = np.repeat(piece, 3)
-    lowest = np.full(n_vertices, n_pieces)
-    highest = np.full(n_vertices, -1)
-    np.minimum.at(lowest, faces.ravel(), corner_piece)
-    np.maximum.at(highest, faces.ravel(), corner_piece)
-    shared = (highest >= 0) & (lowest != highest)
+    incidence = sparse.csr_matrix(
+        (np.ones(faces.size, bool), (faces.ravel(), np.repeat(piece, 3))),
+        shape=(n_vertices, n_pieces),
+    )
+    shared = np.diff(incidence.indptr) > 1  # distinct pieces per vertex (duplicates summed)
     if not shared.any():
         return vertices, faces, 0
     near = np.flatnonzero(shared[faces].any(axis=1))
@@ -451,9 +475,11 @@ def _split_touching_pieces(vertices, faces, n_vertices):
 
 
 def _fix_non_manifold(vertices, faces, keep_attrs, n_vertices):
-    """Where more than two faces share an edge, drop the smallest until two remain.
+    """Where more than two faces share an edge, drop faces until two remain.
 
-    Dropping faces never raises another edge's count, so one pass suffices.
+    The faces dropped first are those of the smallest piece (joined by manifold edges; a fin
+    or a flap lying on the surface), then the smallest faces. Dropping faces never raises
+    another edge's count, so one pass suffices.
     """
     keys, face_of = _undirected(faces, n_vertices)
     order = np.argsort(keys, kind="stable")
@@ -463,13 +489,15 @@ def _fix_non_manifold(vertices, faces, keep_attrs, n_vertices):
     if len(bad) == 0:
         return faces, keep_attrs, 0
     areas = _areas(vertices, faces)
+    n_pieces, piece = connected_components(_manifold_edge_graph(faces, n_vertices), directed=False)
+    piece_area = np.bincount(piece, weights=areas, minlength=n_pieces)[piece]
     drop = np.zeros(len(faces), bool)
     for e in bad:
         incident = faces_sorted[start[e] : start[e] + counts[e]]
         incident = incident[~drop[incident]]
         if len(incident) > 2:
-            by_area = incident[np.argsort(areas[incident], kind="stable")]
-            drop[by_area[: len(incident) - 2]] = True
+            smallest = incident[np.lexsort((areas[incident], piece_area[incident]))]
+            drop[smallest[: len(incident) - 2]] = True
     return faces[~drop], keep_attrs[~drop], int(np.count_nonzero(drop))
 
 
@@ -721,10 +749,10 @@ class _AirTest:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
         self.n_pieces, self.piece = _face_components(faces, len(vertices))
         corners = vertices[faces]
-        lo = np.full((self.n_pieces, 3), np.inf)
-        hi = np.full((self.n_pieces, 3), -np.inf)
-        np.minimum.at(lo, self.piece, corners.min(axis=1))
-        np.maximum.at(hi, self.piece, corners.max(axis=1))
+        by_piece = np.argsort(self.piece, kind="stable")
+        first = np.searchsorted(self.piece[by_piece], np.arange(self.n_pieces))
+        lo = np.minimum.reduceat(corners.min(axis=1)[by_piece], first)
+        hi = np.maximum.reduceat(corners.max(axis=1)[by_piece], first)
         scale = float(np.linalg.norm(hi.max(axis=0) - lo.min(axis=0)))
         layer = _layers(lo, hi, 1e-3 * scale)[self.piece]
         self.layers = []
@@ -732,7 +760,7 @@ class _AirTest:
             in_layer = np.flatnonzero(layer == k)
             self.layers.append((_ray_intersector(vertices, faces[in_layer]), in_layer))
         # sample faces spread over each piece: evenly spaced ranks of the piece's faces
-        order = np.argsort(self.piece, kind="stable")
+        order = by_piece
         size = np.bincount(self.piece, minlength=self.n_pieces)
         start = np.cumsum(size) - size
         k = np.minimum(size, self.samples_per_piece)
