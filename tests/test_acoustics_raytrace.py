@@ -105,12 +105,6 @@ def test_t30_within_10_percent_of_eyring_with_air_absorption():
     assert res.escaped_ray_fraction == 0.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="synthesize_late gives each band's noise the band's whole histogram energy, while "
-    "an early tap's band carries only its share of a flat spectrum: the late tail is ~8 dB "
-    "too loud against the direct sound and image sources (issue 4); remove this mark with the fix",
-)
 def test_c50_follows_barrons_revised_theory():
     """C50 of synthesised RIRs (our ISO 3382-1 routine) against Barron & Lee's revised theory.
 
@@ -133,7 +127,8 @@ def test_c50_follows_barrons_revised_theory():
     Measured with a correct tail: the single number within 0.4 dB (1.6 m) and 1.1 dB
     (5.35 m) of the theory over 6 seeds; per band 500 Hz–4 kHz within 1.5 dB.
     Broken early/late splits miss by 1.9–3.7 dB (80 ms or 35 ms instead of 50 ms; time zero at
-    the RIR's first sample), and so does the current tail level (about −2.2 and −3.0 dB).
+    the RIR's first sample), and so did the tail before its band level was weighted by the
+    band's share of a flat spectrum (about −2.2 and −3.0 dB).
     """
     fs, bands = 16_000, tuple(BANDS_HZ[:6])  # 8 kHz is not below Nyquist at 16 kHz
     verts, faces = shoebox(10.0, 7.0, 3.0)

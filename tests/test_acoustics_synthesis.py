@@ -60,14 +60,37 @@ def test_band_amplitudes_are_applied() -> None:
 
 def test_late_tail_keeps_energy_and_decay() -> None:
     t60s = np.array([1.2, 1.0, 0.9, 0.8, 0.7, 0.5])
-    hist = exp_histogram(t60s, 1.5)
+    # A reverberant field 3 dB above the direct sound at 2 m (a strong direct sound would
+    # drop the decay curve below -5 dB at once and bias T30, whatever the synthesis).
+    hist = exp_histogram(t60s, 1.5, level=1e-2)
     rng = np.random.default_rng(1)
     rir = synthesize_rir(direct(2.0), hist, FS, rng, max_length_s=1.5)
     fig = room_acoustic_figures(rir, FS)
     # One noise realisation per band: a few % of Monte-Carlo spread, most at 125 Hz.
     assert fig.t30_s == pytest.approx(t60s, rel=0.08)
-    late = synthesize_late(hist, OctaveFilterBank(FS), int(1.5 * FS), np.random.default_rng(2))
-    assert np.sum(late**2) == pytest.approx(hist.energy.sum(), rel=0.05)
+    bank = OctaveFilterBank(FS)
+    late = synthesize_late(hist, bank, int(1.5 * FS), np.random.default_rng(2))
+    # Each band carries the histogram's energy times its share of a flat spectrum.
+    expected = float((hist.energy * bank.flat_energy_shares()[None, :]).sum())
+    assert np.sum(late**2) == pytest.approx(expected, rel=0.05)
+
+
+def test_tail_to_direct_energy_ratio_is_the_histograms() -> None:
+    """Regression: the tail gave every band the histogram's whole energy while a flat tap's band
+    holds only its share, so reverberation came out 5-8 dB too loud against the direct sound
+    (DRR and C50 too low)."""
+    r = 4.0
+    hist = exp_histogram(np.full(N_BANDS, 0.8), 1.2, level=0.05 / (4 * math.pi * r) ** 2)
+    rir = synthesize_rir(direct(r), hist, FS, np.random.default_rng(3), max_length_s=1.2)
+    tap = synthesize_rir(direct(r), None, FS, np.random.default_rng(3), max_length_s=1.2)
+    tail = rir - np.pad(tap, (0, rir.size - tap.size))
+    ratio = np.sum(tail**2) / np.sum(tap**2)
+    # Per band the histogram says 0.05 / bin_s * Σ decay ≈ ratio_hist; a flat tail keeps it
+    # up to the crossovers' share (Σ shares = 0.94 at 16 kHz).
+    ratio_hist = hist.energy[:, 0].sum() * (4 * math.pi * r) ** 2
+    shares = OctaveFilterBank(FS).flat_energy_shares()
+    assert shares.sum() == pytest.approx(0.94, abs=0.02)
+    assert ratio == pytest.approx(ratio_hist * shares.sum(), rel=0.05)
 
 
 def test_same_generator_same_bytes() -> None:

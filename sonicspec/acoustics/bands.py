@@ -96,6 +96,21 @@ class OctaveFilterBank:
             out[k] = below * above
         return out
 
+    def flat_energy_shares(self, n_fft: int = 1 << 16) -> np.ndarray:
+        """Share of a flat spectrum's energy that falls in each band, ``(n_bands,)``.
+
+        An impulse of amplitude ``A`` has energy ``A²``; band ``b`` holds ``A² · share_b`` of it
+        (Parseval over the band's response). Energies quoted "per band" for a flat source —
+        the ray tracer's histograms — must be weighted by these shares to become band energies
+        of a signal.
+        """
+        resp = self.responses(n_fft) ** 2
+        weights = np.full(resp.shape[1], 2.0)  # rfft bins stand for two full-spectrum bins
+        weights[0] = 1.0
+        if n_fft % 2 == 0:
+            weights[-1] = 1.0
+        return (resp * weights).sum(axis=1) / n_fft
+
     def padding(self) -> int:
         """Samples of zero padding that keep circular wrap-around negligible.
 

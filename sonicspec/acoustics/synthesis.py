@@ -8,8 +8,13 @@
   to one, an arrival with equal amplitude in every band comes out as a clean, flat tap.
 * **Late part** (the ray tracer's energy histogram): independent white Gaussian noise per band,
   band-filtered by the same bank; in every band the noise is scaled so that the energy it
-  carries in each histogram bin equals the histogram's (gains interpolated linearly between bin
-  centres, so the envelope has no steps), and the bands are summed. Gaussian noise has full
+  carries in each histogram bin equals the histogram's times the band's share of a flat
+  spectrum (gains interpolated linearly between bin centres, so the envelope has no steps), and
+  the bands are summed. The share matters: the histogram, like an arrival's band amplitudes,
+  quotes each band as if the whole flat spectrum were in it (the direct sound is ``1/(4πr)`` in
+  every band), while the band of a flat tap holds only its share of the tap's energy — so the
+  tail gets the same weighting, and the direct-to-reverberant ratio of the RIR is the
+  histogram's. Gaussian noise has full
   reflection density from the first bin on; since the histogram holds only what the image
   sources do not render (late and diffuse energy), its first bins are weak, which limits the
   effect of this approximation. The histogram and the arrivals never hold the same energy (the
@@ -86,6 +91,7 @@ def synthesize_late(histogram: EnergyHistogram, bank: OctaveFilterBank, n_sample
     # Independent noise per band: bands of one noise would correlate in the crossovers and
     # add energy there; with independent noises the band energies simply add.
     white = rng.standard_normal((bank.n_bands, n_samples))
+    e = e * bank.flat_energy_shares()[None, :]
     noise_bands = np.stack([bank.split(white[b])[b] for b in range(bank.n_bands)])
     t = np.arange(n_samples)
     k = np.minimum((t / bin_len).astype(np.int64), e.shape[0] - 1)
