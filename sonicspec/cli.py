@@ -117,8 +117,7 @@ def _last_plan_path(plan) -> Path:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from sonicspec.plan.compile import compile_spec, plan_changes
-    from sonicspec.plan.model import Plan
+    from sonicspec.plan.compile import compile_spec, plan_changes, recorded_keys
     from sonicspec.plan.summary import format_summary, summarize
     from sonicspec.stages.workflow import progress
     from sonicspec.store import ArtifactStore
@@ -132,7 +131,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         return EXIT_OK
     plan = compile_spec(loaded)
     last = _last_plan_path(plan)
-    old = Plan.read(last) if last.is_file() else None
+    old = recorded_keys(last)
     changes = plan_changes(old, plan)
     done = {p.step: p.done for p in progress(plan, ArtifactStore(plan.store_dir))}
     steps = {

@@ -167,6 +167,21 @@ def test_full_plan_of_the_demo(tmp_path: Path) -> None:
     assert plan["steps"]["mesh"] == {"jobs": 3, "in_store": 0, "kept": 0, "added": 3,
                                      "dropped": 0}
     assert plan["store_dir"] == str(tmp_path / "out" / "store")
+    # The last build's plan made by another sonicspec version (a stage's version bumped, so
+    # one step's keys no longer re-hash) still tells what changed: that step is all new.
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import load_spec
+
+    built = compile_spec(load_spec(spec)).to_dict()
+    for job in built["jobs"]:
+        if job["step"] == "rir":
+            job["key"] = "0" * 64
+    last = tmp_path / "out" / "store" / "plans" / "last-build-demo.json"
+    last.parent.mkdir(parents=True)
+    last.write_text(json.dumps(built))
+    plan = json.loads(run_cli("plan", "--json", str(spec)).stdout)
+    assert plan["steps"]["mesh"]["kept"] == 3 and plan["steps"]["mesh"]["added"] == 0
+    assert plan["steps"]["rir"]["added"] == 4 and plan["steps"]["rir"]["dropped"] == 1
 
 
 def test_plan_on_invalid_spec_exits_2(tmp_path: Path) -> None:

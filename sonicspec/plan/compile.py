@@ -426,11 +426,32 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     )
 
 
-def plan_changes(old: Plan | None, new: Plan) -> dict[str, dict[str, int]]:
-    """Per step: jobs kept, added and dropped relative to ``old`` (the last build's plan)."""
+def recorded_keys(path: Path) -> dict[str, set[str]] | None:
+    """Keys per step recorded in a plan file, without re-checking them.
+
+    The last build's plan may come from another sonicspec version (a stage's version bumped,
+    so its keys no longer re-hash): it still says which keys were built, which is all that
+    "what changed since the last build" needs. None if the file is absent or unreadable.
+    """
+    try:
+        data = json.loads(Path(path).read_text())
+        out: dict[str, set[str]] = {}
+        for item in data["jobs"]:
+            out.setdefault(str(item["step"]), set()).add(str(item["key"]))
+        return out
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def plan_changes(old: Plan | Mapping[str, set[str]] | None, new: Plan
+                 ) -> dict[str, dict[str, int]]:
+    """Per step: jobs kept, added and dropped relative to ``old`` (the last build's plan, or
+    its keys per step)."""
     old_keys: Mapping[str, set[str]] = {}
-    if old is not None:
+    if isinstance(old, Plan):
         old_keys = {step: {j.key for j in jobs} for step, jobs in old.by_step().items()}
+    elif old is not None:
+        old_keys = old
     out = {}
     for step, jobs in new.by_step().items():
         keys = {j.key for j in jobs}
