@@ -2,6 +2,7 @@
 
 Reproduce:  python bench/bench_tracer.py            (about a minute on 2 cores)
             python bench/bench_tracer.py --pra      (adds pyroomacoustics' hybrid simulator)
+            python bench/bench_tracer.py --only trajectory   (the trajectory case alone)
 
 Figures printed:
 * raw embreex first-hit rate (the ceiling) in the 10 x 7 x 3 m shoebox, 1 and 2 threads;
@@ -9,7 +10,10 @@ Figures printed:
   shadow ray per receiver, sphere tests and the bookkeeping in numpy);
 * one RIR's histograms (direct + image sources order 3 + rays) at 2 000 and 20 000 rays, with
   T30 per band against Eyring (with ISO 9613-1 air absorption) and the seed-to-seed spread;
-* N = 1, 10, 100 receivers traced at once.
+* N = 1, 10, 100 receivers traced at once;
+* trajectory: 100 source points along a 5 m line, static mic — sonicspec's ``simulate_rirs``
+  (one trace from the mic, reciprocity) against 100 separate pyroomacoustics hybrid RIRs, side
+  by side, with times, T30 per band against Eyring, and the tracer on 1 vs 2 threads.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.stages import rir as rir_stage
 
 BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
 SIZE = (10.0, 7.0, 3.0)
@@ -160,15 +165,137 @@ def one_rir(
     return energy, h.bin_s, t1 - t0, t2 - t1, res[0]
 
 
+TRAJ_MIC = np.array([5.0, 5.5, 1.6])
+TRAJ_LINE = (np.array([2.5, 2.0, 1.5]), np.array([7.5, 2.0, 1.5]))  # 5 m, 3.5-4.3 m from the mic
+
+
+def _timed(module, name: str, totals: dict[str, float]) -> None:
+    """Wrap ``module.name`` so its wall time adds up in ``totals[name]``."""
+    inner = getattr(module, name)
+
+    def wrapper(*args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            totals[name] = totals.get(name, 0.0) + time.perf_counter() - t
+
+    setattr(module, name, wrapper)
+
+
+def _t30_stats(rirs: list[np.ndarray], fs: int, bands: tuple[float, ...]) -> np.ndarray:
+    from sonicspec.acoustics.metrics import room_acoustic_figures
+
+    return np.array([room_acoustic_figures(r, fs, bands).t30_s for r in rirs])
+
+
+def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
+    """One static mic, a moving source: one trace for all points vs one pra RIR per point."""
+    from sonicspec.acoustics.bands import default_bands
+
+    fs = 16_000
+    bands = default_bands(fs)  # the spec's "auto": 125 Hz - 4 kHz at 16 kHz
+    settings = rir_stage.RirSettings(
+        sample_rate_hz=fs, bands_hz=bands, rays=n_rays, image_source_order=3,
+        max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True, temperature_c=20.0,
+        relative_humidity_pct=50.0, transmission=False, diffuse_rain=True,
+        receiver_radius_m=0.1, histogram_bin_s=0.001, speed_of_sound_m_s=343.0,
+    )  # fmt: skip
+    v, f = shoebox(*SIZE)
+    n, b = len(f), len(bands)
+    scene = AcousticScene(v, f, np.full((n, b), 0.2), np.full((n, b), 0.5), np.zeros((n, b)))
+    a, z = TRAJ_LINE
+    points = a + np.linspace(0.0, 1.0, n_points)[:, None] * (z - a)
+    air = iso9613_energy_per_m(np.array(bands))
+    eyring = 24 * math.log(10) * 210.0 / (343.0 * (-242.0 * math.log(0.8) + 4 * air * 210.0))
+    print(f"\n## trajectory: {n_points} source points on a 5 m line, static mic, 10 x 7 x 3 m, "
+          f"alpha 0.2, s 0.5, {n_rays} rays, ISM order 3, {fs} Hz, bands {list(bands)}")
+    print("Eyring T30 [s]:", np.round(eyring, 3))
+
+    # sonicspec: the stage's own function, its pieces timed in passing
+    totals: dict[str, float] = {}
+    for name in ("direct_sound", "image_sources", "trace_rays", "synthesize_rir"):
+        _timed(rir_stage, name, totals)
+    t = time.perf_counter()
+    rirs, facts = rir_stage.simulate_rirs(scene, TRAJ_MIC, points, settings,
+                                          np.random.default_rng(0))
+    t_ss = time.perf_counter() - t
+    rest = t_ss - sum(totals.values())
+    print(f"sonicspec simulate_rirs: {t_ss:6.2f} s for {n_points} RIRs "
+          f"({t_ss / n_points * 1e3:.0f} ms/RIR): trace {totals['trace_rays']:.2f} s, image "
+          f"sources {totals['image_sources']:.2f} s, direct {totals['direct_sound']:.2f} s, "
+          f"synthesis {totals['synthesize_rir']:.2f} s, other {rest:.2f} s; escaped "
+          f"{max(fc['escaped_ray_fraction'] for fc in facts):.1e}")
+    t30_ss = _t30_stats([r[0] for r in rirs], fs, bands)
+
+    # the tracer alone on 1 and 2 threads (2 000 rays in 4 batches, all points as receivers)
+    for n_threads in (1, 2):
+        ray_settings = RayTraceSettings(n_rays=n_rays, max_time_s=1.5, batch_size=n_rays // 4)
+        t = time.perf_counter()
+        trace_rays(scene, TRAJ_MIC, points, np.random.default_rng(1), ray_settings, air,
+                   n_threads=n_threads)
+        print(f"  tracer alone, {n_threads} thread(s), {n_points} receivers: "
+              f"{time.perf_counter() - t:6.2f} s")
+
+    try:
+        import pyroomacoustics as pra
+    except ImportError:
+        print("pyroomacoustics not installed: the comparison is skipped")
+        return
+
+    def pra_room(sources, mics):
+        room = pra.ShoeBox(list(SIZE), fs=fs, materials=pra.Material(0.2, 0.5), max_order=3,
+                           ray_tracing=True, air_absorption=True)
+        room.set_ray_tracing(n_rays=n_rays)
+        for src in sources:
+            room.add_source(list(src))
+        room.add_microphone_array(np.asarray(mics, dtype=float).T)
+        return room
+
+    np.random.seed(0)  # noqa: NPY002 — pyroomacoustics draws from numpy's global generator
+    t = time.perf_counter()
+    pra_rirs = []
+    for p in points:
+        room = pra_room([p], [TRAJ_MIC])
+        room.compute_rir()
+        pra_rirs.append(np.asarray(room.rir[0][0]))
+    t_pra = time.perf_counter() - t
+    print(f"pyroomacoustics, {n_points} separate hybrid RIRs: {t_pra:6.2f} s "
+          f"({t_pra / n_points * 1e3:.0f} ms/RIR)")
+    # pyroomacoustics with reciprocity too: one source at the mic, every point a microphone
+    t = time.perf_counter()
+    room = pra_room([TRAJ_MIC], points)
+    room.compute_rir()
+    t_pra_rec = time.perf_counter() - t
+    pra_rec = [np.asarray(room.rir[m][0]) for m in range(n_points)]
+    print(f"pyroomacoustics, reciprocal (1 source at the mic, {n_points} mics): "
+          f"{t_pra_rec:6.2f} s")
+    print(f"speed-up of simulate_rirs: {t_pra / t_ss:5.1f}x {n_points} separate pra RIRs "
+          f"(target >= 20x), {t_pra_rec / t_ss:5.1f}x pra reciprocal")
+    t30_pra = _t30_stats(pra_rirs, fs, bands)
+    t30_rec = _t30_stats(pra_rec, fs, bands)
+    print("T30 over the points, per band: mean [s], mean error vs Eyring %, spread (std) %")
+    for label, t30 in (("sonicspec", t30_ss), ("pra separate", t30_pra),
+                       ("pra reciprocal", t30_rec)):
+        mean = np.nanmean(t30, axis=0)
+        print(f"  {label:15s} {np.round(mean, 3)}  err {np.round((mean / eyring - 1) * 100, 1)}"
+              f"  spread {np.round(np.nanstd(t30, axis=0) / mean * 100, 1)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pra", action="store_true", help="also time pyroomacoustics' hybrid")
+    parser.add_argument("--only", choices=["trajectory"], help="run just this case")
     args = parser.parse_args()
     print(
         f"# bench_tracer  python {platform.python_version()}  numpy {np.__version__}  "
         f"{platform.machine()}  cores={len(__import__('os').sched_getaffinity(0))}"
     )
-    print("# reproduce: python bench/bench_tracer.py" + (" --pra" if args.pra else ""))
+    print("# reproduce: python bench/bench_tracer.py" + (" --pra" if args.pra else "")
+          + (f" --only {args.only}" if args.only else ""))
+    if args.only == "trajectory":
+        trajectory()
+        return
     air = iso9613_energy_per_m(BANDS_HZ)
     scene = scene_for(0.2, 0.5)
     raw_embree(scene)
@@ -297,6 +424,7 @@ def main() -> None:
                 dt = time.perf_counter() - t
                 rt = pra.experimental.measure_rt60(room.rir[0][0], fs=16_000, decay_db=30)
                 print(f"{n_rays:6d} rays, seed {seed}: {dt:6.2f} s, broadband T30 {rt:.3f} s")
+        trajectory()
 
 
 if __name__ == "__main__":
