@@ -11,6 +11,7 @@ at its band centre (transitions narrower than an octave never reach a centre).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Sequence
@@ -40,6 +41,21 @@ def _lowpass(freqs: np.ndarray, edge_hz: float, width_oct: float) -> np.ndarray:
     x = np.clip(x, 0.0, 1.0)
     out = np.cos(0.5 * np.pi * x) ** 2
     out[freqs <= 0] = 1.0
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def _responses(sample_rate_hz: float, bands_hz: tuple[float, ...], transition_octaves: float,
+               n_fft: int) -> np.ndarray:
+    freqs = np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz)
+    edges = [c * math.sqrt(2.0) for c in bands_hz[:-1]]  # between band k and k + 1
+    lows = [_lowpass(freqs, e, transition_octaves) for e in edges]
+    out = np.empty((len(bands_hz), freqs.size))
+    for k in range(len(bands_hz)):
+        below = lows[k] if k < len(lows) else np.ones_like(freqs)
+        above = 1.0 - lows[k - 1] if k > 0 else np.ones_like(freqs)
+        out[k] = below * above
+    out.flags.writeable = False
     return out
 
 
@@ -85,16 +101,12 @@ class OctaveFilterBank:
         return len(self.bands_hz)
 
     def responses(self, n_fft: int) -> np.ndarray:
-        """Magnitude (= real, zero-phase) response of each band on the rfft grid, (n_bands, F)."""
-        freqs = np.fft.rfftfreq(int(n_fft), 1.0 / self.sample_rate_hz)
-        edges = [c * math.sqrt(2.0) for c in self.bands_hz[:-1]]  # between band k and k + 1
-        lows = [_lowpass(freqs, e, self.transition_octaves) for e in edges]
-        out = np.empty((self.n_bands, freqs.size))
-        for k in range(self.n_bands):
-            below = lows[k] if k < len(lows) else np.ones_like(freqs)
-            above = 1.0 - lows[k - 1] if k > 0 else np.ones_like(freqs)
-            out[k] = below * above
-        return out
+        """Magnitude (= real, zero-phase) response of each band on the rfft grid, (n_bands, F).
+
+        Cached (read-only): synthesis asks for the same grid for every RIR it makes.
+        """
+        return _responses(self.sample_rate_hz, self.bands_hz, self.transition_octaves,
+                          int(n_fft))
 
     def flat_energy_shares(self, n_fft: int = 1 << 16) -> np.ndarray:
         """Share of a flat spectrum's energy that falls in each band, ``(n_bands,)``.
