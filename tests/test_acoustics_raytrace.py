@@ -124,8 +124,8 @@ def test_c50_follows_barrons_revised_theory():
     T for the theory is the RIRs' own T30 (as Barron used measured T): the T30-vs-Eyring error,
     tested above, is kept out of the clarity comparison. 125 Hz is left out: the Schroeder
     frequency 2000·sqrt(T/V) is 110 Hz here, so the 88–177 Hz band is modal, not diffuse.
-    Measured with a correct tail: the single number within 0.4 dB (1.6 m) and 1.1 dB
-    (5.35 m) of the theory over 6 seeds; per band 500 Hz–4 kHz within 1.5 dB.
+    Measured with a correct tail: the single number within 0.4 dB (1.6 m) and 1.2 dB
+    (5.35 m) of the theory over 6 seeds; per band 500 Hz–4 kHz within 1.6 dB.
     Broken early/late splits miss by 1.9–3.7 dB (80 ms or 35 ms instead of 50 ms; time zero at
     the RIR's first sample), and so did the tail before its band level was weighted by the
     band's share of a flat spectrum (about −2.2 and −3.0 dB).
