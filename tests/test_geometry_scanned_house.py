@@ -40,3 +40,20 @@ def test_floor_plan_shows_the_rooms_joined_by_doors(repaired) -> None:
     # Points inside the walls between rooms are not walkable.
     wall_points = np.array([[4.1, 1.0], [4.1, 4.0], [3.0, 5.1]])
     assert np.all(grid.component_at(wall_points) == -1)
+
+
+def test_a_scan_with_t_junctions_is_stitched_closed() -> None:
+    """The scanned house with, on top of its other damage, 60 seam edges bisected on one side
+    only: repair stitches every T-junction and the result is watertight and does not leak."""
+    house = scanned_house(np.random.default_rng(11), t_junctions=60)
+    assert house.n_t_junctions > 50
+    settings = RepairSettings(max_hole_size_m=2.0, leak_test_rays=20_000, if_not_watertight="error")
+    mesh, report = repair_mesh(house.damaged, settings, np.random.default_rng(0))
+    assert report.t_junctions_stitched == house.n_t_junctions
+    assert report.watertight and report.after.inconsistent_edges == 0
+    assert report.holes_closed == 1  # only the missing panel is a hole
+    assert report.leak.leak_fraction == 0.0
+    assert mesh.air_volume() == pytest.approx(house.clean.air_volume(), rel=2e-3)
+    # the T-junctions are drawn last: the rest of the damage is the plain scan's
+    plain = scanned_house(np.random.default_rng(11)).damaged.vertices
+    np.testing.assert_array_equal(house.damaged.vertices[: len(plain)], plain)

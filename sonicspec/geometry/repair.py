@@ -11,7 +11,7 @@ wound either way. A ray tracer needs a closed surface whose normals all face the
    vertices, either winding: a two-sided sheet of zero thickness keeps one side);
 3. stitch T-junctions: a vertex of an open edge that lies within ``merge_distance_m`` of the
    inside of another open edge (the two sides of a crack were tessellated differently) splits
-   that edge's face there, so both sides share vertices and edges;
+   that edge's face there, so both sides share vertices and edges (:func:`_stitch_t_junctions`);
 4. make edges manifold: where closed pieces touch or cross at shared vertices (a line of
    edges with four faces, two from each piece, or a single pinch vertex), give each piece its
    own copies of those vertices; elsewhere, where more than two faces share an edge, drop the
@@ -74,7 +74,9 @@ class RepairSettings:
     Attributes
     ----------
     merge_distance_m : float
-        Vertices closer than this (metres) are merged.
+        Vertices on open edges closer than this (metres) are merged (the two sides of a
+        crack), and a vertex of an open edge within this distance of another open edge's
+        inside is stitched into it (a T-junction).
     min_component_area_m2 : float
         Connected pieces with less total area (m²) are removed as debris.
     max_hole_size_m : float
@@ -330,10 +332,9 @@ def _stitch_t_junctions(vertices, faces, keep_attrs, tolerance_m: float):
     fan (a, m1, c), (m1, m2, c), …, (mk, b, c) makes every edge of the seam shared by two
     faces. A vertex counts as on an edge when it is an end of an open edge, lies within
     ``tolerance_m`` of the edge's line and more than ``tolerance_m`` from both of its ends;
-    it goes into the nearest such edge only.
-    Edges with more than two faces are split too (every face on them): there the whole side
-    of a T-junction lies on a line where two closed pieces touch, which
-    :func:`_split_touching_pieces` separates afterwards.
+    it goes into the nearest such edge only. Edges with more than two faces are split too
+    (every face on them): there the whole side of a T-junction lies on a line where two
+    closed pieces touch, which :func:`_split_touching_pieces` separates afterwards.
 
     Candidates come from one KD-tree query over the open edges' vertices (a ball around each
     edge's midpoint). A face is split along one edge per pass; a face with T-vertices on

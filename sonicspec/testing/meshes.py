@@ -323,8 +323,9 @@ class ScannedHouse:
 
     ``clean`` is watertight with normals into the air. ``damaged`` has, on top of it: vertex
     noise, duplicated (split) vertices that open cracks, one missing wall panel, flipped faces,
-    duplicated faces and a small piece of floating debris. ``missing_panel_m`` is the panel's
-    (y0, y1, z0, z1) on the west wall x = 0 of the first room.
+    duplicated faces, a small piece of floating debris and, if asked for, T-junctions (an edge
+    bisected on one side only). ``missing_panel_m`` is the panel's (y0, y1, z0, z1) on the
+    west wall x = 0 of the first room.
     """
 
     clean: SceneMesh
@@ -333,6 +334,7 @@ class ScannedHouse:
     n_flipped: int
     n_split_vertices: int
     n_duplicated_faces: int
+    n_t_junctions: int = 0
 
     @staticmethod
     def contains_air(points: np.ndarray) -> np.ndarray:
@@ -454,10 +456,14 @@ def scanned_house(
     flipped_fraction: float = 0.05,
     split_fraction: float = 0.05,
     duplicated_faces: int = 10,
+    t_junctions: int = 0,
 ) -> ScannedHouse:
     """The synthetic house and a copy with scan damage (see :class:`ScannedHouse`).
 
-    Randomness (noise, which faces flip, which vertices split) comes from ``rng``.
+    Randomness (noise, which faces flip, which vertices split) comes from ``rng``;
+    ``t_junctions`` faces (drawn last, so the other damage does not depend on it) get one edge
+    bisected at its midpoint on their side only, while the face across keeps the whole edge:
+    the two sides of that seam are tessellated differently, as where scan tiles meet.
     """
     clean = house_mesh()
     vertices = clean.vertices + rng.normal(scale=noise_m, size=clean.vertices.shape)
@@ -498,12 +504,20 @@ def scanned_house(
         [[2.0, 2.5, 1.2], [2.04, 2.5, 1.2], [2.04, 2.54, 1.2], [2.0, 2.54, 1.2]]
     )
     debris_faces = np.array([[0, 1, 2], [0, 2, 3]]) + len(vertices)
+    vertices = np.concatenate([vertices, debris_vertices])
+    faces = redirected[order]
+    face_label = clean.face_label[order]
+    n_t = 0
+    if t_junctions > 0:
+        vertices, faces, face_label, n_t = _add_t_junctions(
+            vertices, faces, face_label, t_junctions, rng
+        )
     damaged = SceneMesh(
-        vertices=np.concatenate([vertices, debris_vertices]),
-        faces=np.concatenate([redirected[order], debris_faces]),
-        face_material=np.zeros(len(order) + 2, np.int32),
+        vertices=vertices,
+        faces=np.concatenate([faces, debris_faces]),
+        face_material=np.zeros(len(faces) + 2, np.int32),
         materials=clean.materials,
-        face_label=np.concatenate([clean.face_label[order], [0, 0]]),
+        face_label=np.concatenate([face_label, [0, 0]]),
         labels=clean.labels,
     )
     return ScannedHouse(
@@ -513,4 +527,34 @@ def scanned_house(
         n_flipped=int(np.count_nonzero(flip & keep)),
         n_split_vertices=n_split,
         n_duplicated_faces=duplicated_faces,
+        n_t_junctions=n_t,
     )
+
+
+def _add_t_junctions(vertices, faces, face_label, count: int, rng: np.random.Generator):
+    """Bisect one edge of ``count`` random faces on their own side only (T-junctions).
+
+    Each picked face (a, b, c) becomes (a, m, c), (m, b, c) with m the midpoint of a-b; the
+    face across a-b keeps it whole. Duplicated faces are not picked (their copy would keep the
+    edge whole on the same side), and an edge picked twice (from both sides) is bisected once.
+    Returns (vertices, faces, face_label, number of T-junctions).
+    """
+    triples = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(triples, axis=0, return_inverse=True, return_counts=True)
+    single = np.flatnonzero(counts[inverse.ravel()] == 1)
+    picked = rng.choice(single, size=min(count, len(single)), replace=False)
+    corner = rng.integers(0, 3, len(picked))
+    a, b = faces[picked, corner], faces[picked, (corner + 1) % 3]
+    c = faces[picked, (corner + 2) % 3]
+    # split vertices have copies 0.1 mm away: tell edges apart by their midpoints (to 1 mm)
+    midpoint = np.round(0.5 * (vertices[a] + vertices[b]), 3)
+    _, first = np.unique(midpoint, axis=0, return_index=True)
+    first = np.sort(first)
+    picked, a, b, c = picked[first], a[first], b[first], c[first]
+    m = len(vertices) + np.arange(len(picked))
+    kept = np.ones(len(faces), bool)
+    kept[picked] = False
+    faces = np.concatenate([faces[kept], np.column_stack([a, m, c]), np.column_stack([m, b, c])])
+    face_label = np.concatenate([face_label[kept], face_label[picked], face_label[picked]])
+    vertices = np.concatenate([vertices, 0.5 * (vertices[a] + vertices[b])])
+    return vertices, faces, face_label, len(picked)
