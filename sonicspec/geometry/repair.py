@@ -827,8 +827,8 @@ def _orient_to_air(vertices, faces, n_vertices):
     rank = np.arange(len(order)) - start[label[order]]
     chosen = order[rank < 15]
     owners = label[chosen]
-    front_air = in_air(centroid[chosen] + offset * normal[chosen])
-    back_air = in_air(centroid[chosen] - offset * normal[chosen])
+    probes = centroid[chosen] + offset * normal[chosen] * np.array([[[1.0]], [[-1.0]]])
+    front_air, back_air = in_air(probes.reshape(-1, 3)).reshape(2, -1)
     # +1: air in front only (right way); -1: air behind only; 0 abstains (a face in contact
     # with another surface, e.g. the underside of a box on the floor, has air on neither side)
     votes = np.bincount(owners, weights=front_air.astype(int) - back_air.astype(int), minlength=n)
