@@ -5,10 +5,13 @@ microphone* (unit vectors from the mic towards where the sound comes from, scene
 
 * **Arrays** of omnidirectional capsules: every arrival is a plane wave (far field), so capsule
   ``m`` at offset ``p_m`` from the array centre hears it ``−(p_m · d)/c`` seconds relative to the
-  centre — earlier when the capsule points towards the source. The late tail is independent
-  noise per capsule with the mono tail's per-band energy (a diffuse field is treated as
-  incoherent between capsules; the true coherence ``sinc(k·d)`` is neglected, which matters
-  below ``c / (2 d)`` for capsule distance ``d``).
+  centre — earlier when the capsule points towards the source. The late tail is a diffuse
+  field: independent noise per capsule with the mono tail's per-band energy, then mixed per
+  frequency so that capsules ``d`` apart have the spherically isotropic coherence
+  ``Γ(f) = sin(kd)/(kd)``, ``k = 2πf/c`` (Habets & Gannot 2007: ``Y(f) = C(f)ᵀ X(f)`` with
+  ``Cᵀ C = Γ``, here ``C = √Λ Vᵀ`` from the eigen-decomposition, which stays valid where ``Γ``
+  is singular, as at low frequencies where every capsule hears the same). Each capsule keeps
+  its energy (``Γ`` has a unit diagonal).
 * **Ambisonics**, orders 1–3, ACN channel order, SN3D normalisation (AmbiX): every arrival is
   encoded with the real spherical harmonics of its direction (:func:`sh_sn3d`). The late tail
   is independent noise per channel, with the diffuse-field energy of SN3D channels: a channel
@@ -108,9 +111,42 @@ def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
         delays = -(arrivals.directions @ p) / speed_of_sound_m_s
         out[m] = synthesize_early(_scaled(arrivals, np.ones(len(arrivals)), delays), bank, n,
                                   taps)
-        if histogram is not None:
-            out[m] += synthesize_late(histogram, bank, n, rng)
+    if histogram is not None:
+        tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in offsets])
+        out += diffuse_coherence(tails, offsets, sample_rate_hz, speed_of_sound_m_s)
     return out
+
+
+def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_hz: float,
+                      speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+    """Mix independent signals ``(M, n)`` into a diffuse field heard at ``positions_m``.
+
+    Per frequency, the mixing matrix ``C = √Λ Vᵀ`` of ``Γ = V Λ Vᵀ``, ``Γ_ij = sinc(k d_ij)``,
+    gives outputs with coherence ``Γ`` and each input's power spectrum (when the inputs have
+    equal spectra, as independent tails of one histogram do). Zero-phase filters of length
+    about ``max d / c``; the signals are padded by that much so nothing wraps around.
+    """
+    x = np.asarray(signals, dtype=np.float64)
+    pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+    if x.ndim != 2 or x.shape[0] != len(pos):
+        raise AcousticsError(f"diffuse_coherence: expected one signal (M, n) per position "
+                             f"({len(pos)}), got {x.shape}")
+    if len(pos) < 2:
+        return x.copy()
+    d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+    n = x.shape[1]
+    pad = math.ceil(4 * d.max() / speed_of_sound_m_s * sample_rate_hz) + 16
+    n_fft = 1 << math.ceil(math.log2(n + 2 * pad))
+    frame = np.zeros((len(pos), n_fft))
+    frame[:, pad:pad + n] = x
+    spectrum = np.fft.rfft(frame, axis=-1)  # (M, F)
+    k = 2 * math.pi * np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz) / speed_of_sound_m_s
+    # (F, M, M); numpy's sinc is sin(πx)/(πx)
+    gamma = np.sinc(k[:, None, None] * d[None, :, :] / math.pi)
+    lam, vec = np.linalg.eigh(gamma)
+    mix = np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.swapaxes(vec, 1, 2)  # C = √Λ Vᵀ
+    mixed = np.einsum("fij,if->jf", mix, spectrum)  # Y_j = Σ_i C_ij X_i
+    return np.fft.irfft(mixed, n=n_fft, axis=-1)[:, pad:pad + n]
 
 
 def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
