@@ -471,3 +471,17 @@ def test_a_post_through_a_table_keeps_its_orientation():
     fixed, report = repair_mesh(scene, settings, np.random.default_rng(0))
     assert report.components_flipped == 0 and report.leak.leak_fraction == 0.0
     np.testing.assert_allclose(fixed.face_normals, scene.face_normals, atol=1e-12)
+
+
+def test_air_test_layers_never_put_overlapping_boxes_together():
+    from sonicspec.geometry.repair import _layers
+
+    rng = np.random.default_rng(3)
+    # many small boxes (fragments) and a few large ones (rooms), like a cracked scan
+    lo = np.concatenate([rng.uniform(0, 10, (2000, 3)), rng.uniform(0, 3, (5, 3))])
+    hi = lo + np.concatenate([rng.uniform(0.01, 0.3, (2000, 3)), rng.uniform(3, 8, (5, 3))])
+    colour = _layers(lo, hi, margin=0.01)
+    overlap = np.all((lo[:, None] - 0.01 <= hi[None]) & (hi[:, None] + 0.01 >= lo[None]), axis=2)
+    np.fill_diagonal(overlap, False)
+    assert not np.any(overlap & (colour[:, None] == colour[None]))
+    assert colour.max() < 20  # greedy colouring stays near the largest overlap count

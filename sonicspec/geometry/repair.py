@@ -716,14 +716,44 @@ def _ray_intersector(vertices: np.ndarray, faces: np.ndarray):
 
 
 def _layers(lo: np.ndarray, hi: np.ndarray, margin: float) -> np.ndarray:
-    """Colour boxes so that boxes of one colour do not overlap (greedy, largest first)."""
+    """Colour boxes so that boxes of one colour do not overlap (greedy, largest first).
+
+    Overlapping pairs come from a KD-tree over box centres for the many small boxes (a
+    scan's fragments) and from a direct test for the few large ones (rooms, partitions).
+    """
     n = len(lo)
+    center = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo) + margin
+    radius = np.linalg.norm(half, axis=1)
+    cutoff = 4.0 * float(np.median(radius))
+    if np.count_nonzero(radius > cutoff) > 256:  # keep the direct tests few
+        cutoff = float(np.sort(radius)[-257])
+    big = np.flatnonzero(radius > cutoff)
+    small = np.flatnonzero(radius <= cutoff)
+    # candidates: small-small within the sum of radii, big-anything by a direct box test
+    balls = cKDTree(center[small]).query_ball_point(center[small], radius[small] + cutoff)
+    sizes = np.fromiter(map(len, balls), np.int64, len(balls))
+    first = np.repeat(small, sizes)
+    second = small[np.fromiter(itertools.chain.from_iterable(balls), np.int64, sizes.sum())]
+    rows, cols = [first], [second]
+    for i in big:
+        rows.append(np.full(n, i))
+        cols.append(np.arange(n))
+    first, second = np.concatenate(rows), np.concatenate(cols)
+    touching = (first != second) & np.all(
+        np.abs(center[first] - center[second]) <= half[first] + half[second], axis=1
+    )
+    first, second = first[touching], second[touching]
+    graph = sparse.coo_matrix(
+        (np.ones(2 * len(first), bool), (np.r_[first, second], np.r_[second, first])), (n, n)
+    ).tocsr()
     colour = np.full(n, -1)
     for i in np.argsort(-np.prod(hi - lo, axis=1), kind="stable"):
-        overlaps = np.all((lo - margin <= hi[i]) & (hi + margin >= lo[i]), axis=1)
-        used = np.unique(colour[overlaps & (colour >= 0)])
-        free = np.setdiff1d(np.arange(len(used) + 1), used)
-        colour[i] = free[0]
+        taken = set(colour[graph.indices[graph.indptr[i] : graph.indptr[i + 1]]].tolist())
+        c = 0
+        while c in taken:
+            c += 1
+        colour[i] = c
     return colour
 
 
