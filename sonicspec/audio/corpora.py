@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 import soundfile as sf
-from scipy.signal import firwin, kaiserord, resample_poly
 
 from sonicspec.errors import AudioError, CorpusError
 
@@ -717,6 +716,8 @@ def _antialias_filter(from_hz: int, to_hz: int) -> np.ndarray:
     fs_up = from_hz * up
     nyquist = min(from_hz, to_hz) / 2
     width = (1 - RESAMPLE_PASSBAND) * nyquist
+    from scipy.signal import firwin, kaiserord  # scipy.signal takes 1 s to import
+
     numtaps, beta = kaiserord(RESAMPLE_STOPBAND_DB, width / (fs_up / 2))
     numtaps |= 1  # odd length: resample_poly compensates a whole-sample delay
     return firwin(numtaps, (1 + RESAMPLE_PASSBAND) / 2 * nyquist, window=("kaiser", beta),
@@ -748,6 +749,8 @@ def resample(x: np.ndarray, from_hz: int, to_hz: int) -> np.ndarray:
     if from_hz == to_hz:
         return x.copy()
     g = math.gcd(from_hz, to_hz)
+    from scipy.signal import resample_poly
+
     return resample_poly(x, to_hz // g, from_hz // g, axis=-1,
                          window=_antialias_filter(from_hz, to_hz))
 
