@@ -3,6 +3,7 @@
 Reproduce:  python bench/bench_tracer.py            (about a minute on 2 cores)
             python bench/bench_tracer.py --pra      (adds pyroomacoustics' hybrid simulator)
             python bench/bench_tracer.py --only trajectory   (the trajectory case alone)
+            python bench/bench_tracer.py --only equal-accuracy  (one RIR vs pyroomacoustics)
 
 Figures printed:
 * raw embreex first-hit rate (the ceiling) in the 10 x 7 x 3 m shoebox, 1 and 2 threads;
@@ -282,10 +283,89 @@ def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
               f"  spread {np.round(np.nanstd(t30, axis=0) / mean * 100, 1)}")
 
 
+def equal_accuracy(seeds: int = 6) -> None:
+    """One whole RIR (16 kHz, 1.5 s, ISM order 3 + rays), sonicspec vs pyroomacoustics' hybrid,
+    over ray counts: time, broadband T30 error against Eyring and seed spread, both measured by
+    the same ISO 3382-1 routine. Equal accuracy: the cheapest sonicspec setting whose error and
+    spread are no worse than pyroomacoustics' at each of its settings."""
+    from sonicspec.acoustics.bands import default_bands
+    from sonicspec.acoustics.metrics import room_acoustic_figures
+
+    fs = 16_000
+    bands = default_bands(fs)
+    air = iso9613_energy_per_m(np.array(bands))
+    s_eff = 2 * (70 + 30 + 21)
+    # Broadband reference: Eyring at 500 Hz-1 kHz (ISO 3382-1's single number bands).
+    eyring = np.mean([24 * math.log(10) * 210.0 / (343.0 * (-s_eff * math.log(0.8)
+                                                            + 4 * a * 210.0)) for a in air[2:4]])
+    settings = dict(sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
+                    max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True,
+                    temperature_c=20.0, relative_humidity_pct=50.0, transmission=False,
+                    diffuse_rain=True, receiver_radius_m=0.1, histogram_bin_s=0.001,
+                    speed_of_sound_m_s=343.0)
+    v, f = shoebox(*SIZE)
+    n, b = len(f), len(bands)
+    scene = AcousticScene(v, f, np.full((n, b), 0.2), np.full((n, b), 0.5), np.zeros((n, b)))
+    regions = planar_regions(scene)
+
+    def mid_t30(rir: np.ndarray) -> float:
+        return float(np.mean(room_acoustic_figures(rir, fs, bands).t30_s[2:4]))
+
+    def stats(name: str, rays: int, times: list[float], t30: list[float]) -> tuple:
+        t30a = np.array(t30)
+        err = abs(t30a.mean() / eyring - 1) * 100
+        spread = t30a.std(ddof=1) / t30a.mean() * 100
+        t = float(np.median(times))
+        print(f"{name:10s} {rays:6d} rays: {t:6.3f} s/RIR, T30(500-1k) {t30a.mean():.3f} s, "
+              f"|err| vs Eyring {err:4.1f} %, seed spread {spread:4.1f} %")
+        return rays, t, err, spread
+
+    print(f"\n## equal accuracy: one RIR, 10 x 7 x 3 m, alpha 0.2, s 0.5, 16 kHz, 1.5 s, "
+          f"{seeds} seeds; Eyring T30 (500 Hz-1 kHz) {eyring:.3f} s")
+    ours = []
+    for rays in (100, 200, 500, 1_000, 2_000):
+        st = rir_stage.RirSettings(rays=rays, **settings)
+        times, t30 = [], []
+        for seed in range(seeds):
+            t = time.perf_counter()
+            (rir,), _ = rir_stage.simulate_rirs(scene, RCV[0], SRC[None], st,
+                                                np.random.default_rng(seed), regions)
+            times.append(time.perf_counter() - t)
+            t30.append(mid_t30(rir[0]))
+        ours.append(stats("sonicspec", rays, times, t30))
+    try:
+        import pyroomacoustics as pra
+    except ImportError:
+        print("pyroomacoustics not installed: the comparison is skipped")
+        return
+    for rays in (1_000, 2_000, 5_000, 10_000):
+        times, t30 = [], []
+        for seed in range(seeds):
+            np.random.seed(seed)  # noqa: NPY002 (pyroomacoustics has no generator argument)
+            t = time.perf_counter()
+            room = pra.ShoeBox(list(SIZE), fs=fs, materials=pra.Material(0.2, 0.5),
+                               max_order=3, ray_tracing=True, air_absorption=True)
+            room.set_ray_tracing(n_rays=rays)
+            room.add_source(list(SRC))
+            room.add_microphone(list(RCV[0]))
+            room.compute_rir()
+            times.append(time.perf_counter() - t)
+            t30.append(mid_t30(np.asarray(room.rir[0][0])))
+        _, t_pra, err_pra, spread_pra = stats("pyroom", rays, times, t30)
+        match = [o for o in ours if o[2] <= err_pra and o[3] <= spread_pra]
+        if match:
+            best = min(match, key=lambda o: o[1])
+            print(f"           -> sonicspec at {best[0]} rays is as accurate: "
+                  f"{t_pra / best[1]:.1f}x faster")
+        else:
+            print("           -> no sonicspec setting here is as accurate")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pra", action="store_true", help="also time pyroomacoustics' hybrid")
-    parser.add_argument("--only", choices=["trajectory"], help="run just this case")
+    parser.add_argument("--only", choices=["trajectory", "equal-accuracy"],
+                        help="run just this case")
     args = parser.parse_args()
     print(
         f"# bench_tracer  python {platform.python_version()}  numpy {np.__version__}  "
@@ -295,6 +375,9 @@ def main() -> None:
           + (f" --only {args.only}" if args.only else ""))
     if args.only == "trajectory":
         trajectory()
+        return
+    if args.only == "equal-accuracy":
+        equal_accuracy()
         return
     air = iso9613_energy_per_m(BANDS_HZ)
     scene = scene_for(0.2, 0.5)
