@@ -25,7 +25,7 @@ along +x), circular arrays in the horizontal plane, custom offsets as given; all
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -134,19 +134,35 @@ def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_
     if len(pos) < 2:
         return x.copy()
     d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
-    n = x.shape[1]
+
+    def mixing(freqs_hz: np.ndarray) -> np.ndarray:
+        k = 2 * math.pi * freqs_hz / speed_of_sound_m_s
+        # (F, M, M); numpy's sinc is sin(πx)/(πx)
+        gamma = np.sinc(k[:, None, None] * d[None, :, :] / math.pi)
+        lam, vec = np.linalg.eigh(gamma)
+        return np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.swapaxes(vec, 1, 2)  # C = √Λ Vᵀ
+
     pad = math.ceil(4 * d.max() / speed_of_sound_m_s * sample_rate_hz) + 16
-    n_fft = 1 << math.ceil(math.log2(n + 2 * pad))
-    frame = np.zeros((len(pos), n_fft))
-    frame[:, pad:pad + n] = x
+    return mix_per_frequency(x, mixing, sample_rate_hz, pad)
+
+
+def mix_per_frequency(signals: np.ndarray, mixing: Callable[[np.ndarray], np.ndarray],
+                      sample_rate_hz: float, pad_samples: int) -> np.ndarray:
+    """Zero-phase mixing of ``(M, n)`` signals by real matrices that depend on frequency.
+
+    ``mixing(freqs_hz)`` gives ``C`` of shape ``(F, M, K)`` on the rfft grid and the outputs
+    are ``Y_j(f) = Σ_i C_ij(f) X_i(f)``, ``(K, n)``. The signals sit ``pad_samples`` into a
+    zero frame (at least the mixing filters' half length) so their non-causal tails neither
+    wrap around nor are cut.
+    """
+    n = signals.shape[1]
+    n_fft = 1 << math.ceil(math.log2(n + 2 * pad_samples))
+    frame = np.zeros((signals.shape[0], n_fft))
+    frame[:, pad_samples:pad_samples + n] = signals
     spectrum = np.fft.rfft(frame, axis=-1)  # (M, F)
-    k = 2 * math.pi * np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz) / speed_of_sound_m_s
-    # (F, M, M); numpy's sinc is sin(πx)/(πx)
-    gamma = np.sinc(k[:, None, None] * d[None, :, :] / math.pi)
-    lam, vec = np.linalg.eigh(gamma)
-    mix = np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.swapaxes(vec, 1, 2)  # C = √Λ Vᵀ
+    mix = mixing(np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz))
     mixed = np.einsum("fij,if->jf", mix, spectrum)  # Y_j = Σ_i C_ij X_i
-    return np.fft.irfft(mixed, n=n_fft, axis=-1)[:, pad:pad + n]
+    return np.fft.irfft(mixed, n=n_fft, axis=-1)[:, pad_samples:pad_samples + n]
 
 
 def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
