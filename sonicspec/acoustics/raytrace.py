@@ -54,6 +54,11 @@ Model (every approximation is listed here)
   100 receivers cost ≈6× one, not 100× (bench_tracer). For a moving source and a static
   microphone use reciprocity: trace from the microphone and pass the trajectory points as
   ``receivers``; ``EnergyHistogram.departure_sum`` then holds the direction at the microphone.
+* **Shortcuts that do not change the result** (each tested against the slow path): sphere
+  tests screen (ray, receiver) pairs in float32 with a margin before the exact float64 test;
+  in a convex room (every vertex inside every face plane, no transmission) a shadow ray
+  between two points inside it cannot be blocked and is not traced; receivers farther than
+  ``max_receiver_radius_m`` from every face plane skip the clearance rays.
 * **Determinism**: all randomness comes from the ``rng`` passed in (one spawned child generator
   per fixed batch of rays); batches may run on a thread pool but their histograms are summed
   in batch order, so the bytes of the result depend only on the inputs and the generator's
@@ -66,6 +71,7 @@ Model (every approximation is listed here)
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -82,6 +88,19 @@ __all__ = ["RayTraceSettings", "receiver_clearance_m", "trace_rays"]
 _PAIRS_PER_STEP = 1 << 19
 # Histogram contributions buffered before one bincount pass.
 _FLUSH_ENTRIES = 1 << 21
+# Margin of the float32 receiver-sphere screen, relative to the squared coordinates (its
+# rounding error is below 1e-6 of them).
+_SCREEN_REL = 1e-5
+# Up to this many receivers, every (ray, receiver) pair goes to the exact sphere test.
+_FEW_RECEIVERS = 4
+# Largest (rows × columns × inner) float32 product of the sphere screen per matrix product.
+_SCREEN_PRODUCT = 1 << 18
+# Largest (receivers × faces) for the plane-distance shortcut of the receivers' clearance.
+_PLANE_TEST_PAIRS = 1 << 22
+# Convex rooms of up to this many faces skip shadow rays between points inside them.
+_CONVEX_MAX_FACES = 64
+# "Strictly inside" a plane: farther than this on its inner side, metres.
+_INSIDE_M = 1e-9
 
 
 @dataclass(frozen=True)
@@ -199,60 +218,50 @@ def _cosine_hemisphere(normal: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np
 class _Accumulator:
     """Buffers (receiver, bin) contributions and folds them into histograms by bincount.
 
-    Energies are accumulated *without* air absorption (it is applied per bin at the end, see
-    :func:`trace_rays`); direction sums are weighted by the band-summed energy.
+    ``hist`` holds one row per quantity over the flat (receiver, bin) index: the band
+    energies, then the energy-weighted arrival and departure direction sums (3 rows each).
+    Callers write contributions straight into the buffer as rows (:meth:`reserve`), so every
+    bincount reads and adds contiguous memory and nothing is copied on the way. Energies are
+    accumulated *without* air absorption (it is applied per bin at the end, see
+    :func:`trace_rays`).
     """
 
     def __init__(self, n_receivers: int, n_bins: int, n_bands: int) -> None:
         self.n_bins = n_bins
+        self.n_bands = n_bands
         self.size = n_receivers * n_bins
-        self.energy = np.zeros((self.size, n_bands))
-        self.arrival = np.zeros((self.size, 3))
-        self.departure = np.zeros((self.size, 3))
-        self._buf: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self._count = 0
-        # Flush when the buffer is a sizeable fraction of the histogram (bincount's output
-        # costs O(size) per call) or large in absolute terms.
-        self._flush_at = min(_FLUSH_ENTRIES, max(1 << 16, self.size // 2))
+        self.hist = np.zeros((n_bands + 6, self.size))
+        # A bincount costs O(entries + size); buffering twice the histogram's size keeps the
+        # O(size) part under a third, at about 100 B per buffered entry.
+        capacity = min(_FLUSH_ENTRIES, max(1 << 16, 2 * self.size))
+        self._flat = np.empty(capacity, dtype=np.int64)
+        self._rows = np.empty((n_bands + 6, capacity))
+        self._used = 0
 
-    def add(
-        self,
-        receiver: np.ndarray,
-        bin_index: np.ndarray,
-        energy: np.ndarray,
-        arrival_dir: np.ndarray,
-        departure_dir: np.ndarray,
-    ) -> None:
-        keep = bin_index < self.n_bins
-        if not np.all(keep):
-            receiver, bin_index, energy = receiver[keep], bin_index[keep], energy[keep]
-            arrival_dir, departure_dir = arrival_dir[keep], departure_dir[keep]
-        if bin_index.size == 0:
-            return
-        flat = receiver * self.n_bins + bin_index
-        self._buf.append((flat, energy, arrival_dir, departure_dir))
-        self._count += int(flat.size)
-        if self._count >= self._flush_at:
+    def reserve(self, receiver: np.ndarray, bin_index: np.ndarray) -> np.ndarray:
+        """Rows ``(n_bands + 6, m)`` for ``m`` contributions (all with ``bin_index < n_bins``)
+        to fill: band energies, arrival direction × band-summed energy, departure likewise."""
+        m = bin_index.size
+        if self._used + m > self._flat.size:
             self.flush()
+            if m > self._flat.size:
+                self._flat = np.empty(m, dtype=np.int64)
+                self._rows = np.empty((self._rows.shape[0], m))
+        sl = slice(self._used, self._used + m)
+        np.multiply(receiver, self.n_bins, out=self._flat[sl])
+        self._flat[sl] += bin_index
+        self._used += m
+        return self._rows[:, sl]
 
     def flush(self) -> None:
-        if not self._buf:
+        if self._used == 0:
             return
-        flat = np.concatenate([b[0] for b in self._buf])
-        energy = np.concatenate([b[1] for b in self._buf])
-        arrival = np.concatenate([b[2] for b in self._buf])
-        departure = np.concatenate([b[3] for b in self._buf])
-        self._buf, self._count = [], 0
-        total = energy.sum(axis=1)
-        for b in range(energy.shape[1]):
-            self.energy[:, b] += np.bincount(flat, weights=energy[:, b], minlength=self.size)
-        for k in range(3):
-            self.arrival[:, k] += np.bincount(
-                flat, weights=total * arrival[:, k], minlength=self.size
+        flat = self._flat[: self._used]
+        for j in range(self._rows.shape[0]):
+            self.hist[j] += np.bincount(
+                flat, weights=self._rows[j, : self._used], minlength=self.size
             )
-            self.departure[:, k] += np.bincount(
-                flat, weights=total * departure[:, k], minlength=self.size
-            )
+        self._used = 0
 
 
 def trace_rays(
@@ -313,8 +322,12 @@ def trace_rays(
     n_bins = math.ceil(settings.max_time_s / settings.bin_s - 1e-9)
     radius_cap = np.maximum(
         settings.receiver_radius_m,
-        np.minimum(settings.max_receiver_radius_m, receiver_clearance_m(scene, receivers)),
+        np.minimum(
+            settings.max_receiver_radius_m,
+            _clearance_below(scene, receivers, settings.max_receiver_radius_m),
+        ),
     )
+    rcv = _Receivers.build(scene, receivers, radius_cap)
     sizes = [
         min(settings.batch_size, settings.n_rays - start)
         for start in range(0, settings.n_rays, settings.batch_size)
@@ -325,7 +338,7 @@ def trace_rays(
     def run(i: int) -> tuple[_Accumulator, int, int]:
         acc = _Accumulator(len(receivers), n_bins, scene.n_bands)
         esc, hits = _trace_batch(
-            scene, source[0], receivers, radius_cap, rngs[i], settings, air, sizes[i], acc, tables
+            scene, source[0], rcv, rngs[i], settings, air, sizes[i], acc, tables
         )
         acc.flush()
         return acc, esc, hits
@@ -342,9 +355,7 @@ def trace_rays(
         if total is None:
             total = acc
         else:
-            total.energy += acc.energy
-            total.arrival += acc.arrival
-            total.departure += acc.departure
+            total.hist += acc.hist
 
     if n_threads == 1 or len(sizes) == 1:
         for i in range(len(sizes)):
@@ -362,18 +373,19 @@ def trace_rays(
     # Air absorption per bin (see Notes); direction sums follow the band-summed energy.
     t_centre = (np.arange(n_bins) + 0.5) * settings.bin_s
     air_gain = np.exp(-np.outer(t_centre * settings.speed_of_sound_m_s, air))  # (n_bins, B)
+    b = scene.n_bands
     out = []
     for r in range(len(receivers)):
-        sl = slice(r * n_bins, (r + 1) * n_bins)
-        raw = total.energy[sl]
+        rows = total.hist[:, r * n_bins : (r + 1) * n_bins].T  # (n_bins, n_bands + 6)
+        raw = rows[:, :b]
         energy = raw * air_gain
         before = raw.sum(axis=1)
         ratio = np.where(before > 0, energy.sum(axis=1) / np.where(before > 0, before, 1.0), 0.0)
         hist = EnergyHistogram(
             bin_s=settings.bin_s,
             energy=energy,
-            direction_sum=total.arrival[sl] * ratio[:, None],
-            departure_sum=total.departure[sl] * ratio[:, None],
+            direction_sum=rows[:, b : b + 3] * ratio[:, None],
+            departure_sum=rows[:, b + 3 :] * ratio[:, None],
         )
         out.append(
             TraceResult(
@@ -399,7 +411,7 @@ class _EventTables:
     p_t: np.ndarray  # (F,) P(transmit)
     p_ts: np.ndarray  # (F,) P(transmit) + P(specular)
     gain: np.ndarray  # (3, F, B)
-    w_diff: np.ndarray  # (F, B) scattered energy fraction (1-τ)(1-α)s
+    w_diff_t: np.ndarray  # (B, F) scattered energy fraction (1-τ)(1-α)s
     scatters: np.ndarray  # (F,) any band scatters
 
 
@@ -417,7 +429,7 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
         # A face that absorbs everything (total 0): every pick lands on "diffuse", gain 0.
         p_ts=prob[0] + prob[1],
         gain=gain,
-        w_diff=w_diff,
+        w_diff_t=np.ascontiguousarray(w_diff.T),
         scatters=np.any(w_diff > 0, axis=1),
     )
 
@@ -425,8 +437,7 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
 def _trace_batch(
     scene: AcousticScene,
     src: np.ndarray,
-    receivers: np.ndarray,
-    radius_cap: np.ndarray,
+    rcv: _Receivers,
     rng: np.random.Generator,
     st: RayTraceSettings,
     air: np.ndarray,
@@ -462,61 +473,79 @@ def _trace_batch(
     escaped = 0
     interactions = 0
 
+    normals = scene.normals
+    n_faces = scene.n_faces
+    gain_rows = ev.gain.reshape(3 * n_faces, scene.n_bands)  # row event·F + face
+    # (Row gathers use np.take / np.compress: several times faster than fancy indexing of
+    # 2-D arrays, which matters at every bounce.)
     while len(pos):
         face, t = scene.intersect(pos, dirs)
         miss = face < 0
-        escaped += int(np.count_nonzero(miss))
+        n_miss = int(np.count_nonzero(miss))
+        escaped += n_miss
         # Receiver spheres: paths whose last reflection is specular, beyond the image sources.
         # (An escaping ray's segment is infinite; it is still tested, then dropped.)
         eligible = any_diffuse | (n_refl > st.specular_order_excluded)
         if st.diffuse_rain:
             eligible &= ~last_diffuse
-        if np.any(eligible):
-            idx = np.flatnonzero(eligible)
+        idx = np.flatnonzero(eligible)
+        if idx.size:
             _sphere_hits(
-                pos[idx], dirs[idx], t[idx], energy[idx], length[idx], departure[idx],
-                receivers, radius_cap, st, to_p2, rcv_chunk, acc,
-            )  # fmt: skip
-        if np.any(miss):
+                pos, dirs, t, energy, length, departure, idx, rcv, st, to_p2, rcv_chunk, acc
+            )
+        if n_miss:
             keep = ~miss
-            face, t = face[keep], t[keep]
-            pos, dirs, energy, length = pos[keep], dirs[keep], energy[keep], length[keep]
-            n_refl, any_diffuse = n_refl[keep], any_diffuse[keep]
-            last_diffuse, departure = last_diffuse[keep], departure[keep]
-        if len(pos) == 0:
+            face, t, length = face[keep], t[keep], length[keep]
+            n_refl, any_diffuse, last_diffuse = n_refl[keep], any_diffuse[keep], last_diffuse[keep]
+            pos, dirs, energy, departure = (
+                np.compress(keep, x, axis=0) for x in (pos, dirs, energy, departure)
+            )
+        n_live = len(pos)
+        if n_live == 0:
             break
         # Fly to the hit.
         hit = pos + t[:, None] * dirs
         length = length + t
-        interactions += len(pos)
-        nrm = scene.normals[face]
+        interactions += n_live
+        nrm = np.take(normals, face, axis=0)
         cos_in = np.einsum("ij,ij->i", dirs, nrm)
         n_side = nrm * np.where(cos_in < 0, 1.0, -1.0)[:, None]  # normal facing the ray
-        # Diffuse rain: the scattered share goes to every receiver via a shadow ray.
         alive_time = length < max_len
-        rain = alive_time & ev.scatters[face]
-        if st.diffuse_rain and np.any(rain):
-            sel = np.flatnonzero(rain)
-            _rain(
-                scene, hit[sel], n_side[sel], energy[sel] * ev.w_diff[face[sel]], length[sel],
-                departure[sel], receivers, st, to_p2, rain_rng, acc,
-            )  # fmt: skip
-        # Choose the continuing event by band-mean weights; reweight per band (unbiased).
-        u = rng.random((len(pos), 3))
+        # Diffuse rain: the scattered share goes to every receiver via a shadow ray.
+        if st.diffuse_rain:
+            sel = np.flatnonzero(alive_time & ev.scatters[face])
+            if sel.size == n_live:
+                r_hit, r_side, r_energy, r_face, r_len, r_dep = (
+                    hit, n_side, energy, face, length, departure
+                )  # fmt: skip
+            else:
+                r_hit, r_side, r_energy, r_dep = (
+                    np.take(x, sel, axis=0) for x in (hit, n_side, energy, departure)
+                )
+                r_face, r_len = face[sel], length[sel]
+            if sel.size:
+                scattered = r_energy.T * np.take(ev.w_diff_t, r_face, axis=1)
+                _rain(
+                    scene, r_hit, r_side, scattered, r_len, r_dep, rcv, st, to_p2, rain_rng, acc
+                )
+        # Choose the continuing event by band-mean weights (0 transmit, 1 specular, 2 diffuse;
+        # p_ts >= p_t) and reweight per band (unbiased).
+        u = rng.random((n_live, 3))
         pick = u[:, 0]
         is_t = pick < ev.p_t[face]
-        is_s = ~is_t & (pick < ev.p_ts[face])
-        is_d = ~is_t & ~is_s
-        event = np.where(is_t, 0, np.where(is_s, 1, 2))
-        energy = energy * ev.gain[event, face]
+        event = 2 - is_t - (pick < ev.p_ts[face])
+        is_d = event == 2
+        energy = energy * np.take(gain_rows, event * n_faces + face, axis=0)
         # New directions: specular mirror, Lambert around the facing normal, or straight on.
         new_dirs = dirs - 2.0 * (cos_in[:, None] * nrm)
-        if np.any(is_d):
-            d_idx = np.flatnonzero(is_d)
-            new_dirs[d_idx] = _cosine_hemisphere(n_side[d_idx], u[d_idx, 1], u[d_idx, 2])
-        if np.any(is_t):
+        d_idx = np.flatnonzero(is_d)
+        if d_idx.size:
+            new_dirs[d_idx] = _cosine_hemisphere(
+                np.take(n_side, d_idx, axis=0), u[d_idx, 1], u[d_idx, 2]
+            )
+        if is_t.any():
             new_dirs[is_t] = dirs[is_t]
-        dirs = new_dirs / np.linalg.norm(new_dirs, axis=1, keepdims=True)
+        dirs = new_dirs / np.sqrt(np.einsum("ij,ij->i", new_dirs, new_dirs))[:, None]
         pos = hit + np.where(is_t, -eps, eps)[:, None] * n_side
         reflected = ~is_t
         n_refl = n_refl + reflected
@@ -527,11 +556,54 @@ def _trace_batch(
         else:
             strongest = energy.max(axis=1)
         alive = (strongest >= e_stop) & alive_time
-        if not np.all(alive):
-            pos, dirs, energy, length = pos[alive], dirs[alive], energy[alive], length[alive]
-            n_refl, any_diffuse = n_refl[alive], any_diffuse[alive]
-            last_diffuse, departure = last_diffuse[alive], departure[alive]
+        if not alive.all():
+            length, n_refl = length[alive], n_refl[alive]
+            any_diffuse, last_diffuse = any_diffuse[alive], last_diffuse[alive]
+            pos, dirs, energy, departure = (
+                np.compress(alive, x, axis=0) for x in (pos, dirs, energy, departure)
+            )
     return escaped, interactions
+
+
+def _sphere_candidates(
+    origin: np.ndarray,
+    direction: np.ndarray,
+    seg_len: np.ndarray,
+    rays: np.ndarray,
+    rcv: _Receivers,
+    rcv_chunk: int,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """(ray, receiver) pairs whose segment may cross the receiver's largest sphere, by chunks
+    of receivers: a float32 screen (two small matrix products) with a margin far above its
+    rounding error, so it never misses a pair the exact test would keep."""
+    o = np.take(origin, rays, axis=0) - rcv.centre
+    d = np.take(direction, rays, axis=0)
+    od = np.einsum("ij,ij->i", o, d)
+    oo = np.einsum("ij,ij->i", o, o)
+    # tc = d·(R - o) and |R - o|² as products of augmented vectors.
+    a_tc = np.column_stack([d, -od]).astype(np.float32)
+    a_w2 = np.column_stack([-2.0 * o, oo, np.ones(len(o))]).astype(np.float32)
+    scale = float(np.max(oo, initial=0.0)) + rcv.max_sq
+    margin_sq = np.float32(_SCREEN_REL * (1.0 + 4.0 * scale))
+    margin = np.float32(_SCREEN_REL * (1.0 + 2.0 * math.sqrt(scale)))
+    seg_hi = (seg_len[rays] + margin).astype(np.float32)[:, None]
+    # Small enough products that BLAS runs them on one thread (it spreads larger ones over
+    # every core, which costs CPU time for no gain here).
+    step = max(1, _SCREEN_PRODUCT // (5 * min(rcv.n, rcv_chunk)))
+    for r0 in range(0, rcv.n, rcv_chunk):
+        sl = slice(r0, r0 + rcv_chunk)
+        for i0 in range(0, len(rays), step):
+            rs = slice(i0, i0 + step)
+            tc = a_tc[rs] @ rcv.aug_tc[:, sl]
+            d2 = a_w2[rs] @ rcv.aug_w2[:, sl]
+            d2 -= tc * tc
+            # Within the largest radius of the line, and of the segment along it.
+            near = d2 < rcv.cap_sq32[sl] + margin_sq
+            near &= tc > -(rcv.cap32[sl] + margin)
+            near &= tc < seg_hi[rs] + rcv.cap32[sl]
+            ray, k = np.nonzero(near)
+            if ray.size:
+                yield rays[ray + i0], k + r0
 
 
 def _sphere_hits(
@@ -541,29 +613,36 @@ def _sphere_hits(
     energy: np.ndarray,
     path_len: np.ndarray,
     departure: np.ndarray,
-    receivers: np.ndarray,
-    radius_cap: np.ndarray,
+    rays: np.ndarray,
+    rcv: _Receivers,
     st: RayTraceSettings,
     to_p2: float,
     rcv_chunk: int,
     acc: _Accumulator,
 ) -> None:
-    """Volume estimator ``E·ℓ/V`` for ray segments crossing receiver spheres."""
+    """Volume estimator ``E·ℓ/V`` for segments of ``rays`` (indices into the ray arrays)
+    crossing receiver spheres.
+
+    With a few receivers every (ray, receiver) pair is tested; with more, a float32 screen
+    (:func:`_sphere_candidates`) picks the candidate pairs first. Either way the chord of each
+    pair is computed in float64, exactly as if every pair had been tested.
+    """
     c = st.speed_of_sound_m_s
-    for r0 in range(0, len(receivers), rcv_chunk):
-        rc = receivers[r0 : r0 + rcv_chunk]
-        cap = radius_cap[r0 : r0 + rcv_chunk]
-        w = rc[None, :, :] - origin[:, None, :]  # (n, k, 3)
-        tc = np.einsum("nkj,nj->nk", w, direction)
-        d2 = np.einsum("nkj,nkj->nk", w, w) - tc * tc
-        # Candidates within the largest radius this receiver can have.
-        ray, k = np.nonzero((d2 < (cap * cap)[None, :]) & (tc > -cap[None, :]))
-        if ray.size == 0:
-            continue
-        tc_c, d2_c = tc[ray, k], d2[ray, k]
+    if rcv.n <= _FEW_RECEIVERS:
+        pairs = [(np.tile(rays, rcv.n), np.repeat(np.arange(rcv.n), len(rays)))]
+    else:
+        pairs = _sphere_candidates(origin, direction, seg_len, rays, rcv, rcv_chunk)
+    for ray, k in pairs:
+        cap = rcv.cap[k]
+        w = np.take(rcv.pos, k, axis=0)
+        w -= np.take(origin, ray, axis=0)
+        dr = np.take(direction, ray, axis=0)
+        tc_c = np.einsum("ij,ij->i", w, dr)
+        d2_c = np.einsum("ij,ij->i", w, w) - tc_c * tc_c
+        path = path_len[ray]
         radius = np.maximum(
             st.receiver_radius_m,
-            np.minimum(st.radius_growth * (path_len[ray] + np.maximum(tc_c, 0.0)), cap[k]),
+            np.minimum(st.radius_growth * (path + np.maximum(tc_c, 0.0)), cap),
         )
         half = np.sqrt(np.maximum(radius * radius - d2_c, 0.0))
         # Chord of the sphere within the free segment [0, seg_len].
@@ -571,16 +650,31 @@ def _sphere_hits(
         t_out = np.minimum(tc_c + half, seg_len[ray])
         chord = t_out - t_in
         good = (d2_c < radius * radius) & (chord > 0)
-        ray, k, t_in, t_out, chord, radius = (
-            ray[good], k[good], t_in[good], t_out[good], chord[good], radius[good]
-        )  # fmt: skip
+        if not good.all():
+            ray, k, t_in, t_out, chord, radius, path = (
+                ray[good], k[good], t_in[good], t_out[good], chord[good], radius[good], path[good]
+            )  # fmt: skip
+            dr = np.compress(good, dr, axis=0)
         if ray.size == 0:
             continue
         t_mid = 0.5 * (t_in + t_out)
+        time_bin = np.floor((path + t_mid) / (c * st.bin_s)).astype(np.int64)
+        late = time_bin < acc.n_bins
+        if not late.all():
+            ray, k, time_bin, chord, radius = (
+                ray[late], k[late], time_bin[late], chord[late], radius[late]
+            )  # fmt: skip
+            dr = np.compress(late, dr, axis=0)
+        if ray.size == 0:
+            continue
         volume = 4.0 / 3.0 * math.pi * radius**3
-        e = energy[ray] * (chord / volume * to_p2)[:, None]
-        time_bin = np.floor((path_len[ray] + t_mid) / (c * st.bin_s)).astype(np.int64)
-        acc.add(k + r0, time_bin, e, -direction[ray], departure[ray])
+        weight = chord / volume * to_p2
+        b = acc.n_bands
+        rows = acc.reserve(k, time_bin)
+        np.multiply(np.take(energy, ray, axis=0).T, weight, out=rows[:b])
+        total = rows[:b].sum(axis=0)
+        np.multiply(dr.T, -total, out=rows[b : b + 3])
+        np.multiply(np.take(departure, ray, axis=0).T, total, out=rows[b + 3 :])
 
 
 def receiver_clearance_m(
@@ -600,9 +694,34 @@ def receiver_clearance_m(
     dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
     spacing = math.sqrt(4.0 * math.pi / n_directions)
     out = np.zeros(len(receivers))
-    for i, p in enumerate(receivers):
-        _, dist = scene.intersect(np.repeat(p[None, :], n_directions, axis=0), dirs)
-        out[i] = float(np.min(dist)) * math.cos(spacing)
+    # Several receivers per Embree call (about 2^18 rays): far fewer calls for many receivers.
+    per = max(1, (1 << 18) // n_directions)
+    for r0 in range(0, len(receivers), per):
+        block = receivers[r0 : r0 + per]
+        _, dist = scene.intersect(
+            np.repeat(block, n_directions, axis=0), np.tile(dirs, (len(block), 1))
+        )
+        out[r0 : r0 + len(block)] = dist.reshape(len(block), n_directions).min(axis=1)
+    return out * math.cos(spacing)
+
+
+def _clearance_below(scene: AcousticScene, receivers: np.ndarray, limit: float) -> np.ndarray:
+    """:func:`receiver_clearance_m` wherever it can be below ``limit``; ``inf`` elsewhere.
+
+    A receiver's distance to every face *plane* bounds its distance to the faces from below,
+    and the sampled clearance never undercuts the true distance by more than float32
+    rounding; receivers whose planes are all farther than ``limit`` (plus a margin) would get
+    a clearance above ``limit``, so their 4096 rays are skipped (a shoebox's points more than
+    ``limit`` from every wall: all of them).
+    """
+    near = np.ones(len(receivers), dtype=bool)
+    if len(receivers) * scene.n_faces <= _PLANE_TEST_PAIRS:
+        plane = np.abs(receivers @ scene.normals.T - scene.plane_d[None, :]).min(axis=1)
+        spacing = math.sqrt(4.0 * math.pi / 4096)
+        near = plane * math.cos(spacing) < limit + 1e-4
+    out = np.full(len(receivers), np.inf)
+    if near.any():
+        out[near] = receiver_clearance_m(scene, receivers[near])
     return out
 
 
@@ -635,41 +754,71 @@ def _rain(
     scattered: np.ndarray,
     path_len: np.ndarray,
     departure: np.ndarray,
-    receivers: np.ndarray,
+    rcv: _Receivers,
     st: RayTraceSettings,
     to_p2: float,
     rng: np.random.Generator,
     acc: _Accumulator,
 ) -> None:
-    """Next-event estimate of the scattered energy at every receiver (Lambert, shadow rays)."""
+    """Next-event estimate of the scattered energy at every receiver (Lambert, shadow rays).
+
+    Per-pair quantities are kept as rows (component, pair) so that gathers, products and the
+    accumulator read contiguous memory.
+    """
     radius = st.receiver_radius_m
-    n_rcv = len(receivers)
     limit = st.rain_receivers_per_hit
-    stride = 1 if limit == 0 or n_rcv <= limit else -(-n_rcv // limit)
+    stride = 1 if limit == 0 or rcv.n <= limit else -(-rcv.n // limit)
     # ΔΩ/π per πR², converted to p², times the subsampling weight.
     scale = stride * to_p2 / (math.pi * math.pi * radius * radius)
     inv_bin_len = 1.0 / (st.speed_of_sound_m_s * st.bin_s)
-    for ray, k in _rain_pairs(len(hit), n_rcv, stride, rng):
-        vec = receivers[k] - hit[ray]
-        dot = np.einsum("ij,ij->i", vec, n_side[ray])
+    hit_t, side_t, dep_t = hit.T.copy(), n_side.T.copy(), departure.T.copy()
+    start = hit + scene.eps_m * n_side  # shadow rays leave the surface on the lit side
+    scattered_sum = scattered.sum(axis=0)
+    free_hit = None
+    if rcv.planes is not None:  # convex room: a start inside it sees every inner receiver
+        normals, offsets = rcv.planes
+        free_hit = (start @ normals.T - offsets).min(axis=1) > _INSIDE_M
+    for ray, k in _rain_pairs(len(hit), rcv.n, stride, rng):
+        vec = np.take(rcv.pos_t, k, axis=1)
+        vec -= np.take(hit_t, ray, axis=1)
+        dot = np.einsum("ij,ij->j", vec, np.take(side_t, ray, axis=1))
         front = dot > 0  # receivers on the side the energy is scattered to
-        if not np.all(front):
-            ray, k, vec, dot = ray[front], k[front], vec[front], dot[front]
+        if not front.all():
+            ray, k, dot = ray[front], k[front], dot[front]
+            vec = np.compress(front, vec, axis=1)
         if ray.size == 0:
             continue
-        d = np.sqrt(np.einsum("ij,ij->i", vec, vec))
-        u = vec / d[:, None]
-        start = hit[ray] + scene.eps_m * n_side[ray]
+        d = np.sqrt(np.einsum("ij,ij->j", vec, vec))
+        u = vec / d
         if scene.has_transmission:
-            trans = scene.segment_transmission(start, receivers[k])
+            trans = scene.segment_transmission(
+                np.take(start, ray, axis=0), np.take(rcv.pos, k, axis=0)
+            )
             has = np.any(trans > 0, axis=1)
         else:
             trans = None
-            has = ~scene.occluded_along(start, u, d)
-        if not np.all(has):
-            ray, k, d, u, dot = ray[has], k[has], d[has], u[has], dot[has]
+            if free_hit is None:
+                has = ~scene.occluded_along(np.take(start, ray, axis=0), u.T, d)
+            else:
+                has = np.ones(ray.size, dtype=bool)
+                test = np.flatnonzero(~(free_hit[ray] & rcv.inside[k]))
+                if test.size:
+                    has[test] = ~scene.occluded_along(
+                        np.take(start, ray[test], axis=0), np.take(u, test, axis=1).T, d[test]
+                    )
+        if not has.all():
+            ray, k, d, dot, u = ray[has], k[has], d[has], dot[has], np.compress(has, u, axis=1)
             if trans is not None:
-                trans = trans[has]
+                trans = np.compress(has, trans, axis=0)
+        if ray.size == 0:
+            continue
+        time_bin = ((path_len[ray] + d) * inv_bin_len).astype(np.int64)
+        late = time_bin < acc.n_bins
+        if not late.all():
+            ray, k, d, dot, time_bin = ray[late], k[late], d[late], dot[late], time_bin[late]
+            u = np.compress(late, u, axis=1)
+            if trans is not None:
+                trans = np.compress(late, trans, axis=0)
         if ray.size == 0:
             continue
         cos_out = dot / d
@@ -677,8 +826,78 @@ def _rain(
         sin2 = np.minimum(1.0, (radius / d) ** 2)
         solid = (2.0 * math.pi) * (1.0 - np.sqrt(1.0 - sin2))
         geom = cos_out * solid * scale
-        e = scattered[ray] * geom[:, None]
+        b = acc.n_bands
+        rows = acc.reserve(k, time_bin)
+        np.multiply(np.take(scattered, ray, axis=1), geom, out=rows[:b])
         if trans is not None:
-            e *= trans
-        time_bin = ((path_len[ray] + d) * inv_bin_len).astype(np.int64)
-        acc.add(k, time_bin, e, -u, departure[ray])
+            rows[:b] *= trans.T
+            total = rows[:b].sum(axis=0)
+        else:
+            total = scattered_sum[ray] * geom
+        np.multiply(u, -total, out=rows[b : b + 3])
+        np.multiply(np.take(dep_t, ray, axis=1), total, out=rows[b + 3 :])
+
+
+@dataclass(frozen=True, eq=False)
+class _Receivers:
+    """Receiver positions and detection radii in the layouts the per-step tests use."""
+
+    pos: np.ndarray  # (K, 3) float64
+    pos_t: np.ndarray  # (3, K) float64
+    cap: np.ndarray  # (K,) largest specular-detection radius
+    centre: np.ndarray  # (3,) origin of the float32 screen's coordinates
+    aug_tc: np.ndarray  # (4, K) float32: [R - centre; 1]
+    aug_w2: np.ndarray  # (5, K) float32: [R - centre; 1; |R - centre|²]
+    cap32: np.ndarray  # (K,) float32
+    cap_sq32: np.ndarray  # (K,) float32
+    max_sq: float  # largest |R - centre|²
+    planes: tuple[np.ndarray, np.ndarray] | None  # a convex room's inward planes (n, d)
+    inside: np.ndarray  # (K,) receiver strictly inside those planes
+
+    @property
+    def n(self) -> int:
+        return len(self.pos)
+
+    @classmethod
+    def build(cls, scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray) -> _Receivers:
+        centre = scene.bounds.mean(axis=0)
+        rel = receivers - centre
+        sq = np.einsum("ij,ij->i", rel, rel)
+        ones = np.ones(len(rel))
+        planes = _convex_planes(scene)
+        inside = np.zeros(len(receivers), dtype=bool)
+        if planes is not None:
+            inside = (receivers @ planes[0].T - planes[1]).min(axis=1) > _INSIDE_M
+        return cls(
+            pos=receivers,
+            pos_t=np.ascontiguousarray(receivers.T),
+            cap=cap,
+            centre=centre,
+            aug_tc=np.vstack([rel.T, ones]).astype(np.float32),
+            aug_w2=np.vstack([rel.T, ones, sq]).astype(np.float32),
+            cap32=cap.astype(np.float32),
+            cap_sq32=(cap * cap).astype(np.float32),
+            max_sq=float(sq.max()),
+            planes=planes,
+            inside=inside,
+        )
+
+
+def _convex_planes(scene: AcousticScene) -> tuple[np.ndarray, np.ndarray] | None:
+    """The face planes oriented inwards, ``(normals (F, 3), offsets (F,))``, when every vertex
+    lies on the inner side of every face plane (the faces bound a convex region: a shoebox,
+    any convex room); None otherwise, with transmission, or for more than a few faces.
+
+    Inside a convex region a segment between two points strictly inside every plane meets
+    no face, so diffuse rain needs no shadow ray there (exactly what Embree would find, up to
+    its float32 rounding at edges and corners).
+    """
+    if scene.has_transmission or scene.n_faces > _CONVEX_MAX_FACES:
+        return None
+    used = scene.vertices[np.unique(scene.faces)]
+    side = used @ scene.normals.T - scene.plane_d[None, :]  # (V, F)
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(used))))
+    for sign in (1.0, -1.0):
+        if np.all(sign * side >= -tol):
+            return sign * scene.normals, sign * scene.plane_d
+    return None

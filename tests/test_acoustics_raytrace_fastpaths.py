@@ -1,0 +1,79 @@
+"""The tracer's shortcuts change its cost, never its result: each against the slow path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sonicspec.acoustics import raytrace
+from sonicspec.acoustics.raytrace import RayTraceSettings, receiver_clearance_m, trace_rays
+from sonicspec.testing.rooms import extruded_room, shoebox, uniform_scene
+
+L_ROOM = ([(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)],
+          [(0, 1, 2), (0, 2, 3), (0, 3, 5), (3, 4, 5)])
+
+
+def histograms(results):
+    return [(r.histogram.energy, r.histogram.direction_sum, r.histogram.departure_sum)
+            for r in results]
+
+
+def test_sphere_screen_keeps_every_pair_the_exact_test_keeps():
+    """Seven receivers go through the float32 screen; one at a time, every pair is tested
+    exactly. Receiver spheres only (no rain), some receivers near walls (small radius cap)."""
+    scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), alpha=0.3, s=0.4, n_bands=2)
+    src = np.array([1.0, 1.0, 1.5])
+    rcvs = np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0], [2.5, 4.0, 0.5], [5.9, 4.9, 2.9],
+                     [0.2, 2.5, 1.5], [3.0, 2.5, 1.5], [3.2, 2.6, 1.4]])
+    assert len(rcvs) > raytrace._FEW_RECEIVERS
+    settings = RayTraceSettings(n_rays=600, max_time_s=0.3, diffuse_rain=False,
+                                specular_order_excluded=0)
+    together = trace_rays(scene, src, rcvs, np.random.default_rng(2), settings)
+    for i in range(len(rcvs)):
+        (alone,) = trace_rays(scene, src, rcvs[i:i + 1], np.random.default_rng(2), settings)
+        assert alone.histogram.energy.sum() > 0
+        for a, b in zip(histograms([alone])[0], histograms([together[i]])[0], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-30)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_convex_room_planes_face_inwards_whatever_the_winding(flip: bool):
+    verts, faces = shoebox(4.0, 3.0, 2.5)
+    scene = uniform_scene(verts, faces[:, ::-1] if flip else faces, n_bands=1)
+    normals, offsets = raytrace._convex_planes(scene)
+    assert np.all(np.array([2.0, 1.5, 1.2]) @ normals.T - offsets > 0)
+    assert np.any(np.array([5.0, 1.5, 1.2]) @ normals.T - offsets < 0)  # outside
+
+
+def test_non_convex_room_or_transmission_keeps_every_shadow_ray():
+    scene = uniform_scene(*extruded_room(*L_ROOM, 3.0), n_bands=1)
+    assert raytrace._convex_planes(scene) is None
+    glass = uniform_scene(*shoebox(4.0, 3.0, 2.5), tau=0.1, n_bands=1)
+    assert raytrace._convex_planes(glass) is None
+
+
+def test_convex_shortcut_gives_what_the_shadow_rays_give(monkeypatch):
+    scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), alpha=0.2, s=0.6, n_bands=2)
+    src = np.array([1.0, 1.0, 1.5])
+    rcvs = np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0], [5.95, 4.95, 0.05]])
+    settings = RayTraceSettings(n_rays=500, max_time_s=0.4)
+    fast = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
+    monkeypatch.setattr(raytrace, "_CONVEX_MAX_FACES", 0)
+    slow = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
+    for a, b in zip(histograms(fast), histograms(slow), strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-30)
+
+
+@pytest.mark.parametrize("room", ["shoebox", "L"])
+def test_clearance_shortcut_matches_the_sampled_clearance(room: str):
+    verts, faces = shoebox(6.0, 6.0, 3.0) if room == "shoebox" else extruded_room(*L_ROOM, 3.0)
+    scene = uniform_scene(verts, faces, n_bands=1)
+    rng = np.random.default_rng(0)
+    points = np.c_[rng.uniform(0.05, 2.95, 200), rng.uniform(0.05, 5.95, 200),
+                   rng.uniform(0.05, 2.95, 200)]
+    sampled = receiver_clearance_m(scene, points)
+    for limit in (0.3, 1.0):
+        short = raytrace._clearance_below(scene, points, limit)
+        assert np.array_equal(np.minimum(short, limit), np.minimum(sampled, limit))
+        assert 0 < np.count_nonzero(np.isinf(short)) < len(points)  # some rays were skipped
