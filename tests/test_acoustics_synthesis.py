@@ -63,11 +63,13 @@ def test_late_tail_keeps_energy_and_decay() -> None:
     # A reverberant field 3 dB above the direct sound at 2 m (a strong direct sound would
     # drop the decay curve below -5 dB at once and bias T30, whatever the synthesis).
     hist = exp_histogram(t60s, 1.5, level=1e-2)
-    rng = np.random.default_rng(1)
-    rir = synthesize_rir(direct(2.0), hist, FS, rng, max_length_s=1.5)
-    fig = room_acoustic_figures(rir, FS)
-    # One noise realisation per band: a few % of Monte-Carlo spread, most at 125 Hz.
-    assert fig.t30_s == pytest.approx(t60s, rel=0.08)
+    # One noise realisation per band has a few % of Monte-Carlo spread (3 % at 250 Hz, whose
+    # octave filter also picks up the slower 125 Hz decay: +4 % on average), so a single draw
+    # lands beyond 8 % about one time in twelve; the mean of six draws tests the synthesis.
+    t30 = np.mean([room_acoustic_figures(
+        synthesize_rir(direct(2.0), hist, FS, np.random.default_rng(seed), max_length_s=1.5),
+        FS).t30_s for seed in range(1, 7)], axis=0)
+    assert t30 == pytest.approx(t60s, rel=0.08)
     bank = OctaveFilterBank(FS)
     late = synthesize_late(hist, bank, int(1.5 * FS), np.random.default_rng(2))
     # Each band carries the histogram's energy times its share of a flat spectrum.
