@@ -742,9 +742,10 @@ def _rain_pairs(
             out.append((np.repeat(np.arange(n_hits), len(k)), np.tile(k, n_hits)))
         return out
     offset = rng.integers(0, stride, n_hits)
-    k = offset[:, None] + stride * np.arange(-(-n_rcv // stride))[None, :]
-    ray, j = np.nonzero(k < n_rcv)
-    return [(ray, k[ray, j])]
+    per_hit = -(-n_rcv // stride)
+    k = (offset[:, None] + stride * np.arange(per_hit)[None, :]).ravel()
+    pair = np.flatnonzero(k < n_rcv)
+    return [(pair // per_hit, k[pair])]
 
 
 def _rain(
