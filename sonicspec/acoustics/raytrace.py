@@ -204,15 +204,20 @@ def _fibonacci_sphere(n: int, rng: np.random.Generator) -> np.ndarray:
 def _cosine_hemisphere(normal: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
     """Lambert (cosine-weighted) directions around unit ``normal`` (n, 3)."""
     # Orthonormal basis without branches (Duff et al. 2017).
-    sign = np.where(normal[:, 2] >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + normal[:, 2])
-    b = normal[:, 0] * normal[:, 1] * a
-    t1 = np.stack([1.0 + sign * normal[:, 0] ** 2 * a, sign * b, -sign * normal[:, 0]], axis=1)
-    t2 = np.stack([b, sign + normal[:, 1] ** 2 * a, -normal[:, 1]], axis=1)
+    nx, ny, nz = normal.T
+    sign = np.where(nz >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
     r = np.sqrt(u1)
     phi = 2.0 * math.pi * u2
+    x = r * np.cos(phi)  # along t1 = (1 + sign·nx²·a, sign·b, -sign·nx)
+    y = r * np.sin(phi)  # along t2 = (b, sign + ny²·a, -ny)
     z = np.sqrt(np.maximum(0.0, 1.0 - u1))
-    return (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + z[:, None] * normal
+    out = np.empty_like(normal)
+    out[:, 0] = x * (1.0 + sign * nx * nx * a) + y * b + z * nx
+    out[:, 1] = x * (sign * b) + y * (sign + ny * ny * a) + z * ny
+    out[:, 2] = -x * (sign * nx) - y * ny + z * nz
+    return out
 
 
 class _Accumulator:
@@ -628,7 +633,9 @@ def _sphere_hits(
     pair is computed in float64, exactly as if every pair had been tested.
     """
     c = st.speed_of_sound_m_s
-    if rcv.n <= _FEW_RECEIVERS:
+    if rcv.n == 1:
+        pairs = [(rays, np.zeros(len(rays), dtype=np.int64))]
+    elif rcv.n <= _FEW_RECEIVERS:
         pairs = [(np.tile(rays, rcv.n), np.repeat(np.arange(rcv.n), len(rays)))]
     else:
         pairs = _sphere_candidates(origin, direction, seg_len, rays, rcv, rcv_chunk)
@@ -734,6 +741,8 @@ def _rain_pairs(
     random offset, so every (hit, receiver) pair is chosen with probability exactly 1/S (the
     caller weights by S: unbiased).
     """
+    if n_rcv == 1:
+        return [(np.arange(n_hits), np.zeros(n_hits, dtype=np.int64))]
     if stride == 1:
         per = max(1, _PAIRS_PER_STEP // max(1, n_hits))
         out = []
