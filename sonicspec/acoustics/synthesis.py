@@ -77,11 +77,14 @@ def synthesize_early(arrivals: Arrivals, bank: OctaveFilterBank, n_samples: int,
     out = np.zeros(n_samples)
     if not np.any(keep):
         return out
-    span = min(n_samples, int(idx[keep].max()) + 1 + bank.padding())
-    trains = np.zeros((bank.n_bands, span))
-    for b in range(bank.n_bands):
-        np.add.at(trains[b], idx[keep], (w * arrivals.amplitudes[:, b][:, None])[keep])
-    out[:span] = _filter_bands(trains, bank)
+    arrival, _ = np.nonzero(keep)
+    idx, w = idx[keep], w[keep]
+    span = min(n_samples, int(idx.max()) + 1 + bank.padding())
+    # Every band's train in one bincount: band b's taps go to b·span + sample.
+    weights = arrivals.amplitudes[arrival].T * w  # (n_bands, kept taps)
+    flat = (np.arange(bank.n_bands)[:, None] * span + idx).ravel()
+    trains = np.bincount(flat, weights=weights.ravel(), minlength=bank.n_bands * span)
+    out[:span] = _filter_bands(trains.reshape(bank.n_bands, span), bank)
     return out
 
 
@@ -229,8 +232,10 @@ class _Bins:
         # Sample r of bin j lies between centres j-1 and j (r < L/2) or j and j+1: the value
         # is V[j] + D·(r/L - 0.5), D = V[j] - V[j-1] or V[j+1] - V[j] (0 beyond the ends).
         length, m = self.length, self.m
-        clamped = np.take(values, np.clip(np.arange(-1, m + 1), 0, nb - 1), axis=1)  # V[-1…m]
-        slopes = np.diff(clamped, axis=1)  # D between centres j-1 and j, j = 0…m
+        last = min(m, nb - 1)
+        clamped = np.concatenate([values[:, :1], values[:, :m], values[:, last:last + 1]],
+                                 axis=1)  # V[-1…m], clamped to the histogram
+        slopes = clamped[:, 1:] - clamped[:, :-1]  # D between centres j-1 and j, j = 0…m
         shift = length - (length + 1) // 2
         out = np.repeat(slopes, length, axis=1)[:, shift:shift + self.n]
         out *= self.offset
