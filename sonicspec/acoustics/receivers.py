@@ -121,10 +121,13 @@ def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_
                       speed_of_sound_m_s: float = 343.0) -> np.ndarray:
     """Mix independent signals ``(M, n)`` into a diffuse field heard at ``positions_m``.
 
-    Per frequency, the mixing matrix ``C = √Λ Vᵀ`` of ``Γ = V Λ Vᵀ``, ``Γ_ij = sinc(k d_ij)``,
-    gives outputs with coherence ``Γ`` and each input's power spectrum (when the inputs have
-    equal spectra, as independent tails of one histogram do). Zero-phase filters of length
-    about ``max d / c``; the signals are padded by that much so nothing wraps around.
+    Per frequency, the mixing matrix ``C = Γ^½ = V √Λ Vᵀ`` of ``Γ = V Λ Vᵀ``,
+    ``Γ_ij = sinc(k d_ij)``, gives outputs with coherence ``Γ`` and each input's power spectrum
+    (when the inputs have equal spectra, as independent tails of one histogram do). The
+    symmetric square root is unique and smooth in frequency; ``√Λ Vᵀ`` would also give ``Γ``,
+    but eigenvectors reorder and flip sign where eigenvalues cross, and those jumps spread the
+    mixing filters in time. Zero-phase filters of length about ``max d / c``; the signals are
+    padded by that much so nothing wraps around.
     """
     x = np.asarray(signals, dtype=np.float64)
     pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
@@ -140,7 +143,8 @@ def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_
         # (F, M, M); numpy's sinc is sin(πx)/(πx)
         gamma = np.sinc(k[:, None, None] * d[None, :, :] / math.pi)
         lam, vec = np.linalg.eigh(gamma)
-        return np.sqrt(np.maximum(lam, 0.0))[:, :, None] * np.swapaxes(vec, 1, 2)  # C = √Λ Vᵀ
+        root = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
+        return root @ np.swapaxes(vec, 1, 2)  # C = V √Λ Vᵀ, symmetric
 
     pad = math.ceil(4 * d.max() / speed_of_sound_m_s * sample_rate_hz) + 16
     return mix_per_frequency(x, mixing, sample_rate_hz, pad)
