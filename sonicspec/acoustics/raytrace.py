@@ -71,7 +71,6 @@ Model (every approximation is listed here)
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -577,10 +576,10 @@ def _sphere_candidates(
     rays: np.ndarray,
     rcv: _Receivers,
     rcv_chunk: int,
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """(ray, receiver) pairs whose segment may cross the receiver's largest sphere, by chunks
-    of receivers: a float32 screen (two small matrix products) with a margin far above its
-    rounding error, so it never misses a pair the exact test would keep."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """(ray, receiver) pairs whose segment may cross the receiver's largest sphere: a float32
+    screen (small matrix products over chunks of rays and receivers) with a margin far above
+    its rounding error, so it never misses a pair the exact test would keep."""
     o = np.take(origin, rays, axis=0) - rcv.centre
     d = np.take(direction, rays, axis=0)
     od = np.einsum("ij,ij->i", o, d)
@@ -595,6 +594,7 @@ def _sphere_candidates(
     # Small enough products that BLAS runs them on one thread (it spreads larger ones over
     # every core, which costs CPU time for no gain here).
     step = max(1, _SCREEN_PRODUCT // (5 * min(rcv.n, rcv_chunk)))
+    found_ray, found_k = [], []
     for r0 in range(0, rcv.n, rcv_chunk):
         sl = slice(r0, r0 + rcv_chunk)
         for i0 in range(0, len(rays), step):
@@ -607,8 +607,9 @@ def _sphere_candidates(
             near &= tc > -(rcv.cap32[sl] + margin)
             near &= tc < seg_hi[rs] + rcv.cap32[sl]
             ray, k = np.nonzero(near)
-            if ray.size:
-                yield rays[ray + i0], k + r0
+            found_ray.append(ray + i0)
+            found_k.append(k + r0)
+    return rays[np.concatenate(found_ray)], np.concatenate(found_k)
 
 
 def _sphere_hits(
@@ -638,8 +639,10 @@ def _sphere_hits(
     elif rcv.n <= _FEW_RECEIVERS:
         pairs = [(np.tile(rays, rcv.n), np.repeat(np.arange(rcv.n), len(rays)))]
     else:
-        pairs = _sphere_candidates(origin, direction, seg_len, rays, rcv, rcv_chunk)
+        pairs = [_sphere_candidates(origin, direction, seg_len, rays, rcv, rcv_chunk)]
     for ray, k in pairs:
+        if ray.size == 0:
+            continue
         cap = rcv.cap[k]
         w = np.take(rcv.pos, k, axis=0)
         w -= np.take(origin, ray, axis=0)
@@ -732,29 +735,25 @@ def _clearance_below(scene: AcousticScene, receivers: np.ndarray, limit: float) 
     return out
 
 
-def _rain_pairs(
+def _rain_slots(
     n_hits: int, n_rcv: int, stride: int, rng: np.random.Generator
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(hit, receiver) index pairs that receive diffuse rain, in chunks of bounded size.
+) -> list[np.ndarray]:
+    """Receivers that receive each hit's diffuse rain, as ``(slots, n_hits)`` index blocks
+    (``n_rcv`` or more where a slot is empty), in chunks of bounded size.
 
-    ``stride`` 1: every pair. ``stride`` S > 1: each hit rains onto every S-th receiver from a
-    random offset, so every (hit, receiver) pair is chosen with probability exactly 1/S (the
-    caller weights by S: unbiased).
+    ``stride`` 1: every receiver (slot j is receiver j). ``stride`` S > 1: each hit rains onto
+    every S-th receiver from a random offset, so every (hit, receiver) pair is chosen with
+    probability exactly 1/S (the caller weights by S: unbiased).
     """
-    if n_rcv == 1:
-        return [(np.arange(n_hits), np.zeros(n_hits, dtype=np.int64))]
     if stride == 1:
         per = max(1, _PAIRS_PER_STEP // max(1, n_hits))
-        out = []
-        for r0 in range(0, n_rcv, per):
-            k = np.arange(r0, min(n_rcv, r0 + per))
-            out.append((np.repeat(np.arange(n_hits), len(k)), np.tile(k, n_hits)))
-        return out
+        return [
+            np.broadcast_to(np.arange(r0, min(n_rcv, r0 + per))[:, None],
+                            (min(n_rcv, r0 + per) - r0, n_hits))
+            for r0 in range(0, n_rcv, per)
+        ]
     offset = rng.integers(0, stride, n_hits)
-    per_hit = -(-n_rcv // stride)
-    k = (offset[:, None] + stride * np.arange(per_hit)[None, :]).ravel()
-    pair = np.flatnonzero(k < n_rcv)
-    return [(pair // per_hit, k[pair])]
+    return [offset[None, :] + stride * np.arange(-(-n_rcv // stride))[:, None]]
 
 
 def _rain(
@@ -772,8 +771,10 @@ def _rain(
 ) -> None:
     """Next-event estimate of the scattered energy at every receiver (Lambert, shadow rays).
 
-    Per-pair quantities are kept as rows (component, pair) so that gathers, products and the
-    accumulator read contiguous memory.
+    Pairs are laid out as (slot, hit) blocks: per-hit quantities broadcast along the slots
+    instead of being gathered pair by pair, and pairs that get nothing (an empty slot, a
+    receiver behind the surface, a blocked shadow ray, an arrival beyond the histogram) are
+    added with weight 0 rather than compacted away, unless they are many.
     """
     radius = st.receiver_radius_m
     limit = st.rain_receivers_per_hit
@@ -781,71 +782,76 @@ def _rain(
     # ΔΩ/π per πR², converted to p², times the subsampling weight.
     scale = stride * to_p2 / (math.pi * math.pi * radius * radius)
     inv_bin_len = 1.0 / (st.speed_of_sound_m_s * st.bin_s)
-    hit_t, side_t, dep_t = hit.T.copy(), n_side.T.copy(), departure.T.copy()
+    n_hits, b = len(hit), acc.n_bands
     start = hit + scene.eps_m * n_side  # shadow rays leave the surface on the lit side
-    scattered_sum = scattered.sum(axis=0)
     free_hit = None
     if rcv.planes is not None:  # convex room: a start inside it sees every inner receiver
         normals, offsets = rcv.planes
         free_hit = (start @ normals.T - offsets).min(axis=1) > _INSIDE_M
-    for ray, k in _rain_pairs(len(hit), rcv.n, stride, rng):
-        vec = np.take(rcv.pos_t, k, axis=1)
-        vec -= np.take(hit_t, ray, axis=1)
-        dot = np.einsum("ij,ij->j", vec, np.take(side_t, ray, axis=1))
-        front = dot > 0  # receivers on the side the energy is scattered to
-        if not front.all():
-            ray, k, dot = ray[front], k[front], dot[front]
-            vec = np.compress(front, vec, axis=1)
-        if ray.size == 0:
-            continue
-        d = np.sqrt(np.einsum("ij,ij->j", vec, vec))
+    scattered_sum = scattered.sum(axis=0)
+    for slots in _rain_slots(n_hits, rcv.n, stride, rng):
+        ok = slots < rcv.n
+        k = np.where(ok, slots, 0)
+        vec = np.empty((3, *k.shape))
+        for c in range(3):
+            np.subtract(np.take(rcv.pos_t[c], k), hit[:, c], out=vec[c])
+        dot = vec[0] * n_side[:, 0] + vec[1] * n_side[:, 1] + vec[2] * n_side[:, 2]
+        ok &= dot > 0  # receivers on the side the energy is scattered to
+        d = np.sqrt(np.einsum("cij,cij->ij", vec, vec))
+        d[~ok] = 1.0  # (an empty slot may sit on the hit; it gets weight 0 anyway)
         u = vec / d
+        flat_u = u.reshape(3, -1)
+        trans = None
         if scene.has_transmission:
-            trans = scene.segment_transmission(
-                np.take(start, ray, axis=0), np.take(rcv.pos, k, axis=0)
+            pair = np.flatnonzero(ok)
+            tr = scene.segment_transmission(
+                np.take(start, pair % n_hits, axis=0), np.take(rcv.pos, k.ravel()[pair], axis=0)
             )
-            has = np.any(trans > 0, axis=1)
+            trans = np.ones((b, ok.size))
+            trans[:, pair] = tr.T
+            ok.ravel()[pair[~np.any(tr > 0, axis=1)]] = False
         else:
-            trans = None
-            if free_hit is None:
-                has = ~scene.occluded_along(np.take(start, ray, axis=0), u.T, d)
-            else:
-                has = np.ones(ray.size, dtype=bool)
-                test = np.flatnonzero(~(free_hit[ray] & rcv.inside[k]))
-                if test.size:
-                    has[test] = ~scene.occluded_along(
-                        np.take(start, ray[test], axis=0), np.take(u, test, axis=1).T, d[test]
-                    )
-        if not has.all():
-            ray, k, d, dot, u = ray[has], k[has], d[has], dot[has], np.compress(has, u, axis=1)
-            if trans is not None:
-                trans = np.compress(has, trans, axis=0)
-        if ray.size == 0:
-            continue
-        time_bin = ((path_len[ray] + d) * inv_bin_len).astype(np.int64)
-        late = time_bin < acc.n_bins
-        if not late.all():
-            ray, k, d, dot, time_bin = ray[late], k[late], d[late], dot[late], time_bin[late]
-            u = np.compress(late, u, axis=1)
-            if trans is not None:
-                trans = np.compress(late, trans, axis=0)
-        if ray.size == 0:
+            test = ok if free_hit is None else ok & ~(free_hit & np.take(rcv.inside, k))
+            pair = np.flatnonzero(test)
+            if pair.size:
+                blocked = scene.occluded_along(
+                    np.take(start, pair % n_hits, axis=0), np.take(flat_u, pair, axis=1).T,
+                    d.ravel()[pair],
+                )
+                ok.ravel()[pair[blocked]] = False
+        time_bin = ((path_len + d) * inv_bin_len).astype(np.int64)
+        ok &= time_bin < acc.n_bins
+        n_ok = int(np.count_nonzero(ok))
+        if n_ok == 0:
             continue
         cos_out = dot / d
         # Solid angle of the receiver sphere seen from the hit, exact (2π when inside it).
         sin2 = np.minimum(1.0, (radius / d) ** 2)
         solid = (2.0 * math.pi) * (1.0 - np.sqrt(1.0 - sin2))
         geom = cos_out * solid * scale
-        b = acc.n_bands
-        rows = acc.reserve(k, time_bin)
-        np.multiply(np.take(scattered, ray, axis=1), geom, out=rows[:b])
-        if trans is not None:
-            rows[:b] *= trans.T
-            total = rows[:b].sum(axis=0)
+        if n_ok < 0.75 * ok.size:  # mostly nothing: compact rather than add zeros
+            keep = np.flatnonzero(ok)
+            ray = keep % n_hits
+            geom = geom.ravel()[keep]
+            rows = acc.reserve(k.ravel()[keep], time_bin.ravel()[keep])
+            np.multiply(np.take(scattered, ray, axis=1), geom, out=rows[:b])
+            total = np.take(scattered_sum, ray) * geom
+            if trans is not None:
+                rows[:b] *= np.take(trans, keep, axis=1)
+            arrival, dep = np.take(flat_u, keep, axis=1), np.take(departure, ray, axis=0).T
         else:
-            total = scattered_sum[ray] * geom
-        np.multiply(u, -total, out=rows[b : b + 3])
-        np.multiply(np.take(dep_t, ray, axis=1), total, out=rows[b + 3 :])
+            geom[~ok] = 0.0
+            time_bin[~ok] = 0
+            rows = acc.reserve(k.ravel(), time_bin.ravel()).reshape(b + 6, *ok.shape)
+            np.multiply(scattered[:, None, :], geom, out=rows[:b])
+            total = scattered_sum * geom
+            if trans is not None:
+                rows[:b] *= trans.reshape(b, *ok.shape)
+            arrival, dep = u, departure.T[:, None, :]
+        if trans is not None:  # band-summed energy after the transmitting surfaces
+            total = rows[:b].sum(axis=0)
+        np.multiply(arrival, -total, out=rows[b : b + 3])
+        np.multiply(dep, total, out=rows[b + 3 :])
 
 
 @dataclass(frozen=True, eq=False)
