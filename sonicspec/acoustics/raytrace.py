@@ -96,6 +96,8 @@ _FEW_RECEIVERS = 4
 _SCREEN_PRODUCT = 1 << 18
 # Largest (receivers × faces) for the plane-distance shortcut of the receivers' clearance.
 _PLANE_TEST_PAIRS = 1 << 22
+# Rain pairs are added as dense (slot, hit) blocks when at least this share of them count.
+_RAIN_DENSE = 0.75
 # Convex rooms of up to this many faces skip shadow rays between points inside them.
 _CONVEX_MAX_FACES = 64
 # "Strictly inside" a plane: farther than this on its inner side, metres.
@@ -829,7 +831,7 @@ def _rain(
         sin2 = np.minimum(1.0, (radius / d) ** 2)
         solid = (2.0 * math.pi) * (1.0 - np.sqrt(1.0 - sin2))
         geom = cos_out * solid * scale
-        if n_ok < 0.75 * ok.size:  # mostly nothing: compact rather than add zeros
+        if n_ok < _RAIN_DENSE * ok.size:  # mostly nothing: compact rather than add zeros
             keep = np.flatnonzero(ok)
             ray = keep % n_hits
             geom = geom.ravel()[keep]
