@@ -608,7 +608,7 @@ def _sphere_candidates(
             near = d2 < rcv.cap_sq32[sl] + margin_sq
             near &= tc > -(rcv.cap32[sl] + margin)
             near &= tc < seg_hi[rs] + rcv.cap32[sl]
-            ray, k = np.nonzero(near)
+            ray, k = np.divmod(np.flatnonzero(near), near.shape[1])  # (2-D nonzero is slow)
             found_ray.append(ray + i0)
             found_k.append(k + r0)
     return rays[np.concatenate(found_ray)], np.concatenate(found_k)

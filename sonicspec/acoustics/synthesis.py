@@ -77,8 +77,9 @@ def synthesize_early(arrivals: Arrivals, bank: OctaveFilterBank, n_samples: int,
     out = np.zeros(n_samples)
     if not np.any(keep):
         return out
-    arrival, _ = np.nonzero(keep)
-    idx, w = idx[keep], w[keep]
+    kept = np.flatnonzero(keep)
+    arrival = kept // keep.shape[1]
+    idx, w = idx.ravel()[kept], w.ravel()[kept]
     span = min(n_samples, int(idx.max()) + 1 + bank.padding())
     # Every band's train in one bincount: band b's taps go to b·span + sample.
     weights = arrivals.amplitudes[arrival].T * w  # (n_bands, kept taps)
