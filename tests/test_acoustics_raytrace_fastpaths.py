@@ -97,3 +97,20 @@ def test_rain_blocks_dense_or_compacted_give_the_same_histograms(monkeypatch, ta
     for a, b in zip(histograms(runs[0]), histograms(runs[1]), strict=True):
         for x, y in zip(a, b, strict=True):
             np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-30)
+
+
+def test_without_directions_the_energies_are_the_same_bytes():
+    scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), alpha=0.3, s=0.4, n_bands=3)
+    src = np.array([1.0, 1.0, 1.5])
+    rcvs = np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0], [2.5, 4.0, 0.5], [3.0, 2.5, 1.5],
+                     [1.5, 3.5, 2.5]])
+    settings = RayTraceSettings(n_rays=500, max_time_s=0.3, rain_receivers_per_hit=2)
+    full = trace_rays(scene, src, rcvs, np.random.default_rng(8), settings)
+    bare = trace_rays(scene, src, rcvs, np.random.default_rng(8),
+                      RayTraceSettings(n_rays=500, max_time_s=0.3, rain_receivers_per_hit=2,
+                                       directions=False))
+    for a, b in zip(full, bare, strict=True):
+        assert a.histogram.energy.tobytes() == b.histogram.energy.tobytes()
+        assert np.all(np.isfinite(a.histogram.direction_sum))
+        assert np.all(np.isnan(b.histogram.direction_sum))
+        assert np.all(np.isnan(b.histogram.departure_sum))

@@ -125,7 +125,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
         receiver_radius_m=settings.receiver_radius_m,
         specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
-        diffuse_rain=settings.diffuse_rain)
+        diffuse_rain=settings.diffuse_rain,
+        # No renderer reads the late field's directions (the tails are diffuse): skip them.
+        directions=False)
     traces = trace_rays(scene, mic, points, rng, ray_settings, air)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
     render = _renderer(microphone, settings, hrirs)
