@@ -231,3 +231,39 @@ def test_noisy_scan_walls_merge_with_scan_tolerances():
     scan = image_sources(noisy_scene, src, mic, max_order=2, regions=regions).arrivals[0]
     assert len(scan) == len(clean) == 24
     np.testing.assert_allclose(scan.path_length_m, clean.path_length_m, atol=0.01)
+
+
+def _reach_every_vertex(scene, regions, tol):
+    """Reference: the side test over every vertex of every region (no outline reduction)."""
+    reach = np.zeros((2, regions.n_regions, regions.n_regions), dtype=bool)
+    for p in range(regions.n_regions):
+        fcs = regions.region_faces[regions.region_start[p] : regions.region_start[p + 1]]
+        pts = scene.vertices[scene.faces[fcs]].reshape(-1, 3)
+        dist = regions.normals @ pts.T - regions.plane_d[:, None]
+        reach[0, :, p] = dist.max(axis=1) > tol
+        reach[1, :, p] = dist.min(axis=1) < -tol
+    return reach
+
+
+def test_reach_table_from_region_outlines_matches_every_vertex():
+    """Pruning uses only each region's outline corners: on a finely tessellated L-room the
+    table equals the every-vertex one; on a noisy scan it only ever adds reachable pairs."""
+    from sonicspec.acoustics.image_sources import _reach_tables
+
+    poly = [(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)]
+    verts, faces = extruded_room(poly, [(3, 4, 5), (3, 5, 0), (3, 0, 1), (3, 1, 2)], 3.0)
+    for _ in range(3):
+        verts, faces = trimesh.remesh.subdivide(verts, faces)
+    scene = uniform_scene(verts, faces)
+    regions = planar_regions(scene)
+    got = _reach_tables(scene, regions, scene.eps_m)
+    expected = _reach_every_vertex(scene, regions, scene.eps_m)
+    assert expected.any() and not expected.all()  # the re-entrant corner prunes something
+    np.testing.assert_array_equal(got, expected)
+
+    noisy = verts + np.random.default_rng(1).normal(0.0, 0.003, verts.shape)
+    noisy_scene = uniform_scene(noisy, faces)
+    regions = planar_regions(noisy_scene, angle_tol_rad=0.1, distance_tol_m=0.02)
+    got = _reach_tables(noisy_scene, regions, noisy_scene.eps_m)
+    expected = _reach_every_vertex(noisy_scene, regions, noisy_scene.eps_m)
+    assert np.all(got | ~expected)  # never prunes a pair the vertices say is reachable

@@ -162,25 +162,58 @@ class ImageSourceResult:
     max_order: int
 
 
+def _region_extremes(scene: AcousticScene, regions: PlanarRegions
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each region's outline corners and how far its vertices stray from its plane.
+
+    A linear function's extremes over a planar region lie at corners of the convex hull of its
+    vertices (in the plane), so a finely tessellated wall reduces to a handful of points.
+    Returns ``points (K, 3)``, ``starts (P+1,)`` (region p's points are
+    ``points[starts[p]:starts[p+1]]``) and ``stray (P,)``, the largest distance of a vertex
+    of p from p's plane (nonzero for scans; a corner-only test can miss at most twice that).
+    """
+    from scipy.spatial import ConvexHull, QhullError  # only regions with many vertices
+
+    chunks, counts = [], []
+    stray = np.zeros(regions.n_regions)
+    for p in range(regions.n_regions):
+        fcs = regions.region_faces[regions.region_start[p]:regions.region_start[p + 1]]
+        pts = scene.vertices[np.unique(scene.faces[fcs])]
+        stray[p] = float(np.max(np.abs(pts @ regions.normals[p] - regions.plane_d[p])))
+        if len(pts) > 8:
+            n = regions.normals[p]
+            u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+            u /= np.linalg.norm(u)
+            v = np.cross(n, u)
+            try:
+                pts = pts[ConvexHull(np.column_stack([pts @ u, pts @ v])).vertices]
+            except (QhullError, ValueError):  # collinear or degenerate: keep every vertex
+                pass
+        chunks.append(pts)
+        counts.append(len(pts))
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return np.concatenate(chunks), starts, stray
+
+
 def _reach_tables(scene: AcousticScene, regions: PlanarRegions, tol: float) -> np.ndarray | None:
     """``reach[side, q, p]``: region p has a vertex strictly on side (0: front, 1: back) of q.
 
     A path reflected at q towards side ``σ`` can only next reach regions with some part on that
-    side; this prunes candidates in non-convex scenes. None when there are too many regions.
+    side; this prunes candidates in non-convex scenes. Conservative: a region whose vertices
+    stray off its plane counts as reaching by that much more. None when there are too many
+    regions.
     """
     n_regions = regions.n_regions
-    if n_regions > _MAX_REGIONS_FOR_REACH_TABLE:
+    if n_regions > _MAX_REGIONS_FOR_REACH_TABLE or n_regions == 0:
         return None
-    tri = scene.vertices[scene.faces[regions.region_faces]]  # faces sorted by region
+    points, starts, stray = _region_extremes(scene, regions)
     reach = np.zeros((2, n_regions, n_regions), dtype=bool)
-    starts = regions.region_start[:-1]
-    chunk = max(1, 2_000_000 // max(1, 3 * len(tri)))
-    flat = tri.reshape(-1, 3)
+    chunk = max(1, 4_000_000 // max(1, len(points)))
     for q0 in range(0, n_regions, chunk):
         q = slice(q0, min(n_regions, q0 + chunk))
-        dist = (regions.normals[q] @ flat.T - regions.plane_d[q][:, None]).reshape(-1, len(tri), 3)
-        reach[0, q] = np.maximum.reduceat(dist.max(axis=2), starts, axis=1) > tol
-        reach[1, q] = np.minimum.reduceat(dist.min(axis=2), starts, axis=1) < -tol
+        dist = regions.normals[q] @ points.T - regions.plane_d[q][:, None]  # (Q, K)
+        reach[0, q] = np.maximum.reduceat(dist, starts[:-1], axis=1) + 2 * stray > tol
+        reach[1, q] = np.minimum.reduceat(dist, starts[:-1], axis=1) - 2 * stray < -tol
     return reach
 
 
