@@ -47,7 +47,8 @@ Model (every approximation is listed here)
 
 * **Histograms**: per receiver, per-band energy in ``bin_s`` bins up to ``max_time_s``, with the
   band-summed energy-weighted sums of the arrival direction (towards the last reflection point,
-  or against the ray for sphere hits) and of the ray's departure direction.
+  or against the ray for sphere hits) and of the ray's departure direction (unless
+  ``RayTraceSettings.directions`` is False: then NaN, and the trace is about a sixth faster).
 * **Many receivers**: one trace serves every receiver; sphere tests and shadow rays are the
   only per-receiver cost, and the shadow rays are bounded by ``rain_receivers_per_hit``: with
   more receivers each hit rains onto a random, evenly strided subset (weighted, unbiased), so
