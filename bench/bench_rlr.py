@@ -1,0 +1,583 @@
+"""One RIR in a furnished ~100 k-triangle apartment: sonicspec against rlr-audio-propagation.
+
+``rlr-audio-propagation`` is the engine SonicSim drives through Habitat. It is a benchmark-only
+optional dependency with a non-commercial licence (CC BY-NC 4.0), never imported by the package:
+
+    pip install rlr-audio-propagation
+
+Without it this script prints a message and exits 0.
+
+Reproduce:  python bench/bench_rlr.py            (about 15 minutes on 2 busy cores)
+            python bench/bench_rlr.py --quick    (fewer seeds and rays in the accuracy sweep)
+
+What it does
+* Scene: the furnished six-room apartment of ``bench_navigation.py`` (20 × 14 × 2.7 m,
+  partitions with door gaps, 24 boxes, 6 columns), subdivided to about ``--triangles``
+  triangles. Materials from sonicspec's ``sonicset`` library (SonicSet's own table and label
+  rule): wall → Gypsum Board, floor → Carpet, ceiling → Acoustic Tile, furniture → wood, Thick,
+  column → Default. RLR gets the *same* table entries (the library's ``mp3d_material_config
+  .json``, with the damping/density/speed fields RLR requires), each under a unique label, and
+  each face group is added with that label — so every face has the same SonicSet material in
+  both engines (not just the same label rule).
+* One source and one microphone in the same room with line of sight (checked).
+* Timed, each in a fresh process pinned to one core (``taskset -c 0``), RLR with
+  ``thread_count = 1`` and a fresh context per RIR (a reused context returns different IRs):
+  (a) RLR defaults (44.1 kHz, 5 000 indirect rays, 4 bands); (a') the same with 50 000 rays,
+  RLR's own converged answer for (a); (b) RLR at SonicSim's settings (16 kHz, 50 000 indirect
+  rays, 32 bands asked — the engine caps at 12, checked here —, SH orders 5/3; mono listener);
+  (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, image sources to
+  order 3, 16 kHz) and at the cheapest setting of a small sweep (rays × image-source order,
+  several seeds) that stays, in every band and for every seed, near sonicspec's converged
+  answer (``--ref-rays`` rays): within the ISO 3382-1 just-noticeable differences (T30, EDT
+  5 %, C50 1 dB) if any setting does, else no farther than RLR's defaults are from RLR's own
+  50 000-ray answer (the accuracy RLR's defaults are used at).
+  sonicspec is timed per RIR with its Embree scene and planar regions built once per mesh (as
+  the rir stage does); that once-per-mesh cost is reported too. sonicspec also on 2 threads.
+* Reports T30/EDT/C50 per octave band (125 Hz–4 kHz, the bands SonicSet's table covers) of
+  every RIR by sonicspec's ISO 3382-1 routine, and the speed ratios against the issue's targets
+  (sonicspec ≥ 3× faster than RLR defaults, ≥ 20× faster than RLR at SonicSim's settings, on
+  one thread). Ratios use CPU time of the pinned single-thread processes (the machine is shared;
+  wall time and the load average are printed too).
+* Diagnosis (not with ``--quick``): both engines with every scattering coefficient set to 1,
+  and RLR's direct and reverberant energy (direct-only / indirect-only runs) against the
+  free-field direct sound 1/(4πr), next to sonicspec's reverberant energy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench_navigation import apartment, subdivide
+
+from sonicspec.acoustics.arrivals import Arrivals
+from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.metrics import room_acoustic_figures
+from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.geometry.materials import load_library
+from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.stages.rir import RirSettings, acoustic_scene, simulate_rirs
+
+BANDS_HZ = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0)
+SOURCE_M = np.array([12.5, 9.0, 1.5])  # the 10 × 7 m room at x 10..20, y 7..14
+MIC_M = np.array([17.5, 12.0, 1.5])
+SAMPLE_RATE_HZ = 16_000  # the spec's default sample rate (and SonicSim's)
+SPEED_OF_SOUND_M_S = 343.0
+# ISO 3382-1 Annex A just-noticeable differences: EDT 5 %, reverberation time 5 %, clarity 1 dB.
+JND = {"t30": 0.05, "edt": 0.05, "c50_db": 1.0}
+RLR_LABEL = "<sonicspec-material-{:03d}>"  # unique: no label is a substring of another
+
+
+# --------------------------------------------------------------------------- scene
+def apartment_mesh(triangles: int) -> SceneMesh:
+    """The furnished apartment near ``triangles`` triangles, SonicSet materials by label."""
+    base = apartment(np.random.default_rng(0))
+    best = None
+    for scale in (1.0, 1.1, 0.9, 1.2, 0.8):  # subdivision is coarse-grained: try a few targets
+        mesh = subdivide(base, int(triangles * scale), 0.0, np.random.default_rng(0))
+        if best is None or abs(mesh.n_faces / triangles - 1) < abs(best.n_faces / triangles - 1):
+            best = mesh
+        if abs(best.n_faces / triangles - 1) < 0.1:
+            break
+    return best.with_materials(load_library("sonicset").material_for_label)
+
+
+def rlr_material_json(mesh: SceneMesh, path: Path) -> None:
+    """SonicSet's entries for the mesh's materials, each relabelled with a unique label."""
+    text = resources.files("sonicspec").joinpath(
+        "data", "materials", "mp3d_material_config.json").read_text("utf-8")
+    entries = {e["name"]: e for e in json.loads(text)["materials"]}
+    out = [dict(entries["Default"], labels=["default"])]  # RLR's fallback; unused here
+    out += [dict(entries[name], labels=[RLR_LABEL.format(k)])
+            for k, name in enumerate(mesh.materials)]
+    path.write_text(json.dumps({"materials": out}), encoding="utf-8")
+
+
+def check_positions(scene, source: np.ndarray, mic: np.ndarray) -> float:
+    """Both points in the air, 0.3 m clear of every surface along the axes, line of sight."""
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    for name, p in (("source", source), ("mic", mic)):
+        face, dist = scene.intersect(np.repeat(p[None], 6, axis=0), axes)
+        facing = np.einsum("ij,ij->i", scene.normals[np.maximum(face, 0)], axes) < 0
+        if np.any(face < 0) or not np.all(facing) or np.any(dist < 0.3):
+            raise SystemExit(f"bench_rlr: the {name} at {p.tolist()} is not in open air")
+    if scene.occluded(mic[None], source[None])[0]:
+        raise SystemExit("bench_rlr: no line of sight between source and mic")
+    return float(np.linalg.norm(source - mic))
+
+
+def load_mesh(tmp: Path) -> SceneMesh:
+    z = np.load(tmp / "mesh.npz")
+    names = tuple(json.loads((tmp / "materials.json").read_text()))
+    return SceneMesh(z["vertices"], z["faces"], z["face_material"], names)
+
+
+def figures(rir: np.ndarray, fs: float) -> dict:
+    f = room_acoustic_figures(np.asarray(rir, dtype=np.float64), fs, BANDS_HZ).to_dict()
+    return {"t30_s": f["t30_s"], "edt_s": f["edt_s"], "c50_db": f["c50_db"],
+            "broadband": f["broadband"], "drr_db": f["drr_db"]}
+
+
+# --------------------------------------------------------------------------- RLR (child)
+def rlr_config(name: str, rlr):
+    cfg = rlr.Config()  # the engine's defaults: 44.1 kHz, 4 bands, 5 000 indirect rays
+    cfg.thread_count = 1
+    if name == "default_50k":
+        cfg.indirect_ray_count = 50_000
+    elif name.startswith("sonicsim"):  # SonicSim's SonicSim_rir.py acoustic_config
+        cfg.sample_rate = 16_000
+        cfg.frequency_bands = 32
+        cfg.indirect_ray_count = 50_000
+        cfg.direct_sh_order = 5
+        cfg.indirect_sh_order = 3
+        cfg.unit_scale = 1.0
+        cfg.direct = cfg.indirect = cfg.diffraction = cfg.transmission = True
+        if name == "sonicsim_5k_12":  # band-cap check: 12 bands, fewer rays
+            cfg.frequency_bands, cfg.indirect_ray_count = 12, 5_000
+        elif name == "sonicsim_5k_32":
+            cfg.indirect_ray_count = 5_000
+    elif name == "default_2threads":
+        cfg.thread_count = 2
+    elif name != "default":
+        raise SystemExit(f"bench_rlr: unknown RLR configuration {name!r}")
+    return cfg
+
+
+def rlr_rir(rlr, cfg, mesh: SceneMesh, material_json: Path) -> tuple[np.ndarray, float]:
+    """One mono IR from a fresh context; returns (ir, seconds spent in simulate())."""
+    ctx = rlr.Context(cfg)
+    ctx.set_material_database_json(str(material_json))
+    ctx.add_object()
+    ctx.add_mesh_vertices(mesh.vertices.astype(np.float32).ravel().tolist())
+    for k in range(len(mesh.materials)):
+        faces = mesh.faces[mesh.face_material == k].astype(np.uint32)
+        ctx.add_mesh_indices(faces.ravel().tolist(), 3, RLR_LABEL.format(k))
+    ctx.finalize_object_mesh(0)
+    ctx.add_listener(rlr.ChannelLayout(rlr.ChannelLayoutType.Mono, 1))
+    ctx.set_listener_position(0, MIC_M.tolist())
+    ctx.add_source()
+    ctx.set_source_position(0, SOURCE_M.tolist())
+    t0 = time.perf_counter()
+    ctx.simulate()
+    t_sim = time.perf_counter() - t0
+    return np.array(ctx.get_ir_channel(0, 0, 0), dtype=np.float64), t_sim
+
+
+def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
+    import rlr_audio_propagation as rlr  # benchmark-only optional dependency
+
+    mesh = load_mesh(tmp)
+    cfg = rlr_config(name, rlr)
+    walls, cpus, sims, ir = [], [], [], None
+    for _ in range(repeats):
+        w0, c0 = time.perf_counter(), time.process_time()
+        out, t_sim = rlr_rir(rlr, cfg, mesh, tmp / "rlr_materials.json")
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+        sims.append(t_sim)
+        if ir is None:
+            ir = out
+        elif name.startswith("default") and not np.array_equal(ir, out):
+            print(f"note: RLR {name}: fresh contexts gave different IRs", file=sys.stderr)
+    np.save(tmp / f"rir_rlr_{name}.npy", ir)
+    return {"engine": "rlr", "name": name, "sample_rate_hz": float(cfg.sample_rate),
+            "rays": int(cfg.indirect_ray_count), "bands_asked": int(cfg.frequency_bands),
+            "threads": int(cfg.thread_count), "wall_s": walls, "cpu_s": cpus,
+            "simulate_s": sims, "samples": int(ir.size),
+            "figures": figures(ir, cfg.sample_rate)}
+
+
+# --------------------------------------------------------------------------- sonicspec (child)
+def sonicspec_settings(rays: int, order: int) -> RirSettings:
+    acoustics = AcousticsSpec().model_dump(mode="json")
+    acoustics.update(rays=rays, image_source_order=order)
+    return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
+
+
+def sonicspec_rir(scene, regions, settings: RirSettings, seed: int, n_threads: int
+                  ) -> tuple[np.ndarray, int]:
+    """``simulate_rirs`` for one mono RIR, with the tracer's thread count exposed.
+
+    Same calls in the same order with the same generator, so with any thread count the
+    bytes equal ``simulate_rirs``' (checked in the sweep). Also returns the image-source order
+    completed (order 3 stops at 2 in this scene: more than 2 M candidates).
+    """
+    rng = np.random.default_rng(seed)
+    air, c = settings.air(), settings.speed_of_sound_m_s
+    points = SOURCE_M[None]
+    direct = direct_sound(scene, MIC_M, points, air, c)
+    with warnings.catch_warnings():  # order 3 stops at order 2 here (candidate limit)
+        warnings.simplefilter("ignore")
+        ism = image_sources(scene, MIC_M, points, settings.image_source_order, air, c, regions,
+                            max_path_length_m=c * settings.max_rir_length_s)
+    ray_settings = RayTraceSettings(
+        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
+        energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
+        receiver_radius_m=settings.receiver_radius_m,
+        specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
+        diffuse_rain=settings.diffuse_rain)
+    (trace,) = trace_rays(scene, MIC_M, points, rng, ray_settings, air, n_threads=n_threads)
+    arrivals = Arrivals.concatenate([direct[0], ism.arrivals[0]])
+    rir = synthesize_rir(arrivals, trace.histogram, settings.sample_rate_hz, rng,
+                         max_length_s=settings.max_rir_length_s, bands_hz=settings.bands_hz)
+    return rir, ism.max_order
+
+
+def prepared_scene(tmp: Path, settings: RirSettings):
+    """Embree scene and planar regions, built once per mesh; returns them and the seconds."""
+    mesh = load_mesh(tmp)
+    w0, c0 = time.perf_counter(), time.process_time()
+    scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+    regions = planar_regions(scene)
+    return scene, regions, time.perf_counter() - w0, time.process_time() - c0
+
+
+def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int,
+                    seed: int) -> dict:
+    settings = sonicspec_settings(rays, order)
+    scene, regions, setup_wall, setup_cpu = prepared_scene(tmp, settings)
+    walls, cpus, rir = [], [], None
+    for _ in range(repeats):
+        w0, c0 = time.perf_counter(), time.process_time()
+        out, order_done = sonicspec_rir(scene, regions, settings, seed, threads)
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+        rir = out if rir is None else rir
+    np.save(tmp / f"rir_sonicspec_{rays}_{order}_{threads}.npy", rir)
+    return {"engine": "sonicspec", "rays": rays, "order": order, "order_done": order_done,
+            "threads": threads,
+            "wall_s": walls, "cpu_s": cpus, "setup_wall_s": setup_wall,
+            "setup_cpu_s": setup_cpu, "regions": regions.n_regions, "samples": int(rir.size),
+            "figures": figures(rir, SAMPLE_RATE_HZ)}
+
+
+def deviation(fig: dict, ref: dict) -> dict:
+    """Worst band: relative T30/EDT error, absolute C50 error (dB) against ``ref``."""
+    def rel(key):
+        a, b = np.array(fig[key], float), np.array(ref[key], float)
+        return float(np.nanmax(np.abs(a / b - 1))) if np.all(np.isfinite(a)) else float("inf")
+
+    c = np.abs(np.array(fig["c50_db"], float) - np.array(ref["c50_db"], float))
+    return {"t30": rel("t30_s"), "edt": rel("edt_s"),
+            "c50_db": float(np.nanmax(c)) if np.all(np.isfinite(c)) else float("inf")}
+
+
+def child_sweep(tmp: Path, ref_rays: int, seeds: list[int], candidates: list[tuple[int, int]]
+                ) -> dict:
+    """sonicspec's converged answer, then every candidate (rays, order) over seeds."""
+    ref_settings = sonicspec_settings(ref_rays, 3)
+    scene, regions, _, _ = prepared_scene(tmp, ref_settings)
+    threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    t0 = time.perf_counter()
+    ref = figures(sonicspec_rir(scene, regions, ref_settings, 0, threads)[0], SAMPLE_RATE_HZ)
+    ref_wall = time.perf_counter() - t0
+    # The mirror of simulate_rirs gives its bytes (one cheap case).
+    check = sonicspec_settings(1000, 1)
+    (via_stage,), _ = simulate_rirs(scene, MIC_M, SOURCE_M[None], check,
+                                    np.random.default_rng(seeds[0]), regions=regions)
+    mirror = sonicspec_rir(scene, regions, check, seeds[0], 1)[0]
+    same_bytes = bool(np.array_equal(via_stage[0], mirror.astype(np.float32)))
+    rows = []
+    for rays, order in candidates:
+        settings = sonicspec_settings(rays, order)
+        cpus, devs, figs = [], [], []
+        for seed in seeds:
+            c0 = time.process_time()
+            rir = sonicspec_rir(scene, regions, settings, seed, 1)[0]
+            cpus.append(time.process_time() - c0)
+            figs.append(figures(rir, SAMPLE_RATE_HZ))
+            devs.append(deviation(figs[-1], ref))
+        t30 = np.array([f["t30_s"] for f in figs], float)
+        rows.append({"rays": rays, "order": order, "cpu_s": cpus,
+                     "worst": {k: max(d[k] for d in devs) for k in JND},
+                     "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
+    return {"ref_rays": ref_rays, "ref_wall_s": ref_wall, "ref_threads": threads, "ref": ref,
+            "stage_bytes_equal": same_bytes, "candidates": rows}
+
+
+def child_diagnose(tmp: Path) -> dict:
+    """Why the engines differ and where sonicspec's seed spread comes from.
+
+    Both engines with every scattering coefficient set to 1; sonicspec's T30 over seeds with
+    the table's scattering, with each material's scattering replaced by its band mean, and
+    with scattering 1; RLR's direct and reverberant energy against 1/(4πr).
+    """
+    import rlr_audio_propagation as rlr  # benchmark-only optional dependency
+
+    mesh = load_mesh(tmp)
+    threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    doc = json.loads((tmp / "rlr_materials.json").read_text())
+    for entry in doc["materials"]:
+        entry["scattering"] = [20.0, 1.0, 20000.0, 1.0]
+    diffuse_json = tmp / "rlr_materials_diffuse.json"
+    diffuse_json.write_text(json.dumps(doc))
+    out: dict = {}
+    cfg = rlr_config("sonicsim", rlr)
+    out["rlr_diffuse"] = figures(rlr_rir(rlr, cfg, mesh, diffuse_json)[0], cfg.sample_rate)
+    settings = sonicspec_settings(5000, 1)
+    scene, _, _, _ = prepared_scene(tmp, settings)
+    s = scene.scattering
+    variants = {"table": s, "band_mean": np.repeat(s.mean(axis=1, keepdims=True), s.shape[1], 1),
+                "one": np.ones_like(s)}
+    for name, scattering in variants.items():
+        variant = AcousticScene(scene.vertices, scene.faces, scene.absorption, scattering,
+                                scene.transmission)
+        regions = planar_regions(variant)
+        t30 = np.array([figures(sonicspec_rir(variant, regions, settings, seed, threads)[0],
+                                SAMPLE_RATE_HZ)["t30_s"] for seed in (1, 2, 3)], float)
+        out[f"sonicspec_scattering_{name}"] = {"t30_mean": t30.mean(axis=0).tolist(),
+                                               "t30_spread": (t30.std(axis=0) /
+                                                              t30.mean(axis=0)).tolist()}
+    # Energies re the free-field direct sound 1/(4πr): RLR with direct or indirect only.
+    r = float(np.linalg.norm(SOURCE_M - MIC_M))
+    free = (1.0 / (4.0 * np.pi * r)) ** 2
+    for part in ("direct", "indirect"):
+        cfg = rlr_config("sonicsim", rlr)
+        cfg.direct, cfg.indirect = part == "direct", part == "indirect"
+        ir = rlr_rir(rlr, cfg, mesh, tmp / "rlr_materials.json")[0]
+        out[f"rlr_{part}_db"] = float(10 * np.log10(np.sum(ir**2) / free))
+    rir = sonicspec_rir(scene, planar_regions(scene), sonicspec_settings(20_000, 1), 1,
+                        threads)[0]
+    out["sonicspec_reverberant_db"] = float(10 * np.log10(np.sum(rir**2) / free - 1.0))
+    return out
+
+
+# --------------------------------------------------------------------------- parent
+def run_child(tmp: Path, cores: str, threads: int, *args: str) -> dict:
+    out = tmp / f"child_{time.monotonic_ns()}.json"
+    pin = ["taskset", "-c", cores] if sys.platform.startswith("linux") else []
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads),
+               MKL_NUM_THREADS=str(threads))
+    load = os.getloadavg()[0]
+    subprocess.run([*pin, sys.executable, __file__, "--child-dir", str(tmp), "--child-out",
+                    str(out), *args], check=True, env=env, stdout=subprocess.DEVNULL)
+    result = json.loads(out.read_text())
+    result["load_average"] = [load, os.getloadavg()[0]]
+    return result
+
+
+def fmt(v, spec: str) -> str:
+    return "—" if v is None or not np.isfinite(v) else format(v, spec)
+
+
+def print_figures(rows: list[tuple[str, dict]]) -> None:
+    head = " | ".join(f"{b:g}" for b in BANDS_HZ)
+    for key, label, spec in (("t30_s", "T30 (s)", ".2f"), ("edt_s", "EDT (s)", ".2f"),
+                             ("c50_db", "C50 (dB)", ".1f")):
+        print(f"\n{label}, octave bands (Hz)\n\n| engine, setting | {head} | broadband |")
+        print("|---" * (len(BANDS_HZ) + 2) + "|")
+        for name, fig in rows:
+            cells = " | ".join(fmt(v, spec) for v in fig[key])
+            print(f"| {name} | {cells} | {fmt(fig['broadband'][key], spec)} |")
+
+
+def choose_cheap(candidates: list[dict], rlr_own: dict) -> tuple[dict, str]:
+    """Fastest candidate within the JND of the reference; else within RLR's own error."""
+    for label, limit in (("jnd", JND), ("rlr", rlr_own)):
+        ok = [r for r in candidates if all(r["worst"][k] <= limit[k] for k in JND)]
+        if ok:
+            return min(ok, key=lambda r: np.median(r["cpu_s"])), label
+    return min(candidates, key=lambda r: max(r["worst"][k] / rlr_own[k] for k in JND)), "none"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--triangles", type=int, default=100_000)
+    parser.add_argument("--ref-rays", type=int, default=200_000,
+                        help="rays of sonicspec's converged reference")
+    parser.add_argument("--quick", action="store_true",
+                        help="2 seeds, 50 000 reference rays, fewer candidates, no diagnosis")
+    parser.add_argument("--json", help="also write every figure to this JSON file")
+    parser.add_argument("--child-dir", help=argparse.SUPPRESS)
+    parser.add_argument("--child-out", help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+
+    if args.child:
+        tmp, kind, rest = Path(args.child_dir), args.child[0], args.child[1:]
+        if kind == "rlr":
+            result = child_rlr(tmp, rest[0], int(rest[1]))
+        elif kind == "sonicspec":
+            result = child_sonicspec(tmp, *(int(x) for x in rest))
+        elif kind == "diagnose":
+            result = child_diagnose(tmp)
+        else:
+            spec = json.loads(rest[0])
+            result = child_sweep(tmp, spec["ref_rays"], spec["seeds"],
+                                 [tuple(c) for c in spec["candidates"]])
+        Path(args.child_out).write_text(json.dumps(result))
+        return 0
+
+    if importlib.util.find_spec("rlr_audio_propagation") is None:
+        print("bench_rlr: rlr_audio_propagation is not installed — skipping the comparison "
+              "(pip install rlr-audio-propagation; non-commercial licence, benchmark only)")
+        return 0
+
+    ref_rays = 50_000 if args.quick and args.ref_rays == 200_000 else args.ref_rays
+    seeds = [1, 2] if args.quick else [1, 2, 3]
+    candidates = [(1000, 1), (2000, 1), (5000, 1), (10_000, 1), (2000, 2), (20_000, 3)]
+    if not args.quick:
+        candidates[4:4] = [(20_000, 1)]
+        candidates[-1:-1] = [(5000, 2)]
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        t0 = time.perf_counter()
+        mesh = apartment_mesh(args.triangles)
+        np.savez(tmp / "mesh.npz", vertices=mesh.vertices, faces=mesh.faces,
+                 face_material=mesh.face_material)
+        (tmp / "materials.json").write_text(json.dumps(list(mesh.materials)))
+        rlr_material_json(mesh, tmp / "rlr_materials.json")
+        settings = sonicspec_settings(1000, 1)
+        scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+        distance = check_positions(scene, SOURCE_M, MIC_M)
+        counts = np.bincount(mesh.face_material, minlength=len(mesh.materials))
+        print(f"python {platform.python_version()}, {os.cpu_count()} cpus, load average "
+              f"{os.getloadavg()[0]:.1f} at start")
+        print(f"mesh: {mesh.n_faces:,} triangles, {len(mesh.vertices):,} vertices (built in "
+              f"{time.perf_counter() - t0:.1f} s); materials (sonicset): " + ", ".join(
+                  f"{n} {c:,}" for n, c in zip(mesh.materials, counts, strict=True)))
+        print(f"source {SOURCE_M.tolist()} -> mic {MIC_M.tolist()}: {distance:.2f} m, line of "
+              "sight", flush=True)
+
+        results: dict = {"mesh_triangles": mesh.n_faces, "distance_m": distance}
+        for name, reps in (("default", 3), ("default_50k", 1), ("sonicsim", 2),
+                           ("sonicsim_5k_12", 1), ("sonicsim_5k_32", 1)):
+            results[f"rlr_{name}"] = run_child(tmp, "0", 1, "--child", "rlr", name, str(reps))
+            print(f"RLR {name}: done", flush=True)
+        results["rlr_default_2threads"] = run_child(tmp, "0,1", 2, "--child", "rlr",
+                                                    "default_2threads", "3")
+        cap = np.array_equal(np.load(tmp / "rir_rlr_sonicsim_5k_12.npy"),
+                             np.load(tmp / "rir_rlr_sonicsim_5k_32.npy"))
+        results["rlr_bands_capped_at_12"] = bool(cap)
+        results["rlr_own_error"] = deviation(results["rlr_default"]["figures"],
+                                             results["rlr_default_50k"]["figures"])
+
+        results["sweep"] = run_child(tmp, "0,1", 2, "--child", "sweep", json.dumps(
+            {"ref_rays": ref_rays, "seeds": seeds, "candidates": candidates}))
+        print("sonicspec sweep: done", flush=True)
+        cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
+        results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"], "rule": rule}
+        default = AcousticsSpec()
+        for label, rays, order in (("default", default.rays, default.image_source_order),
+                                   ("cheap", cheap["rays"], cheap["order"])):
+            for threads, cores in ((1, "0"), (2, "0,1")):
+                reps = 1 if rays >= 20_000 else 3
+                results[f"sonicspec_{label}_{threads}"] = run_child(
+                    tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
+                    str(threads), str(reps), "1")
+            print(f"sonicspec {label}: done", flush=True)
+        if not args.quick:
+            results["diagnosis"] = run_child(tmp, "0,1", 2, "--child", "diagnose")
+            print("diagnosis: done", flush=True)
+
+    report(results)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+def report(results: dict) -> None:
+    sweep, cheap = results["sweep"], results["cheap"]
+    ss_default = results["sonicspec_default_1"]
+    own = results["rlr_own_error"]
+    print(f"\nRLR bands: 12 and 32 asked give identical IRs: {results['rlr_bands_capped_at_12']}"
+          "; fresh contexts are deterministic (no seed to vary)")
+    print(f"sonicspec: {ss_default['regions']} planar regions; image sources completed to order "
+          f"{ss_default['order_done']} when 3 is asked; Embree scene + planar regions once per "
+          f"mesh: {ss_default['setup_cpu_s']:.2f} s CPU; simulate_rirs and the bench's threaded "
+          f"mirror give identical bytes: {sweep['stage_bytes_equal']}")
+    print(f"RLR defaults against RLR with 50 000 rays (its own error, worst band): T30 "
+          f"{100 * own['t30']:.1f} %, EDT {100 * own['edt']:.1f} %, C50 {own['c50_db']:.2f} dB")
+
+    n_seeds = len(sweep["candidates"][0]["cpu_s"])
+    print(f"\nAccuracy sweep (sonicspec, 1 thread, {n_seeds} seeds): worst band and seed against "
+          f"sonicspec at {sweep['ref_rays']:,} rays (order 3). JND: T30 and EDT within 5 %, C50 "
+          "within 1 dB; RLR: no worse than RLR defaults against its own 50 000-ray run\n")
+    print("| rays | image-source order | CPU per RIR | T30 | EDT | C50 | T30 spread over seeds "
+          "| JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in sweep["candidates"]:
+        w = r["worst"]
+        marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
+        print(f"| {r['rays']:,} | {r['order']} | {np.median(r['cpu_s']):.2f} s | "
+              f"{100 * w['t30']:.1f} % | {100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | "
+              f"{100 * r['t30_spread']:.1f} % | {marks[0]} | {marks[1]} |")
+    rule = {"jnd": "within the JND", "rlr": "no worse than RLR defaults' own error (no "
+            "candidate within the JND)", "none": "NO candidate passes either rule; the closest"}
+    print(f"cheap setting: {cheap['rays']:,} rays, order {cheap['order']} — fastest "
+          f"{rule[cheap['rule']]}")
+
+    rows = [("RLR defaults (44.1 kHz, 5 000 rays, 4 bands)", results["rlr_default"]),
+            ("RLR defaults, 50 000 rays", results["rlr_default_50k"]),
+            ("RLR SonicSim (16 kHz, 50 000 rays, 32→12 bands)", results["rlr_sonicsim"]),
+            (f"sonicspec reference ({sweep['ref_rays']:,} rays)", {"figures": sweep["ref"]}),
+            ("sonicspec spec defaults (20 000 rays, order 3)", ss_default),
+            (f"sonicspec cheap ({cheap['rays']:,} rays, order {cheap['order']})",
+             results["sonicspec_cheap_1"])]
+    print("\nTime per RIR (min over repeats; 1 thread = pinned to one core)\n")
+    print("| engine, setting | threads | CPU | wall | of which RLR simulate() | load avg |")
+    print("|---|---|---|---|---|---|")
+    timed = rows[:3] + rows[4:] + [
+        ("RLR defaults", results["rlr_default_2threads"]),
+        ("sonicspec spec defaults", results["sonicspec_default_2"]),
+        (f"sonicspec cheap ({cheap['rays']:,} rays, order {cheap['order']})",
+         results["sonicspec_cheap_2"])]
+    for name, r in timed:
+        sim = f"{min(r['simulate_s']):.2f} s" if "simulate_s" in r else "—"
+        load = "–".join(f"{x:.1f}" for x in r["load_average"])
+        print(f"| {name} | {r.get('threads', 1)} | {min(r['cpu_s']):.2f} s | "
+              f"{min(r['wall_s']):.2f} s | {sim} | {load} |")
+
+    print_figures([(n, r["figures"]) for n, r in rows])
+
+    print("\nSpeed ratios on one thread (CPU time; > 1: sonicspec faster)\n")
+    for label, key, target in (("RLR defaults", "rlr_default", 3.0),
+                               ("RLR SonicSim settings", "rlr_sonicsim", 20.0)):
+        t_rlr = min(results[key]["cpu_s"])
+        for s_label, s_key in (("spec defaults", "sonicspec_default_1"),
+                               ("cheap", "sonicspec_cheap_1")):
+            r = results[s_key]
+            warm = t_rlr / min(r["cpu_s"])
+            cold = t_rlr / (min(r["cpu_s"]) + r["setup_cpu_s"])
+            verdict = "met" if warm >= target else f"missed by {target / warm:.1f}×"
+            print(f"- vs {label}: sonicspec {s_label} {warm:.2f}× (target {target:g}×: "
+                  f"{verdict}); with the once-per-mesh setup {cold:.2f}×")
+
+    diag = results.get("diagnosis")
+    if diag:
+        print("\nDiagnosis (T30 per band, s)")
+        print("- RLR SonicSim settings, every scattering coefficient 1: " +
+              ", ".join(fmt(v, ".2f") for v in diag["rlr_diffuse"]["t30_s"]))
+        for name, label in (("table", "the table's scattering"),
+                            ("band_mean", "each material's scattering = its band mean"),
+                            ("one", "every scattering coefficient 1")):
+            d = diag[f"sonicspec_scattering_{name}"]
+            print(f"- sonicspec 5 000 rays, order 1, 3 seeds, {label}: mean " +
+                  ", ".join(fmt(v, ".2f") for v in d["t30_mean"]) + "; spread " +
+                  ", ".join(fmt(100 * v, ".0f") for v in d["t30_spread"]) + " %")
+        print(f"- energies re the free-field direct sound (1/(4πr))²: RLR direct "
+              f"{diag['rlr_direct_db']:+.1f} dB, RLR reverberant {diag['rlr_indirect_db']:+.1f} "
+              f"dB, sonicspec reverberant {diag['sonicspec_reverberant_db']:+.1f} dB")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
