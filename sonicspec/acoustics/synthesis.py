@@ -100,10 +100,14 @@ def _fft_size(n: int) -> int:
 
 
 def _filter_bands(trains: np.ndarray, bank: OctaveFilterBank) -> np.ndarray:
-    """Σ_b band_b(trains[b]): each band's signal through its own filter, summed."""
+    """Σ_b band_b(trains[b]): each band's signal through its own filter, summed.
+
+    The filters reach ``pad`` samples either way, so a frame of ``n + pad`` keeps the output
+    window ``[pad, pad + n)`` free of wrap-around: what wraps lands in the leading ``pad``.
+    """
     n = trains.shape[-1]
     pad = bank.padding()
-    n_fft = _fft_size(n + 2 * pad)
+    n_fft = _fft_size(n + pad)
     frame = np.zeros((bank.n_bands, n_fft))
     frame[:, pad:pad + n] = trains
     spectrum = np.fft.rfft(frame, axis=-1) * bank.responses(n_fft)
