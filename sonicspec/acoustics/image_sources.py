@@ -172,8 +172,6 @@ def _region_extremes(scene: AcousticScene, regions: PlanarRegions
     ``points[starts[p]:starts[p+1]]``) and ``stray (P,)``, the largest distance of a vertex
     of p from p's plane (nonzero for scans; a corner-only test can miss at most twice that).
     """
-    from scipy.spatial import ConvexHull, QhullError  # only regions with many vertices
-
     chunks, counts = [], []
     stray = np.zeros(regions.n_regions)
     for p in range(regions.n_regions):
@@ -181,6 +179,9 @@ def _region_extremes(scene: AcousticScene, regions: PlanarRegions
         pts = scene.vertices[np.unique(scene.faces[fcs])]
         stray[p] = float(np.max(np.abs(pts @ regions.normals[p] - regions.plane_d[p])))
         if len(pts) > 8:
+            # Imported here: a shoebox never needs it, and it costs 0.15 s to import.
+            from scipy.spatial import ConvexHull, QhullError
+
             n = regions.normals[p]
             u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
             u /= np.linalg.norm(u)
