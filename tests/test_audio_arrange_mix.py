@@ -112,6 +112,23 @@ def test_normalised_loudness_is_within_a_tenth_of_a_lu(target: float) -> None:
     assert g == pytest.approx(gain / np.sqrt(1.25), rel=1e-3)
 
 
+def test_normalisation_corrects_for_the_gates_moving_with_the_gain() -> None:
+    """A long quiet passage just above −70 LUFS drops under the absolute gate when the gain
+    lowers it, which moves the relative gate: one gain step lands 0.1 LU off, the corrected
+    gain lands on the target."""
+    rng = np.random.default_rng(0)
+
+    def part(seconds: float, db: float) -> np.ndarray:
+        return 0.1 * 10 ** (db / 20) * rng.standard_normal(int(seconds * FS))
+
+    x = np.concatenate([part(2, 0.0), part(2, -9.6), part(30, -50.5)])
+    measured = integrated_loudness(x, FS)
+    one_step = 10 ** ((-23.0 - measured) / 20)
+    assert abs(integrated_loudness(one_step * x, FS) + 23.0) > 0.05  # the gates moved
+    gain, _ = gain_to_loudness(x, FS, -23.0)
+    assert integrated_loudness(gain * x, FS) == pytest.approx(-23.0, abs=0.01)
+
+
 def test_silent_and_short_inputs_are_named() -> None:
     with pytest.raises(AudioError, match=r"source2: expected sound to normalise to -17 LUFS, "
                                          "got silence"):

@@ -99,8 +99,14 @@ def test_components_are_at_their_target_loudness(built: Plan) -> None:
     assert max(peaks) == pytest.approx(10 ** (-1 / 20), abs=1e-4)
     for name, target in (("source1", -17), ("source2", -17), ("noise", -21), ("music", -24)):
         x = read(group_folder(built) / f"{name}.flac")
-        assert integrated_loudness(x, 16000) == pytest.approx(target + guard, abs=0.1), name
-        assert meta[name]["loudness"]["output_lufs"] == pytest.approx(target + guard, abs=1e-6)
+        # The normalised component (the file before the group's guard) is at its target.
+        normalised = x / 10 ** (guard / 20)
+        assert integrated_loudness(normalised, 16000) == pytest.approx(target, abs=0.1), name
+        # The file is what the metadata says; target + guard only up to BS.1770's gates,
+        # which do not scale with the gain (quiet blocks cross the −70 LUFS gate).
+        out = meta[name]["loudness"]["output_lufs"]
+        assert integrated_loudness(x, 16000) == pytest.approx(out, abs=0.02), name
+        assert out == pytest.approx(target + guard, abs=0.5), name
         assert meta[name]["loudness"]["target_lufs"] == target
     # The dry target is brought to the same level on its own, or lower to keep its peaks
     # under the limit (-1 dBFS).

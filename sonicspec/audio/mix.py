@@ -50,17 +50,33 @@ def integrated_loudness(x: np.ndarray, sample_rate_hz: int, *, binaural: bool = 
     return float(value)
 
 
+# How close gain_to_loudness brings a signal to its target, LU, and its correction steps.
+LOUDNESS_TOLERANCE_LU = 0.01
+_LOUDNESS_STEPS = 4
+
+
 def gain_to_loudness(x: np.ndarray, sample_rate_hz: int, target_lufs: float, *,
                      binaural: bool = False, where: str = "signal") -> tuple[float, float]:
     """(linear gain, measured LUFS) that bring ``x`` to ``target_lufs``.
 
+    BS.1770's gates are not scale-invariant (the absolute gate at −70 LUFS moves with the
+    gain, and the relative gate with it), so a quiet passage near the gate can leave the
+    one-step gain a tenth of a LU off. The gain is therefore re-measured and corrected until
+    the scaled signal is within ``LOUDNESS_TOLERANCE_LU`` (a few steps at most).
     A silent component cannot be brought to a loudness: :class:`AudioError` naming it.
     """
     measured = integrated_loudness(x, sample_rate_hz, binaural=binaural, where=where)
     if not math.isfinite(measured):
         raise AudioError(f"{where}: expected sound to normalise to {target_lufs:g} LUFS, got "
                          "silence (every 400 ms block below −70 LUFS)")
-    return 10.0 ** ((target_lufs - measured) / 20.0), measured
+    gain = 10.0 ** ((target_lufs - measured) / 20.0)
+    for _ in range(_LOUDNESS_STEPS):
+        reached = integrated_loudness(gain * np.asarray(x), sample_rate_hz, binaural=binaural,
+                                      where=where)
+        if not math.isfinite(reached) or abs(reached - target_lufs) <= LOUDNESS_TOLERANCE_LU:
+            break
+        gain *= 10.0 ** ((target_lufs - reached) / 20.0)
+    return gain, measured
 
 
 @dataclass(frozen=True)
