@@ -267,3 +267,26 @@ def test_reach_table_from_region_outlines_matches_every_vertex():
     got = _reach_tables(noisy_scene, regions, noisy_scene.eps_m)
     expected = _reach_every_vertex(noisy_scene, regions, noisy_scene.eps_m)
     assert np.all(got | ~expected)  # never prunes a pair the vertices say is reachable
+
+
+def test_coefficient_classes_partition_faces_by_identical_rows():
+    """Faces share a class exactly when their absorption, scattering and transmission rows
+    are identical, also for rows that differ in one band by the smallest float step."""
+    from sonicspec.acoustics.image_sources import _coefficient_classes
+
+    verts, faces = shoebox(4.0, 3.0, 2.5)
+    for _ in range(3):
+        verts, faces = trimesh.remesh.subdivide(verts, faces)
+    rng = np.random.default_rng(5)
+    table = rng.uniform(0.05, 0.6, (5, 3, 2))
+    table[4] = table[3]
+    table[4, 1, 1] = np.nextafter(table[3, 1, 1], 1.0)  # one ulp apart in one band
+    pick = rng.integers(0, 5, len(faces))
+    scene = AcousticScene(verts, faces, table[pick, 0], table[pick, 1], table[pick, 2] * 0.1)
+    got = _coefficient_classes(scene)
+    coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
+    _, exact = np.unique(coef, axis=0, return_inverse=True)
+    exact = exact.reshape(-1)
+    # Same partition: a one-to-one map between the two labelings.
+    pairs = set(zip(got.tolist(), exact.tolist(), strict=True))
+    assert len(pairs) == len(set(got.tolist())) == len(set(exact.tolist())) == 5

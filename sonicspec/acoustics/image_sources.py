@@ -71,6 +71,23 @@ class PlanarRegions:
         return int(self.normals.shape[0])
 
 
+def _coefficient_classes(scene: AcousticScene) -> np.ndarray:
+    """Per face, an id shared exactly by the faces with identical coefficient rows.
+
+    Rows are keyed by a fixed random projection (one sort instead of comparing whole rows
+    per neighbour pair), and every row is then checked against its class's first row, so a
+    key collision can only ever fall back to the exact row comparison, never merge materials.
+    """
+    coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
+    weights = np.random.default_rng(0x5EED).uniform(1.0, 2.0, coef.shape[1])
+    _, first, ids = np.unique(coef @ weights, return_index=True, return_inverse=True)
+    ids = ids.reshape(-1)
+    if not np.array_equal(coef, np.take(coef, np.take(first, ids), axis=0)):
+        _, ids = np.unique(coef, axis=0, return_inverse=True)  # a collision: exact classes
+        ids = ids.reshape(-1)
+    return ids.astype(np.int64)
+
+
 def planar_regions(
     scene: AcousticScene, angle_tol_rad: float = 1e-4, distance_tol_m: float = 1e-4
 ) -> PlanarRegions:
@@ -112,13 +129,15 @@ def planar_regions(
     same = key[1:] == key[:-1]
     fa, fb = edge_face[:-1][same], edge_face[1:][same]
     nrm = scene.normals
-    cos_ok = np.einsum("ij,ij->i", nrm[fa], nrm[fb]) >= np.cos(angle_tol_rad)
+    # (np.take: several times faster than fancy indexing for these million-row gathers.)
+    nrm_a = np.take(nrm, fa, axis=0)
+    cos_ok = np.einsum("ij,ij->i", nrm_a, np.take(nrm, fb, axis=0)) >= np.cos(angle_tol_rad)
     # Coplanar, not merely parallel: every vertex of b lies on a's plane.
-    vb = scene.vertices[faces[fb]]
-    off = np.abs(np.einsum("ij,ikj->ik", nrm[fa], vb) - scene.plane_d[fa][:, None]).max(axis=1)
-    coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
-    same_mat = np.all(coef[fa] == coef[fb], axis=1)
-    link = cos_ok & (off <= distance_tol_m) & same_mat
+    vb = np.take(scene.vertices, np.take(faces, fb, axis=0), axis=0)
+    off = np.abs(np.einsum("ij,ikj->ik", nrm_a, vb) - np.take(scene.plane_d, fa)[:, None])
+    classes = _coefficient_classes(scene)
+    same_mat = np.take(classes, fa) == np.take(classes, fb)
+    link = cos_ok & (off.max(axis=1) <= distance_tol_m) & same_mat
     graph = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(n_faces, n_faces))
     n_regions, label = connected_components(graph, directed=False)
     label = label.astype(np.int64)
