@@ -36,6 +36,7 @@ source (z up); the head faces +x at yaw 0 and its left is +y, like a SOFA listen
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from dataclasses import dataclass
@@ -48,6 +49,7 @@ from scipy.spatial import QhullError, SphericalVoronoi, cKDTree
 
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.acoustics.receivers import mix_per_frequency, rotation
 from sonicspec.acoustics.synthesis import (
     DEFAULT_TAPS,
@@ -283,23 +285,14 @@ def synthesize_hrir_binaural_rir(arrivals: Arrivals, histogram: EnergyHistogram 
     return out
 
 
-def _fibonacci_sphere(n: int) -> np.ndarray:
-    """``n`` near-uniform unit vectors (Fibonacci lattice: equal areas, no random rotation)."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = k * (math.pi * (3.0 - math.sqrt(5.0)))
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
 def _check_freqs(freqs_hz: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     f = np.atleast_1d(np.asarray(freqs_hz, dtype=np.float64))
-    if f.ndim != 1 or not np.all((f >= 0) & (f <= sample_rate_hz / 2)):
-        bad = f[~((f >= 0) & (f <= sample_rate_hz / 2))]
+    if f.ndim != 1:
+        raise AcousticsError(f"freqs_hz: expected a 1-d array, got shape {f.shape}")
+    bad = f[~((f >= 0) & (f <= sample_rate_hz / 2))]
+    if bad.size:
         raise AcousticsError(f"freqs_hz: expected frequencies in 0..{sample_rate_hz / 2:g} Hz "
-                             f"(Nyquist), got {bad.size} outside, e.g. {bad.flat[0]:g} Hz"
-                             if bad.size else f"freqs_hz: expected a 1-d array, got shape "
-                             f"{f.shape}")
+                             f"(Nyquist), got {bad.size} outside, e.g. {bad[0]:g} Hz")
     return f
 
 
@@ -328,11 +321,11 @@ def nearest_direction_weights(directions: np.ndarray) -> np.ndarray:
         raise AcousticsError(f"directions: expected at least one vector, all finite and "
                              f"non-zero, got {len(d)} with {bad} zero or non-finite")
     unique, first = np.unique(d / norms, axis=0, return_index=True)
-    try:
-        if len(unique) < 4:
-            raise ValueError("too few generators")
-        areas = SphericalVoronoi(unique).calculate_areas() / (4 * math.pi)
-    except (ValueError, QhullError):
+    areas = None
+    if len(unique) >= 4:
+        with contextlib.suppress(ValueError, QhullError):
+            areas = SphericalVoronoi(unique).calculate_areas() / (4 * math.pi)
+    if areas is None:
         areas = _counted_weights(unique)
     weights = np.zeros(len(d))
     weights[first] = areas
@@ -342,7 +335,7 @@ def nearest_direction_weights(directions: np.ndarray) -> np.ndarray:
 def _counted_weights(directions: np.ndarray, n_points: int = 1 << 16) -> np.ndarray:
     """Nearest-direction cell areas / 4π of distinct unit ``directions`` by counting lattice
     points (error about one cell boundary's worth, ``~1/√m`` of a cell of ``m`` points)."""
-    _, nearest = cKDTree(directions).query(_fibonacci_sphere(n_points))
+    _, nearest = cKDTree(directions).query(fibonacci_sphere(n_points))
     return np.bincount(nearest, minlength=len(directions)) / n_points
 
 
@@ -365,7 +358,7 @@ def sphere_head_coherence(head: SphereHead, freqs_hz: np.ndarray, sample_rate_hz
     (b_lp, a_lp), (b_hp, a_hp) = _shadow_filters(head, sample_rate_hz, speed_of_sound_m_s)
     lp = signal.freqz(b_lp, a_lp, worN=f, fs=sample_rate_hz)[1]
     hp = signal.freqz(b_hp, a_hp, worN=f, fs=sample_rate_hz)[1]
-    dirs = _fibonacci_sphere(n_directions)
+    dirs = fibonacci_sphere(n_directions)
     cos_l, cos_r = (dirs @ axis for axis in _ear_axes(head, 0.0, 0.0))
     dtau = (woodworth_delays_s(cos_l, head.head_radius_m, speed_of_sound_m_s)
             - woodworth_delays_s(cos_r, head.head_radius_m, speed_of_sound_m_s))

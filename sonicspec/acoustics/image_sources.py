@@ -16,6 +16,7 @@ opaque surface kills the path). Everything is vectorised per order over arrays o
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from dataclasses import dataclass
 
@@ -205,10 +206,9 @@ def _region_extremes(scene: AcousticScene, regions: PlanarRegions
             u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
             u /= np.linalg.norm(u)
             v = np.cross(n, u)
-            try:
+            # Collinear or degenerate outlines keep every vertex.
+            with contextlib.suppress(QhullError, ValueError):
                 pts = pts[ConvexHull(np.column_stack([pts @ u, pts @ v])).vertices]
-            except (QhullError, ValueError):  # collinear or degenerate: keep every vertex
-                pass
         chunks.append(pts)
         counts.append(len(pts))
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

@@ -79,6 +79,7 @@ import numpy as np
 
 from sonicspec.acoustics.arrivals import EnergyHistogram, TraceResult
 from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
+from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 
@@ -196,13 +197,9 @@ class RayTraceSettings:
                 raise AcousticsError(f"RayTraceSettings.{name}: expected {allowed}, got {value}")
 
 
-def _fibonacci_sphere(n: int, rng: np.random.Generator) -> np.ndarray:
+def _rotated_fibonacci_sphere(n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` near-uniform unit vectors (Fibonacci lattice) under a uniformly random rotation."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = k * (math.pi * (3.0 - math.sqrt(5.0)))
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    pts = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    pts = fibonacci_sphere(n)
     q, rr = np.linalg.qr(rng.standard_normal((3, 3)))
     q = q * np.sign(np.diag(rr))  # Haar-uniform orthogonal matrix
     return pts @ q.T
@@ -480,7 +477,7 @@ def _trace_batch(
 
     # Separate streams: ray paths do not depend on how the rain is subsampled.
     rng, rain_rng = rng.spawn(2)
-    dirs = _fibonacci_sphere(n, rng)
+    dirs = _rotated_fibonacci_sphere(n, rng)
     departure = dirs.copy()
     pos = np.repeat(src[None, :], n, axis=0)
     energy = np.full((n, scene.n_bands), e0)
@@ -712,11 +709,7 @@ def receiver_clearance_m(
     the rays can be missed (the radius is then slightly too large near them).
     """
     receivers = check_points("receivers", receivers)
-    k = np.arange(n_directions) + 0.5
-    z = 1.0 - 2.0 * k / n_directions
-    phi = k * (math.pi * (3.0 - math.sqrt(5.0)))
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    dirs = fibonacci_sphere(n_directions)
     spacing = math.sqrt(4.0 * math.pi / n_directions)
     out = np.zeros(len(receivers))
     # Several receivers per Embree call (about 2^18 rays): far fewer calls for many receivers.
