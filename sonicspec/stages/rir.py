@@ -101,14 +101,15 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
 def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                   settings: RirSettings, rng: np.random.Generator,
                   regions=None, microphone: dict[str, Any] | None = None,
-                  hrirs: HrirSet | None = None
+                  hrirs: HrirSet | None = None, n_threads: int = 1
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs ``(channels, samples)`` from every source position to the microphone, and facts.
 
     ``microphone`` is the spec's microphone section (default: mono). For directional
     receivers the early arrivals are traced from each source to the microphone, so their
     directions are directions of arrival at the microphone. A binaural microphone with a SOFA
-    HRTF needs its measured set in ``hrirs`` (see :func:`load_hrirs`).
+    HRTF needs its measured set in ``hrirs`` (see :func:`load_hrirs`). ``n_threads`` only
+    changes how fast the rays are traced, never the bytes.
     """
     microphone = microphone or {"kind": "mono", "trajectory": {"kind": "static"}}
     check_receiver(microphone, hrirs)
@@ -128,7 +129,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         diffuse_rain=settings.diffuse_rain,
         # No renderer reads the late field's directions (the tails are diffuse): skip them.
         directions=False)
-    traces = trace_rays(scene, mic, points, rng, ray_settings, air)
+    traces = trace_rays(scene, mic, points, rng, ray_settings, air, n_threads=n_threads)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
     render = _renderer(microphone, settings, hrirs)
     rirs, facts = [], []
