@@ -114,3 +114,29 @@ def test_without_directions_the_energies_are_the_same_bytes():
         assert np.all(np.isfinite(a.histogram.direction_sum))
         assert np.all(np.isnan(b.histogram.direction_sum))
         assert np.all(np.isnan(b.histogram.departure_sum))
+
+
+def test_roulette_through_transmitting_walls_is_unbiased():
+    """Blocked shadow rays are walked through the wall with probability max τ and weighted by
+    1/max τ. The rain that reaches the closed neighbouring room through the partition (the
+    energy minus a run in which no blocked shadow ray is walked) matches walking every one of
+    them. Ray paths use their own random stream, so all runs trace the very same rays."""
+    verts, faces = shoebox(8.0, 4.0, 3.0)
+    wall = np.array([[4, 0, 0], [4, 4, 0], [4, 4, 3], [4, 0, 3]], dtype=float)
+    verts = np.vstack([verts, wall])
+    faces = np.vstack([faces, np.array([[0, 1, 2], [0, 2, 3]]) + 8])
+    tau = np.zeros((len(faces), 2))
+    tau[-2:] = [0.05, 0.2]
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.5, n_bands=2)
+    scene = type(scene)(scene.vertices, scene.faces, scene.absorption, scene.scattering, tau)
+    src, rcv = np.array([1.5, 2.0, 1.5]), np.array([[6.5, 2.2, 1.4]])
+    settings = RayTraceSettings(n_rays=3000, max_time_s=0.4, specular_order_excluded=0)
+    energy = {}
+    for name, walk in (("roulette", None), ("every", 1.0), ("none", 1e-300)):
+        if walk is not None:
+            scene.max_transmission = walk  # the walk probability is min(1, max τ)
+        (res,) = trace_rays(scene, src, rcv, np.random.default_rng(5), settings)
+        energy[name] = res.histogram.energy.sum(axis=0)
+    through_wall = energy["every"] - energy["none"]
+    assert np.all(through_wall > 0.03 * energy["every"])
+    np.testing.assert_allclose(energy["roulette"] - energy["none"], through_wall, rtol=0.05)

@@ -31,7 +31,9 @@ Model (every approximation is listed here)
     ``cosθ·ΔΩ/π`` of the solid angle ``ΔΩ`` the receiver sphere (radius ``receiver_radius_m``)
     subtends, divided by its cross-section ``πR²`` (→ ``cosθ/(πd²)`` far away, capped near the
     surface where ``ΔΩ → 2π``). A shadow ray through transmitting surfaces is multiplied by
-    their ``τ``. This counts every path whose *last* reflection is diffuse.
+    their ``τ``; a blocked one is walked through them only with probability ``q = max τ`` of
+    the scene (Russian roulette, weight ``1/q``: unbiased, and cheap where walls carry
+    ``τ ≈ 0.01``). This counts every path whose *last* reflection is diffuse.
   - *Receiver sphere* (for paths whose last reflection is specular): a ray segment crossing the
     receiver sphere adds ``E·ℓ/V`` (chord length ``ℓ``, sphere volume ``V``), the unbiased
     volume estimator of intensity. Its variance falls with the number of crossings, ∝ R², so
@@ -797,6 +799,7 @@ def _rain(
         normals, offsets = rcv.planes
         free_hit = (start @ normals.T - offsets).min(axis=1) > _INSIDE_M
     scattered_sum = scattered.sum(axis=0)
+    walk_probability = min(1.0, scene.max_transmission)
     for slots in _rain_slots(n_hits, rcv.n, stride, rng):
         ok = slots < rcv.n
         k = np.where(ok, slots, 0)
@@ -809,24 +812,35 @@ def _rain(
         d[~ok] = 1.0  # (an empty slot may sit on the hit; it gets weight 0 anyway)
         u = vec / d
         flat_u = u.reshape(3, -1)
-        trans = None
-        if scene.has_transmission:
-            pair = np.flatnonzero(ok)
-            tr = scene.segment_transmission(
-                np.take(start, pair % n_hits, axis=0), np.take(rcv.pos, k.ravel()[pair], axis=0)
-            )
-            trans = np.ones((b, ok.size))
-            trans[:, pair] = tr.T
-            ok.ravel()[pair[~np.any(tr > 0, axis=1)]] = False
-        else:
-            test = ok if free_hit is None else ok & ~(free_hit & np.take(rcv.inside, k))
-            pair = np.flatnonzero(test)
-            if pair.size:
-                blocked = scene.occluded_along(
+        test = ok if free_hit is None else ok & ~(free_hit & np.take(rcv.inside, k))
+        pair = np.flatnonzero(test)
+        blocked = np.zeros(0, dtype=np.int64)
+        if pair.size:
+            blocked = pair[
+                scene.occluded_along(
                     np.take(start, pair % n_hits, axis=0), np.take(flat_u, pair, axis=1).T,
                     d.ravel()[pair],
                 )
-                ok.ravel()[pair[blocked]] = False
+            ]
+        trans = None
+        if blocked.size and walk_probability > 0:
+            # Russian roulette: a blocked shadow ray is walked through the surfaces it crosses
+            # with probability q = max τ and its Π τ divided by q (unbiased, and Π τ / q <= 1
+            # since it crosses at least one surface); the rest stop here. Most blocked rays
+            # would come out tens of dB down, and walking them is most of the rain's cost.
+            walk = rng.random(blocked.size) < walk_probability
+            ok.ravel()[blocked[~walk]] = False
+            blocked = blocked[walk]
+            if blocked.size:
+                tr = scene.crossed_transmission(
+                    np.take(start, blocked % n_hits, axis=0),
+                    np.take(rcv.pos, k.ravel()[blocked], axis=0),
+                ) / walk_probability
+                trans = np.ones((b, ok.size))
+                trans[:, blocked] = tr.T
+                ok.ravel()[blocked[~np.any(tr > 0, axis=1)]] = False
+        else:
+            ok.ravel()[blocked] = False
         time_bin = ((path_len + d) * inv_bin_len).astype(np.int64)
         ok &= time_bin < acc.n_bins
         n_ok = int(np.count_nonzero(ok))

@@ -125,7 +125,9 @@ class AcousticScene:
         #: Offset (m) by which rays leaving a surface start off it: far above the float32
         #: resolution of the shifted coordinates, far below any acoustic length scale.
         self.eps_m = max(1e-5, 2e-5 * max(extent, float(np.max(np.abs(self._shift)))))
-        self.has_transmission = bool(np.any(self.transmission > 0))
+        #: Largest transmission coefficient of any face and band.
+        self.max_transmission = float(self.transmission.max())
+        self.has_transmission = self.max_transmission > 0
 
         self._embree = rtcore_scene.EmbreeScene()
         # Keep a reference: the Embree geometry must live as long as the scene.
@@ -298,11 +300,16 @@ class AcousticScene:
         if not self.has_transmission:
             factor[blocked] = 0.0
             return factor
-        seg, face = self.crossings(origins[blocked], targets[blocked])
+        factor[blocked] = self.crossed_transmission(origins[blocked], targets[blocked])
+        return factor
+
+    def crossed_transmission(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """``Π τ`` per band over the surfaces each segment crosses, walked surface by surface
+        (no occlusion screen: for segments already known to be blocked), ``(n, n_bands)``."""
+        seg, face = self.crossings(origins, targets)
         # log-sum keeps the product order-independent and exact zeros exact.
         with np.errstate(divide="ignore"):
             log_tau = np.log(self.transmission[face])
-        acc = np.zeros((blocked.size, self.n_bands))
+        acc = np.zeros((len(origins), self.n_bands))
         np.add.at(acc, seg, log_tau)
-        factor[blocked] = np.exp(acc)
-        return factor
+        return np.exp(acc)
