@@ -19,8 +19,10 @@ from sonicspec.acoustics.theory import (
     barron_reflected_energy,
     critical_distance_m,
     eyring_t60,
+    kuttruff_t60,
     mean_free_path_m,
     sabine_t60,
+    shoebox_free_paths,
 )
 from sonicspec.errors import AcousticsError
 
@@ -190,3 +192,25 @@ def test_closed_forms_for_a_10_by_7_by_3_room() -> None:
     assert critical_distance_m(v, 0.6265) == pytest.approx(
         math.sqrt(0.161 * v / 0.6265 / (16 * math.pi)), rel=2e-3)
     assert barron_clarity_db(2.0, v, 0.6) > barron_clarity_db(8.0, v, 0.6)
+    # Kuttruff: no path spread is Eyring; by hand with γ² = 0.4, A = 54.00 · (1 − 0.2 · 0.2231).
+    assert kuttruff_t60(v, s, 0.2, 0.0) == pytest.approx(eyring_t60(v, s, 0.2))
+    assert kuttruff_t60(v, s, 0.2, 0.4) == pytest.approx(33.83 / (54.00 * 0.95537), abs=5e-4)
+    with pytest.raises(AcousticsError, match="path_variance"):
+        kuttruff_t60(v, s, 0.2, -0.1)
+
+
+def test_shoebox_free_paths_have_mean_4v_over_s() -> None:
+    """Sampled diffuse free paths of a shoebox: mean 4V/S (a theorem for convex rooms), and
+    γ² = var/mean² near the values Kuttruff quotes for rectangular rooms (≈ 0.34 for a cube,
+    larger for flat or long rooms); different seeds agree."""
+    paths = shoebox_free_paths((10.0, 7.0, 3.0))
+    assert paths.mean() == pytest.approx(840 / 242, rel=2e-3)
+    gamma2 = paths.var() / paths.mean() ** 2
+    assert 0.37 < gamma2 < 0.42
+    other = shoebox_free_paths((10.0, 7.0, 3.0), seed=1)
+    assert other.var() / other.mean() ** 2 == pytest.approx(gamma2, rel=0.01)
+    cube = shoebox_free_paths((5.0, 5.0, 5.0))
+    assert cube.mean() == pytest.approx(5 * 4 / 6, rel=2e-3)
+    assert 0.32 < cube.var() / cube.mean() ** 2 < gamma2
+    with pytest.raises(AcousticsError, match="size_m"):
+        shoebox_free_paths((10.0, -1.0, 3.0))

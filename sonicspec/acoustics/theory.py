@@ -3,6 +3,11 @@
 * Sabine and Eyring reverberation time with air absorption:
   ``T = 24 ln(10) V / (c (A + 4 m V))`` with ``A = S ᾱ`` (Sabine) or ``A = −S ln(1 − ᾱ)``
   (Eyring), ``m`` the air's energy attenuation (1/m).
+* Kuttruff's correction of Eyring for the spread of free path lengths:
+  ``A = −S ln(1 − ᾱ) (1 + γ²/2 · ln(1 − ᾱ))``, ``γ²`` the relative variance of the path
+  lengths between reflections (Kuttruff, *Room Acoustics*, §5.5); for a shoebox γ² is found
+  here by sampling diffusely reflected paths between its walls (:func:`shoebox_free_paths`,
+  no ray tracer involved).
 * Mean free path ``4V/S``; critical distance ``√(A / 16π)`` (directivity 1).
 * Barron & Lee (1988) revised theory: relative to the direct energy ``100/r²``, the reflected
   energy arriving after time ``t`` (after the direct sound at distance r) is
@@ -45,6 +50,48 @@ def eyring_t60(volume_m3: float, surface_m2: float, mean_absorption, air_m_per_m
         raise AcousticsError(f"mean_absorption: expected values in [0, 1), got {alpha}")
     m = np.asarray(air_m_per_m, dtype=np.float64)
     return 4 * SIXTY_DB * v / (speed_of_sound_m_s * (-s * np.log1p(-alpha) + 4 * m * v))
+
+
+def kuttruff_t60(volume_m3: float, surface_m2: float, mean_absorption, path_variance: float,
+                 air_m_per_m=0.0, speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+    """Eyring's reverberation time corrected for the relative variance ``path_variance``
+    (γ²) of the free path lengths, seconds (per band if arrays are given)."""
+    v, s = _positive("volume_m3", volume_m3), _positive("surface_m2", surface_m2)
+    alpha = np.asarray(mean_absorption, dtype=np.float64)
+    if np.any((alpha < 0) | (alpha >= 1)):
+        raise AcousticsError(f"mean_absorption: expected values in [0, 1), got {alpha}")
+    if not (math.isfinite(path_variance) and path_variance >= 0):
+        raise AcousticsError(f"path_variance: expected >= 0, got {path_variance!r}")
+    log_r = np.log1p(-alpha)
+    a = -s * log_r * (1.0 + 0.5 * path_variance * log_r)
+    m = np.asarray(air_m_per_m, dtype=np.float64)
+    return 4 * SIXTY_DB * v / (speed_of_sound_m_s * (a + 4 * m * v))
+
+
+def shoebox_free_paths(size_m, n_paths: int = 1_000_000, seed: int = 0) -> np.ndarray:
+    """Lengths of straight paths in a shoebox that leave a wall point (uniform over the
+    surface) in a Lambert direction and end on the next wall, metres. Their mean is ``4V/S``
+    and ``var / mean²`` is the γ² of :func:`kuttruff_t60`."""
+    size = np.array([_positive(f"size_m[{i}]", x) for i, x in enumerate(size_m)])
+    if size.shape != (3,):
+        raise AcousticsError(f"size_m: expected 3 lengths, got {size.shape}")
+    rng = np.random.default_rng(seed)
+    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
+    wall = rng.choice(6, n_paths, p=areas / areas.sum())
+    axis, far_side = wall // 2, wall % 2
+    rows = np.arange(n_paths)
+    start = rng.random((n_paths, 3)) * size
+    start[rows, axis] = far_side * size[axis]
+    u1, u2 = rng.random(n_paths), rng.random(n_paths)
+    direction = np.empty((n_paths, 3))
+    direction[rows, (axis + 1) % 3] = np.sqrt(u1) * np.cos(2 * math.pi * u2)
+    direction[rows, (axis + 2) % 3] = np.sqrt(u1) * np.sin(2 * math.pi * u2)
+    direction[rows, axis] = np.sqrt(1.0 - u1) * np.where(far_side == 1, -1.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_wall = np.where(direction > 0, (size - start) / direction,
+                           np.where(direction < 0, -start / direction, np.inf))
+    to_wall[rows, axis] = np.where(direction[rows, axis] != 0, to_wall[rows, axis], np.inf)
+    return to_wall.min(axis=1)
 
 
 def mean_free_path_m(volume_m3: float, surface_m2: float) -> float:
