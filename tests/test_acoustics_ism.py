@@ -271,9 +271,8 @@ def test_reach_table_from_region_outlines_matches_every_vertex():
 
 def test_coefficient_classes_partition_faces_by_identical_rows():
     """Faces share a class exactly when their absorption, scattering and transmission rows
-    are identical, also for rows that differ in one band by the smallest float step."""
-    from sonicspec.acoustics.image_sources import _coefficient_classes
-
+    are identical, also for rows that differ in one band by the smallest float step; the
+    representative face of each class has that class."""
     verts, faces = shoebox(4.0, 3.0, 2.5)
     for _ in range(3):
         verts, faces = trimesh.remesh.subdivide(verts, faces)
@@ -283,7 +282,8 @@ def test_coefficient_classes_partition_faces_by_identical_rows():
     table[4, 1, 1] = np.nextafter(table[3, 1, 1], 1.0)  # one ulp apart in one band
     pick = rng.integers(0, 5, len(faces))
     scene = AcousticScene(verts, faces, table[pick, 0], table[pick, 1], table[pick, 2] * 0.1)
-    got = _coefficient_classes(scene)
+    got, first = scene.coefficient_classes()
+    assert np.array_equal(got[first], np.arange(len(first)))
     coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
     _, exact = np.unique(coef, axis=0, return_inverse=True)
     exact = exact.reshape(-1)

@@ -72,23 +72,6 @@ class PlanarRegions:
         return int(self.normals.shape[0])
 
 
-def _coefficient_classes(scene: AcousticScene) -> np.ndarray:
-    """Per face, an id shared exactly by the faces with identical coefficient rows.
-
-    Rows are keyed by a fixed random projection (one sort instead of comparing whole rows
-    per neighbour pair), and every row is then checked against its class's first row, so a
-    key collision can only ever fall back to the exact row comparison, never merge materials.
-    """
-    coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
-    weights = np.random.default_rng(0x5EED).uniform(1.0, 2.0, coef.shape[1])
-    _, first, ids = np.unique(coef @ weights, return_index=True, return_inverse=True)
-    ids = ids.reshape(-1)
-    if not np.array_equal(coef, np.take(coef, np.take(first, ids), axis=0)):
-        _, ids = np.unique(coef, axis=0, return_inverse=True)  # a collision: exact classes
-        ids = ids.reshape(-1)
-    return ids.astype(np.int64)
-
-
 def planar_regions(
     scene: AcousticScene, angle_tol_rad: float = 1e-4, distance_tol_m: float = 1e-4
 ) -> PlanarRegions:
@@ -136,7 +119,7 @@ def planar_regions(
     # Coplanar, not merely parallel: every vertex of b lies on a's plane.
     vb = np.take(scene.vertices, np.take(faces, fb, axis=0), axis=0)
     off = np.abs(np.einsum("ij,ikj->ik", nrm_a, vb) - np.take(scene.plane_d, fa)[:, None])
-    classes = _coefficient_classes(scene)
+    classes = scene.coefficient_classes()[0]
     same_mat = np.take(classes, fa) == np.take(classes, fb)
     link = cos_ok & (off.max(axis=1) <= distance_tol_m) & same_mat
     graph = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(n_faces, n_faces))

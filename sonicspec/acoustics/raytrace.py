@@ -368,9 +368,9 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
     cached = _TABLES.get(scene)
     if cached is not None:
         return cached
-    coefficients = np.hstack([scene.absorption, scene.scattering, scene.transmission])
-    classes, face_class = np.unique(coefficients, axis=0, return_inverse=True)
-    alpha, scattering, tau = np.split(classes, 3, axis=1)
+    face_class, first = scene.coefficient_classes()
+    alpha, scattering, tau = (np.take(x, first, axis=0)
+                              for x in (scene.absorption, scene.scattering, scene.transmission))
     w_refl = (1.0 - tau) * (1.0 - alpha)
     w_diff = w_refl * scattering
     weights = np.stack([tau, w_refl - w_diff, w_diff])  # (3, C, B)
@@ -380,7 +380,7 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
     gain = np.where(prob[:, :, None] > 0, weights / np.where(prob > 0, prob, 1.0)[:, :, None], 0)
     tables = _EventTables(
         planes=np.ascontiguousarray(np.column_stack([scene.normals, scene.plane_d])),
-        face_class=face_class.reshape(-1).astype(np.int32),
+        face_class=face_class.astype(np.int32),
         p_t=np.ascontiguousarray(prob[0]),
         # A face that absorbs everything (total 0): every pick lands on "diffuse", gain 0.
         p_ts=prob[0] + prob[1],

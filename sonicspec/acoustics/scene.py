@@ -128,6 +128,7 @@ class AcousticScene:
         #: Largest transmission coefficient of any face and band.
         self.max_transmission = float(self.transmission.max())
         self.has_transmission = self.max_transmission > 0
+        self._classes: tuple[np.ndarray, np.ndarray] | None = None
 
         self._embree = rtcore_scene.EmbreeScene()
         # Keep a reference: the Embree geometry must live as long as the scene.
@@ -198,6 +199,25 @@ class AcousticScene:
         distance = np.full(n, np.inf)
         distance[hit] = np.where(good, exact, tfar_hit)
         return face, distance
+
+    def coefficient_classes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Faces grouped by identical coefficient rows (absorption, scattering, transmission):
+        the class of every face ``(F,)`` and one face of every class ``(C,)``; computed once.
+
+        Rows are keyed by a fixed random projection (one sort instead of comparing whole rows),
+        and every row is then checked against its class's representative, so a key collision
+        can only fall back to the exact row comparison, never merge two materials.
+        """
+        if self._classes is None:
+            coef = np.concatenate([self.absorption, self.scattering, self.transmission], axis=1)
+            weights = np.random.default_rng(0x5EED).uniform(1.0, 2.0, coef.shape[1])
+            _, first, ids = np.unique(coef @ weights, return_index=True, return_inverse=True)
+            ids = ids.reshape(-1)
+            if not np.array_equal(coef, np.take(coef, np.take(first, ids), axis=0)):
+                _, first, ids = np.unique(coef, axis=0, return_index=True, return_inverse=True)
+                ids = ids.reshape(-1)  # a collision: exact classes
+            self._classes = (ids.astype(np.int64), first.astype(np.int64))
+        return self._classes
 
     def first_hits(
         self, origins: np.ndarray, directions: np.ndarray
