@@ -26,13 +26,15 @@ What it does
   RLR's own converged answer for (a); (b) RLR at SonicSim's settings (16 kHz, 50 000 indirect
   rays, 32 bands asked — the engine caps at 12, checked here —, SH orders 5/3; mono listener);
   (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, image sources to
-  order 3, 16 kHz) and at the cheapest setting of a small sweep (rays × image-source order,
-  several seeds) that stays, in every band and for every seed, near sonicspec's converged
-  answer (``--ref-rays`` rays): within the ISO 3382-1 just-noticeable differences (T30, EDT
-  5 %, C50 1 dB) if any setting does, else no farther than RLR's defaults are from RLR's own
-  50 000-ray answer (the accuracy RLR's defaults are used at).
-  sonicspec is timed per RIR with its Embree scene and planar regions built once per mesh (as
-  the rir stage does); that once-per-mesh cost is reported too. sonicspec also on 2 threads.
+  order 3, 16 kHz) and at the cheapest setting of a small sweep (rays × image-source order ×
+  specular splitting, several seeds) that stays, in every band and for every seed, near
+  sonicspec's converged answer (``--ref-rays`` rays with splitting): within the ISO 3382-1
+  just-noticeable differences (T30, EDT 5 %, C50 1 dB) if any setting does, else no farther
+  than RLR's defaults are from RLR's own 50 000-ray answer (the accuracy RLR's defaults are
+  used at).
+  sonicspec is timed per RIR with its Embree scene, planar regions and tracer tables built
+  once per mesh and its compiled kernels loaded once per process (as the rir stage does);
+  that cost is reported too. sonicspec also on 2 threads.
 * Reports T30/EDT/C50 per octave band (125 Hz–4 kHz, the bands SonicSet's table covers) of
   every RIR by sonicspec's ISO 3382-1 routine, and the speed ratios against the issue's targets
   (sonicspec ≥ 3× faster than RLR defaults, ≥ 20× faster than RLR at SonicSim's settings, on
@@ -67,6 +69,7 @@ from bench_navigation import apartment, subdivide
 
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.metrics import room_acoustic_figures
+from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
@@ -80,6 +83,8 @@ SAMPLE_RATE_HZ = 16_000  # the spec's default sample rate (and SonicSim's)
 SPEED_OF_SOUND_M_S = 343.0
 # ISO 3382-1 Annex A just-noticeable differences: EDT 5 %, reverberation time 5 %, clarity 1 dB.
 JND = {"t30": 0.05, "edt": 0.05, "c50_db": 1.0}
+# sonicspec's converged reference traces with specular splitting (unbiased, far less noise).
+REF_SPLITTING = 1.0
 RLR_LABEL = "<sonicspec-material-{:03d}>"  # unique: no label is a substring of another
 
 
@@ -203,9 +208,9 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
 
 
 # --------------------------------------------------------------------------- sonicspec (child)
-def sonicspec_settings(rays: int, order: int) -> RirSettings:
+def sonicspec_settings(rays: int, order: int, splitting: float = 0.0) -> RirSettings:
     acoustics = AcousticsSpec().model_dump(mode="json")
-    acoustics.update(rays=rays, image_source_order=order)
+    acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting)
     return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
 
 
@@ -223,17 +228,21 @@ def sonicspec_rir(scene, regions, settings: RirSettings, seed: int, n_threads: i
 
 
 def prepared_scene(tmp: Path, settings: RirSettings):
-    """Embree scene and planar regions, built once per mesh; returns them and the seconds."""
+    """Embree scene, planar regions and the tracer's per-scene tables, built once per mesh,
+    and its compiled kernels, loaded once per process (a 10-ray trace does both); returns
+    the scene, the regions and the seconds."""
     mesh = load_mesh(tmp)
     w0, c0 = time.perf_counter(), time.process_time()
     scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
     regions = planar_regions(scene)
+    trace_rays(scene, MIC_M, SOURCE_M[None], np.random.default_rng(0),
+               RayTraceSettings(n_rays=10, max_time_s=0.01))
     return scene, regions, time.perf_counter() - w0, time.process_time() - c0
 
 
 def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int,
-                    seed: int) -> dict:
-    settings = sonicspec_settings(rays, order)
+                    seed: int, splitting: float) -> dict:
+    settings = sonicspec_settings(rays, order, splitting)
     scene, regions, setup_wall, setup_cpu = prepared_scene(tmp, settings)
     walls, cpus, rir = [], [], None
     for _ in range(repeats):
@@ -243,7 +252,8 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
         cpus.append(time.process_time() - c0)
         rir = out if rir is None else rir
     np.save(tmp / f"rir_sonicspec_{rays}_{order}_{threads}.npy", rir)
-    return {"engine": "sonicspec", "rays": rays, "order": order, "order_done": order_done,
+    return {"engine": "sonicspec", "rays": rays, "order": order, "splitting": splitting,
+            "order_done": order_done,
             "threads": threads,
             "wall_s": walls, "cpu_s": cpus, "setup_wall_s": setup_wall,
             "setup_cpu_s": setup_cpu, "regions": regions.n_regions, "samples": int(rir.size),
@@ -261,18 +271,19 @@ def deviation(fig: dict, ref: dict) -> dict:
             "c50_db": float(np.nanmax(c)) if np.all(np.isfinite(c)) else float("inf")}
 
 
-def child_sweep(tmp: Path, ref_rays: int, seeds: list[int], candidates: list[tuple[int, int]]
-                ) -> dict:
-    """sonicspec's converged answer, then every candidate (rays, order) over seeds."""
-    ref_settings = sonicspec_settings(ref_rays, 3)
+def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
+                candidates: list[tuple[int, int, float]]) -> dict:
+    """sonicspec's converged answer (specular splitting, its lowest-variance estimator), then
+    every candidate (rays, order, splitting) over seeds."""
+    ref_settings = sonicspec_settings(ref_rays, 3, REF_SPLITTING)
     scene, regions, _, _ = prepared_scene(tmp, ref_settings)
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
     t0 = time.perf_counter()
     ref = figures(sonicspec_rir(scene, regions, ref_settings, 0, threads)[0], SAMPLE_RATE_HZ)
     ref_wall = time.perf_counter() - t0
     rows = []
-    for rays, order in candidates:
-        settings = sonicspec_settings(rays, order)
+    for rays, order, splitting in candidates:
+        settings = sonicspec_settings(rays, order, splitting)
         cpus, devs, figs = [], [], []
         for seed in seeds:
             c0 = time.process_time()
@@ -281,7 +292,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int], candidates: list[tup
             figs.append(figures(rir, SAMPLE_RATE_HZ))
             devs.append(deviation(figs[-1], ref))
         t30 = np.array([f["t30_s"] for f in figs], float)
-        rows.append({"rays": rays, "order": order, "cpu_s": cpus,
+        rows.append({"rays": rays, "order": order, "splitting": splitting, "cpu_s": cpus,
                      "worst": {k: max(d[k] for d in devs) for k in JND},
                      "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
     return {"ref_rays": ref_rays, "ref_wall_s": ref_wall, "ref_threads": threads, "ref": ref,
@@ -376,7 +387,7 @@ def choose_cheap(candidates: list[dict], rlr_own: dict) -> tuple[dict, str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--triangles", type=int, default=100_000)
-    parser.add_argument("--ref-rays", type=int, default=200_000,
+    parser.add_argument("--ref-rays", type=int, default=50_000,
                         help="rays of sonicspec's converged reference")
     parser.add_argument("--quick", action="store_true",
                         help="2 seeds, 50 000 reference rays, fewer candidates, no diagnosis")
@@ -391,7 +402,7 @@ def main() -> int:
         if kind == "rlr":
             result = child_rlr(tmp, rest[0], int(rest[1]))
         elif kind == "sonicspec":
-            result = child_sonicspec(tmp, *(int(x) for x in rest))
+            result = child_sonicspec(tmp, *(int(x) for x in rest[:5]), float(rest[5]))
         elif kind == "diagnose":
             result = child_diagnose(tmp)
         else:
@@ -406,12 +417,13 @@ def main() -> int:
               "(pip install rlr-audio-propagation; non-commercial licence, benchmark only)")
         return 0
 
-    ref_rays = 50_000 if args.quick and args.ref_rays == 200_000 else args.ref_rays
+    ref_rays = 20_000 if args.quick and args.ref_rays == 50_000 else args.ref_rays
     seeds = [1, 2] if args.quick else [1, 2, 3]
-    candidates = [(1000, 1), (2000, 1), (5000, 1), (10_000, 1), (2000, 2), (20_000, 3)]
+    candidates = [(1000, 1, 0.0), (5000, 1, 0.0), (20_000, 3, 0.0),
+                  (1000, 1, 1.0), (2000, 1, 1.0), (5000, 1, 1.0), (5000, 2, 1.0)]
     if not args.quick:
-        candidates[4:4] = [(20_000, 1)]
-        candidates[-1:-1] = [(5000, 2)]
+        candidates[2:2] = [(2000, 1, 0.0), (10_000, 1, 0.0), (20_000, 1, 0.0)]
+        candidates += [(10_000, 2, 1.0)]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         t0 = time.perf_counter()
@@ -449,15 +461,17 @@ def main() -> int:
             {"ref_rays": ref_rays, "seeds": seeds, "candidates": candidates}))
         print("sonicspec sweep: done", flush=True)
         cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
-        results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"], "rule": rule}
+        results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"],
+                            "splitting": cheap["splitting"], "rule": rule}
         default = AcousticsSpec()
-        for label, rays, order in (("default", default.rays, default.image_source_order),
-                                   ("cheap", cheap["rays"], cheap["order"])):
+        for label, rays, order, splitting in (
+                ("default", default.rays, default.image_source_order, default.ray_splitting),
+                ("cheap", cheap["rays"], cheap["order"], cheap["splitting"])):
             for threads, cores in ((1, "0"), (2, "0,1")):
                 reps = 1 if rays >= 20_000 else 3
                 results[f"sonicspec_{label}_{threads}"] = run_child(
                     tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
-                    str(threads), str(reps), "1")
+                    str(threads), str(reps), "1", str(splitting))
             print(f"sonicspec {label}: done", flush=True)
         if not args.quick:
             results["diagnosis"] = run_child(tmp, "0,1", 2, "--child", "diagnose")
@@ -469,6 +483,11 @@ def main() -> int:
     return 0
 
 
+def cheap_label(cheap: dict) -> str:
+    return (f"{cheap['rays']:,} rays, order {cheap['order']}, splitting "
+            f"{cheap['splitting']:g}")
+
+
 def report(results: dict) -> None:
     sweep, cheap = results["sweep"], results["cheap"]
     ss_default = results["sonicspec_default_1"]
@@ -476,44 +495,44 @@ def report(results: dict) -> None:
     print(f"\nRLR bands: 12 and 32 asked give identical IRs: {results['rlr_bands_capped_at_12']}"
           "; fresh contexts are deterministic (no seed to vary)")
     print(f"sonicspec: {ss_default['regions']} planar regions; image sources completed to order "
-          f"{ss_default['order_done']} when 3 is asked; Embree scene + planar regions once per "
-          f"mesh: {ss_default['setup_cpu_s']:.2f} s CPU")
+          f"{ss_default['order_done']} when 3 is asked; once per mesh (Embree scene, planar "
+          f"regions, tracer tables) and per process (compiled kernels): "
+          f"{ss_default['setup_cpu_s']:.2f} s CPU")
     print(f"RLR defaults against RLR with 50 000 rays (its own error, worst band): T30 "
           f"{100 * own['t30']:.1f} %, EDT {100 * own['edt']:.1f} %, C50 {own['c50_db']:.2f} dB")
 
     n_seeds = len(sweep["candidates"][0]["cpu_s"])
     print(f"\nAccuracy sweep (sonicspec, 1 thread, {n_seeds} seeds): worst band and seed against "
-          f"sonicspec at {sweep['ref_rays']:,} rays (order 3). JND: T30 and EDT within 5 %, C50 "
+          f"sonicspec at {sweep['ref_rays']:,} rays (order 3, splitting {REF_SPLITTING:g}). JND: "
+          "T30 and EDT within 5 %, C50 "
           "within 1 dB; RLR: no worse than RLR defaults against its own 50 000-ray run\n")
-    print("| rays | image-source order | CPU per RIR | T30 | EDT | C50 | T30 spread over seeds "
-          "| JND | RLR |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| rays | image-source order | splitting | CPU per RIR | T30 | EDT | C50 | T30 spread "
+          "over seeds | JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in sweep["candidates"]:
         w = r["worst"]
         marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
-        print(f"| {r['rays']:,} | {r['order']} | {np.median(r['cpu_s']):.2f} s | "
+        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | "
+              f"{np.median(r['cpu_s']):.2f} s | "
               f"{100 * w['t30']:.1f} % | {100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | "
               f"{100 * r['t30_spread']:.1f} % | {marks[0]} | {marks[1]} |")
     rule = {"jnd": "within the JND", "rlr": "no worse than RLR defaults' own error (no "
             "candidate within the JND)", "none": "NO candidate passes either rule; the closest"}
-    print(f"cheap setting: {cheap['rays']:,} rays, order {cheap['order']} — fastest "
-          f"{rule[cheap['rule']]}")
+    print(f"cheap setting: {cheap_label(cheap)} — fastest {rule[cheap['rule']]}")
 
     rows = [("RLR defaults (44.1 kHz, 5 000 rays, 4 bands)", results["rlr_default"]),
             ("RLR defaults, 50 000 rays", results["rlr_default_50k"]),
             ("RLR SonicSim (16 kHz, 50 000 rays, 32→12 bands)", results["rlr_sonicsim"]),
             (f"sonicspec reference ({sweep['ref_rays']:,} rays)", {"figures": sweep["ref"]}),
             ("sonicspec spec defaults (20 000 rays, order 3)", ss_default),
-            (f"sonicspec cheap ({cheap['rays']:,} rays, order {cheap['order']})",
-             results["sonicspec_cheap_1"])]
+            (f"sonicspec cheap ({cheap_label(cheap)})", results["sonicspec_cheap_1"])]
     print("\nTime per RIR (min over repeats; 1 thread = pinned to one core)\n")
     print("| engine, setting | threads | CPU | wall | of which RLR simulate() | load avg |")
     print("|---|---|---|---|---|---|")
     timed = rows[:3] + rows[4:] + [
         ("RLR defaults", results["rlr_default_2threads"]),
         ("sonicspec spec defaults", results["sonicspec_default_2"]),
-        (f"sonicspec cheap ({cheap['rays']:,} rays, order {cheap['order']})",
-         results["sonicspec_cheap_2"])]
+        (f"sonicspec cheap ({cheap_label(cheap)})", results["sonicspec_cheap_2"])]
     for name, r in timed:
         sim = f"{min(r['simulate_s']):.2f} s" if "simulate_s" in r else "—"
         load = "–".join(f"{x:.1f}" for x in r["load_average"])

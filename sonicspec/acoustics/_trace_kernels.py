@@ -25,19 +25,37 @@ _MISS_T = 1e36
 _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
-F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE = range(9)
-I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX = range(7)
+(F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
+ F_CHILD_P, F_E0) = range(11)
+I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT = range(8)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lambert(sx, sy, sz, u1, u2):  # pragma: no cover - compiled
+    """A cosine-weighted direction around the unit normal (sx, sy, sz) (branchless basis,
+    Duff et al. 2017)."""
+    s = 1.0 if sz >= 0.0 else -1.0
+    a = -1.0 / (s + sz)
+    bb = sx * sy * a
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    x, y = r * math.cos(phi), r * math.sin(phi)
+    z = math.sqrt(max(0.0, 1.0 - u1))
+    return (x * (1.0 + s * sx * sx * a) + y * bb + z * sx,
+            x * (s * bb) + y * (s + sy * sy * a) + z * sy,
+            -x * (s * sx) - y * sy + z * sz)
 
 
 @njit(cache=True, nogil=True)
 def bounce(
     pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
     face, tfar, u, rain_offset,
-    planes, face_class, p_t, p_ts, gain, w_diff, scatters,
+    planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
     rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off,
     air, fp, ip,
     hist, dirsum,
     req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
+    c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep,
 ):  # pragma: no cover - compiled; exercised through raytrace.trace_rays
     """One bounce step of ``n = len(face)`` live rays, compacting the survivors in place.
 
@@ -53,7 +71,7 @@ def bounce(
     max_len, e_stop, eps, to_p2 = fp[F_MAX_LEN], fp[F_E_STOP], fp[F_EPS], fp[F_TO_P2]
     rain_scale = fp[F_RAIN_SCALE]
     n_bins, excluded, rain, directions = ip[I_N_BINS], ip[I_EXCLUDED], ip[I_RAIN], ip[I_DIRECTIONS]
-    stride, has_air, convex = ip[I_STRIDE], ip[I_AIR], ip[I_CONVEX]
+    stride, has_air, convex, split = ip[I_STRIDE], ip[I_AIR], ip[I_CONVEX], ip[I_SPLIT]
     bin_len = c * bin_s
     inv_bin_len = 1.0 / bin_len
     n_slots = n_rcv if stride == 1 else (n_rcv + stride - 1) // stride
@@ -62,6 +80,7 @@ def bounce(
     n_req = 0
     escaped = 0
     hits = 0
+    n_child = 0
     for i in range(n):
         ox, oy, oz = pos[i, 0], pos[i, 1], pos[i, 2]
         dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
@@ -185,30 +204,57 @@ def bounce(
                     req_dep[n_req, 2] = departure[i, 2]
                 n_req += 1
 
-        # The continuing event by band-mean weights (0 transmit, 1 specular, 2 diffuse),
-        # reweighted per band (unbiased).
         pick = u[i, 0]
-        event = 0 if pick < p_t[cls] else (1 if pick < p_ts[cls] else 2)
+        table = gain
+        if split == 1 and not any_diffuse[i]:
+            # A ray that has only been reflected specularly (or transmitted) splits: it goes on
+            # specularly with that share, and the scattered share leaves as a child ray with
+            # probability q ∝ the ray's energy (children start with about the same energy,
+            # e0 × the scattered share / F_CHILD_P), its gain divided by q: unbiased.
+            table = split_gain
+            event = 0 if pick < ps_t[cls] else 1
+            peak = 0.0
+            for b in range(n_bands):
+                peak = max(peak, energy[i, b])
+            q = min(1.0, fp[F_CHILD_P] * peak / fp[F_E0])
+            if event == 1 and alive_time and u[i, 3] < q:
+                strongest = 0.0
+                for b in range(n_bands):
+                    e = energy[i, b] * split_gain[2, cls, b] / q
+                    c_energy[n_child, b] = e
+                    if has_air == 1:
+                        e = e * math.exp(-air[b] * travelled)
+                    strongest = max(strongest, e)
+                if strongest >= e_stop:
+                    ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
+                    norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+                    c_pos[n_child, 0] = hx + eps * sx
+                    c_pos[n_child, 1] = hy + eps * sy
+                    c_pos[n_child, 2] = hz + eps * sz
+                    c_dirs[n_child, 0] = ex / norm
+                    c_dirs[n_child, 1] = ey / norm
+                    c_dirs[n_child, 2] = ez / norm
+                    c_length[n_child] = travelled
+                    c_n_refl[n_child] = n_refl[i] + 1
+                    c_dep[n_child, 0] = departure[i, 0]
+                    c_dep[n_child, 1] = departure[i, 1]
+                    c_dep[n_child, 2] = departure[i, 2]
+                    n_child += 1
+        else:
+            # The continuing event by band-mean weights (0 transmit, 1 specular, 2 diffuse),
+            # reweighted per band (unbiased).
+            event = 0 if pick < p_t[cls] else (1 if pick < p_ts[cls] else 2)
         strongest = 0.0
         for b in range(n_bands):
-            e = energy[i, b] * gain[event, cls, b]
+            e = energy[i, b] * table[event, cls, b]
             energy[out, b] = e
             if has_air == 1:
                 e = e * math.exp(-air[b] * travelled)
             strongest = max(strongest, e)
         if event == 1:  # specular mirror
             ex, ey, ez = dx - 2.0 * cos_in * nx, dy - 2.0 * cos_in * ny, dz - 2.0 * cos_in * nz
-        elif event == 2:  # Lambert around the facing normal (branchless basis, Duff et al.)
-            s = 1.0 if sz >= 0.0 else -1.0
-            a = -1.0 / (s + sz)
-            bb = sx * sy * a
-            r = math.sqrt(u[i, 1])
-            phi = 2.0 * math.pi * u[i, 2]
-            x, y = r * math.cos(phi), r * math.sin(phi)
-            z = math.sqrt(max(0.0, 1.0 - u[i, 1]))
-            ex = x * (1.0 + s * sx * sx * a) + y * bb + z * sx
-            ey = x * (s * bb) + y * (s + sy * sy * a) + z * sy
-            ez = -x * (s * sx) - y * sy + z * sz
+        elif event == 2:  # Lambert around the facing normal
+            ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
         else:  # transmitted: straight on
             ex, ey, ez = dx, dy, dz
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -225,7 +271,7 @@ def bounce(
         departure[out, 0], departure[out, 1], departure[out, 2] = (
             departure[i, 0], departure[i, 1], departure[i, 2])
         out += 1
-    return out, n_req, escaped, hits
+    return out, n_req, escaped, hits, n_child
 
 
 @njit(cache=True, nogil=True)

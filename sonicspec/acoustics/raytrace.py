@@ -15,6 +15,14 @@ Model (every approximation is listed here)
   probability proportional to the band-mean weight of that event, and its per-band energy is
   multiplied by ``weight / probability`` — unbiased in every band (the expectation is exactly
   ``τ + (1-τ)(1-α)``), without splitting rays. Diffuse directions are cosine-weighted.
+* **Specular splitting** (``RayTraceSettings.splitting = r > 0``): a ray that has never been
+  scattered transmits (probability ``τ̄/(τ̄ + (1-τ)(1-α)‾)``) or reflects; reflected, it goes on
+  specularly with the specular share, and the scattered share leaves as a child ray (Lambert,
+  then one continuing ray per hit) with probability ``q = min(1, r·E/E₀)``, its energy divided
+  by ``q`` — unbiased (tested against the plain scheme). With little scattering the late
+  field rides on long specular chains; choosing one event per hit makes each chain survive
+  by chance (``0.9^k`` after ``k`` walls), a heavy-tailed noise that splitting removes. Child
+  probability ∝ energy keeps the children's energies alike and their number bounded.
 * **Air**: energy decays as ``exp(-m·L)`` along the path (``m`` = ISO 9613-1 ``air_m_per_band``).
   Since every contribution arriving at time ``t`` has travelled ``L = c·t``, this factor is
   applied per histogram bin at its centre (±0.4 % at 8 kHz for 1 ms bins) rather than per ray.
@@ -144,6 +152,13 @@ class RayTraceSettings:
         Also accumulate the energy-weighted arrival and departure direction sums (about a
         sixth of the trace's time). False: ``EnergyHistogram.direction_sum`` and
         ``departure_sum`` are NaN (not computed); the energies are the same bytes.
+    splitting : float
+        0: one continuing ray per hit (see the module docstring). r > 0: specular splitting
+        — a ray never scattered goes on specularly with the specular share, and its scattered
+        share leaves as a child ray with probability ``min(1, r · E/E₀)`` (``E`` its largest
+        band energy, ``E₀`` its launch energy), weighted by the inverse. Unbiased either way;
+        it removes the chance of whether a long specular chain survives, the dominant noise
+        of the late field in rooms with little scattering.
     """
 
     n_rays: int = 20_000
@@ -159,6 +174,7 @@ class RayTraceSettings:
     diffuse_rain: bool = True
     rain_receivers_per_hit: int = 8
     directions: bool = True
+    splitting: float = 0.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -182,6 +198,7 @@ class RayTraceSettings:
             ),
             ("speed_of_sound_m_s", self.speed_of_sound_m_s, self.speed_of_sound_m_s > 0, "> 0"),
             ("batch_size", self.batch_size, self.batch_size >= 1, ">= 1"),
+            ("splitting", self.splitting, self.splitting >= 0, ">= 0 (0: off)"),
             (
                 "rain_receivers_per_hit",
                 self.rain_receivers_per_hit,
@@ -358,6 +375,8 @@ class _EventTables:
     gain: np.ndarray  # (3, C, B)
     w_diff: np.ndarray  # (C, B) scattered energy fraction (1-τ)(1-α)s
     scatters: np.ndarray  # (C,) any band scatters
+    ps_t: np.ndarray  # (C,) P(transmit) of a splitting ray
+    split_gain: np.ndarray  # (3, C, B) its gains: transmit, specular, scattered (child: × 1/q)
 
 
 # Built once per scene (a trajectory's many traces reuse it).
@@ -378,6 +397,14 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
     total = means.sum(axis=0)
     prob = means / np.where(total > 0, total, 1.0)
     gain = np.where(prob[:, :, None] > 0, weights / np.where(prob > 0, prob, 1.0)[:, :, None], 0)
+    # A splitting ray transmits or reflects; reflected, it goes on specularly and its
+    # scattered share leaves as a child ray (with probability q; the gain here is for q = 1).
+    p_split = means[0] / np.where(means[0] + means[1] + means[2] > 0,
+                                  means[0] + means[1] + means[2], 1.0)
+    refl = np.where(p_split < 1.0, 1.0 - p_split, 1.0)[:, None]
+    split_gain = np.stack([
+        np.where(p_split[:, None] > 0, tau / np.where(p_split > 0, p_split, 1.0)[:, None], 0.0),
+        (w_refl - w_diff) / refl, w_diff / refl])
     tables = _EventTables(
         planes=np.ascontiguousarray(np.column_stack([scene.normals, scene.plane_d])),
         face_class=face_class.astype(np.int32),
@@ -387,6 +414,8 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
         gain=np.ascontiguousarray(gain),
         w_diff=np.ascontiguousarray(w_diff),
         scatters=np.any(w_diff > 0, axis=1),
+        ps_t=np.ascontiguousarray(p_split),
+        split_gain=np.ascontiguousarray(split_gain),
     )
     _TABLES[scene] = tables
     return tables
@@ -430,7 +459,7 @@ def _trace_batch(
     stride = 1 if limit == 0 or rcv.n <= limit else -(-rcv.n // limit)
     n_slots = rcv.n if stride == 1 else -(-rcv.n // stride)
     to_p2 = 1.0 / (4.0 * math.pi)  # p² per unit "energy per area": see the module docstring
-    fp = np.zeros(9)
+    fp = np.zeros(11)
     fp[K.F_SPEED] = st.speed_of_sound_m_s
     fp[K.F_BIN] = st.bin_s
     fp[K.F_RADIUS] = st.receiver_radius_m
@@ -441,7 +470,7 @@ def _trace_batch(
     fp[K.F_TO_P2] = to_p2
     # ΔΩ/π per πR², converted to p², times the rain's subsampling weight.
     fp[K.F_RAIN_SCALE] = stride * to_p2 / (math.pi * math.pi * st.receiver_radius_m**2)
-    ip = np.zeros(7, dtype=np.int64)
+    ip = np.zeros(8, dtype=np.int64)
     ip[K.I_N_BINS] = n_bins
     ip[K.I_EXCLUDED] = st.specular_order_excluded
     ip[K.I_RAIN] = int(st.diffuse_rain)
@@ -449,6 +478,10 @@ def _trace_batch(
     ip[K.I_STRIDE] = stride
     ip[K.I_AIR] = int(np.any(air > 0))
     ip[K.I_CONVEX] = int(rcv.planes is not None)
+    split = st.splitting > 0
+    ip[K.I_SPLIT] = int(split)
+    fp[K.F_CHILD_P] = st.splitting
+    fp[K.F_E0] = 1.0 / st.n_rays
     plane_n, plane_off = rcv.planes if rcv.planes is not None else (_NO_PLANES, _NO_OFFSETS)
 
     # Separate streams: ray paths do not depend on how the rain is subsampled or walked.
@@ -466,25 +499,54 @@ def _trace_batch(
     interactions = 0
     while n:
         face, tfar = scene.first_hits(pos[:n], dirs[:n])
-        u = rng.random((n, 3))
+        u = rng.random((n, 4 if split else 3))
         offsets = rain_rng.integers(0, stride, n) if stride > 1 else no_offsets
         m = n * n_slots if st.diffuse_rain else 0
         req = _RainQueue.empty(m, scene.n_bands, st.directions)
-        n, n_req, esc, hits = K.bounce(
+        kids = _Children.empty(n if split else 0, scene.n_bands)
+        n, n_req, esc, hits, n_kids = K.bounce(
             pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
             face, tfar, u, offsets,
             ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
+            ev.ps_t, ev.split_gain,
             rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off,
             air, fp, ip,
             acc.energy, acc.directions,
             req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
             req.departure,
+            kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
         )  # fmt: skip
         escaped += esc
         interactions += hits
         if n_req:
             _settle_rain(scene, rcv, req.head(n_req), rain_rng, acc, st.directions)
+        if n_kids:  # children join the live rays: diffusely reflected once
+            pos, dirs, energy, length, n_refl, departure = (
+                np.concatenate([a[:n], b[:n_kids]]) for a, b in (
+                    (pos, kids.pos), (dirs, kids.dirs), (energy, kids.energy),
+                    (length, kids.length), (n_refl, kids.n_refl), (departure, kids.departure)))
+            yes = np.ones(n_kids, dtype=bool)
+            any_diffuse = np.concatenate([any_diffuse[:n], yes])
+            last_diffuse = np.concatenate([last_diffuse[:n], yes])
+            n += n_kids
     return escaped, interactions
+
+
+@dataclass(frozen=True, eq=False)
+class _Children:
+    """Child rays spawned in one bounce step by splitting rays (see ``splitting``)."""
+
+    pos: np.ndarray
+    dirs: np.ndarray
+    energy: np.ndarray
+    length: np.ndarray
+    n_refl: np.ndarray
+    departure: np.ndarray
+
+    @classmethod
+    def empty(cls, m: int, n_bands: int) -> _Children:
+        return cls(np.empty((m, 3)), np.empty((m, 3)), np.empty((m, n_bands)), np.empty(m),
+                   np.empty(m, dtype=np.int64), np.empty((m, 3)))
 
 
 @dataclass(frozen=True, eq=False)

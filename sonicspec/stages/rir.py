@@ -54,6 +54,7 @@ class RirSettings:
     receiver_radius_m: float
     histogram_bin_s: float
     speed_of_sound_m_s: float
+    ray_splitting: float = 0.0
 
     @classmethod
     def from_spec(cls, acoustics: dict[str, Any], sample_rate_hz: int,
@@ -71,6 +72,7 @@ class RirSettings:
                    transmission=acoustics["transmission"],
                    diffuse_rain=acoustics["detection"] == "diffuse_rain",
                    receiver_radius_m=acoustics["receiver_radius_m"],
+                   ray_splitting=acoustics["ray_splitting"],
                    histogram_bin_s=acoustics["histogram_bin_s"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
@@ -126,7 +128,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
         receiver_radius_m=settings.receiver_radius_m,
         specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
-        diffuse_rain=settings.diffuse_rain,
+        diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
         # No renderer reads the late field's directions (the tails are diffuse): skip them.
         directions=False)
     traces = trace_rays(scene, mic, points, rng, ray_settings, air, n_threads=n_threads)
