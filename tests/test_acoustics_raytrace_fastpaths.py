@@ -119,3 +119,20 @@ def test_roulette_through_transmitting_walls_is_unbiased():
     through_wall = energy["every"] - energy["none"]
     assert np.all(through_wall > 0.03 * energy["every"])
     np.testing.assert_allclose(energy["roulette"] - energy["none"], through_wall, rtol=0.05)
+
+
+def test_walking_blocked_shadow_rays_in_batches_gives_the_same_sums(monkeypatch):
+    """Blocked shadow rays chosen by the roulette are walked through the walls together; walking
+    them after every bounce step instead adds the same contributions (sums up to rounding)."""
+    verts, faces = extruded_room(*L_ROOM, 3.0)
+    scene = uniform_scene(verts, faces, alpha=0.2, s=0.6, tau=0.3, n_bands=2)
+    src = np.array([1.0, 1.0, 1.5])
+    rcvs = np.array([[5.0, 1.5, 1.2], [1.5, 5.0, 2.0], [2.0, 2.0, 0.5]])
+    settings = RayTraceSettings(n_rays=400, max_time_s=0.3)
+    batched = trace_rays(scene, src, rcvs, np.random.default_rng(6), settings)
+    monkeypatch.setattr(raytrace, "_WALK_BATCH", 1)
+    stepwise = trace_rays(scene, src, rcvs, np.random.default_rng(6), settings)
+    assert batched[1].histogram.energy.sum() > 0  # round the corner from the source
+    for a, b in zip(histograms(batched), histograms(stepwise), strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-30)

@@ -109,6 +109,9 @@ _INSIDE_M = K._INSIDE_M
 _NO_PLANES = np.zeros((0, 3))
 _NO_OFFSETS = np.zeros(0)
 _NO_TRANSMISSION = np.zeros((0, 0))
+# Blocked shadow rays gathered before one walk through the walls (each walk step is one Embree
+# call whatever its size, so walking many at once saves most of the calls).
+_WALK_BATCH = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -495,6 +498,7 @@ def _trace_batch(
     any_diffuse = np.zeros(n, dtype=bool)
     last_diffuse = np.zeros(n, dtype=bool)
     no_offsets = np.zeros(0, dtype=np.int64)
+    walks: list[_RainQueue] = []  # blocked shadow rays waiting to be walked through walls
     escaped = 0
     interactions = 0
     while n:
@@ -519,7 +523,9 @@ def _trace_batch(
         escaped += esc
         interactions += hits
         if n_req:
-            _settle_rain(scene, rcv, req.head(n_req), rain_rng, acc, st.directions)
+            _settle_rain(scene, req.head(n_req), rain_rng, acc, st.directions, walks)
+            if sum(len(w.length) for w in walks) >= _WALK_BATCH:
+                _walk_rain(scene, rcv, walks, acc, st.directions)
         if n_kids:  # children join the live rays: diffusely reflected once
             pos, dirs, energy, length, n_refl, departure = (
                 np.concatenate([a[:n], b[:n_kids]]) for a, b in (
@@ -529,6 +535,7 @@ def _trace_batch(
             any_diffuse = np.concatenate([any_diffuse[:n], yes])
             last_diffuse = np.concatenate([last_diffuse[:n], yes])
             n += n_kids
+    _walk_rain(scene, rcv, walks, acc, st.directions)
     return escaped, interactions
 
 
@@ -568,36 +575,60 @@ class _RainQueue:
                    np.empty(m, dtype=np.int64), np.empty((m, n_bands)),
                    np.empty((m if directions else 0, 3)))
 
+    def take(self, rows: np.ndarray) -> _RainQueue:
+        dep = np.take(self.departure, rows, axis=0) if len(self.departure) else self.departure
+        return _RainQueue(*(np.take(x, rows, axis=0) for x in (
+            self.origin, self.direction, self.length, self.receiver, self.bin, self.energy)),
+            dep)
+
+    @classmethod
+    def concatenate(cls, queues: list[_RainQueue]) -> _RainQueue:
+        if len(queues) == 1:
+            return queues[0]
+        return cls(*(np.concatenate([getattr(q, name) for q in queues]) for name in (
+            "origin", "direction", "length", "receiver", "bin", "energy", "departure")))
+
     def head(self, n: int) -> _RainQueue:
         dep = self.departure[:n] if len(self.departure) else self.departure
         return _RainQueue(self.origin[:n], self.direction[:n], self.length[:n],
                           self.receiver[:n], self.bin[:n], self.energy[:n], dep)
 
 
-def _settle_rain(scene: AcousticScene, rcv: _Receivers, req: _RainQueue,
-                 rng: np.random.Generator, acc: _Histograms, directions: bool) -> None:
+def _settle_rain(scene: AcousticScene, req: _RainQueue, rng: np.random.Generator,
+                 acc: _Histograms, directions: bool, walks: list[_RainQueue]) -> None:
     """Traces the queued shadow rays and adds those that reach their receiver.
 
     A blocked shadow ray through transmitting surfaces is walked through them with
     probability ``q = max τ`` (Russian roulette) and its ``Π τ`` divided by ``q``: unbiased,
     and ``Π τ / q <= 1`` since it crosses at least one surface; the rest stop here. Most
-    blocked rays would come out tens of dB down, and walking them was most of the cost.
+    blocked rays would come out tens of dB down, and walking them was most of the cost. The
+    chosen ones are appended to ``walks`` and walked together by :func:`_walk_rain` (a walk
+    takes one Embree call per surface crossed, whatever the number of rays).
     """
     blocked = scene.occluded_along(req.origin, req.direction, req.length)
-    trans = _NO_TRANSMISSION
     q = min(1.0, scene.max_transmission)
     if q > 0 and blocked.any():
         walked = np.flatnonzero(blocked)
         walked = walked[rng.random(walked.size) < q]
         if walked.size:
-            trans = np.ones((len(blocked), scene.n_bands))
-            trans[walked] = scene.crossed_transmission(
-                np.take(req.origin, walked, axis=0),
-                np.take(rcv.pos, req.receiver[walked], axis=0),
-            ) / q
-            blocked[walked] = False
-    K.deposit(req.receiver, req.bin, req.direction, req.energy, req.departure, blocked, trans,
-              directions, acc.energy, acc.directions)
+            walks.append(req.take(walked))
+    K.deposit(req.receiver, req.bin, req.direction, req.energy, req.departure, blocked,
+              _NO_TRANSMISSION, directions, acc.energy, acc.directions)
+
+
+def _walk_rain(scene: AcousticScene, rcv: _Receivers, walks: list[_RainQueue],
+               acc: _Histograms, directions: bool) -> None:
+    """Walks the blocked shadow rays chosen by the roulette through the surfaces they cross
+    and adds them weighted by ``Π τ / q``; empties ``walks``."""
+    if not walks:
+        return
+    req = _RainQueue.concatenate(walks)
+    walks.clear()
+    trans = scene.crossed_transmission(req.origin, np.take(rcv.pos, req.receiver, axis=0))
+    trans /= min(1.0, scene.max_transmission)
+    K.deposit(req.receiver, req.bin, req.direction, req.energy, req.departure,
+              np.zeros(len(req.receiver), dtype=bool), trans, directions, acc.energy,
+              acc.directions)
 
 
 def receiver_clearance_m(
