@@ -284,6 +284,7 @@ def test_coefficient_classes_partition_faces_by_identical_rows():
     scene = AcousticScene(verts, faces, table[pick, 0], table[pick, 1], table[pick, 2] * 0.1)
     got, first = scene.coefficient_classes()
     assert np.array_equal(got[first], np.arange(len(first)))
+    assert scene.coefficient_classes() is scene.coefficient_classes()  # computed once
     coef = np.concatenate([scene.absorption, scene.scattering, scene.transmission], axis=1)
     _, exact = np.unique(coef, axis=0, return_inverse=True)
     exact = exact.reshape(-1)

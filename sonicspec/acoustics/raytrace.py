@@ -85,7 +85,6 @@ Model (every approximation is listed here)
 from __future__ import annotations
 
 import math
-import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -382,14 +381,12 @@ class _EventTables:
     split_gain: np.ndarray  # (3, C, B) its gains: transmit, specular, scattered (child: × 1/q)
 
 
-# Built once per scene (a trajectory's many traces reuse it).
-_TABLES: weakref.WeakKeyDictionary[AcousticScene, _EventTables] = weakref.WeakKeyDictionary()
-
-
 def _event_tables(scene: AcousticScene) -> _EventTables:
-    cached = _TABLES.get(scene)
-    if cached is not None:
-        return cached
+    """Built once per scene (a trajectory's many traces reuse it)."""
+    return scene.memoized("raytrace.event_tables", lambda: _build_event_tables(scene))
+
+
+def _build_event_tables(scene: AcousticScene) -> _EventTables:
     face_class, first = scene.coefficient_classes()
     alpha, scattering, tau = (np.take(x, first, axis=0)
                               for x in (scene.absorption, scene.scattering, scene.transmission))
@@ -420,7 +417,6 @@ def _event_tables(scene: AcousticScene) -> _EventTables:
         ps_t=np.ascontiguousarray(p_split),
         split_gain=np.ascontiguousarray(split_gain),
     )
-    _TABLES[scene] = tables
     return tables
 
 

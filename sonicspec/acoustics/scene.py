@@ -12,11 +12,16 @@ precision. Rays leaving a surface start ``eps_m`` off it (see :attr:`AcousticSce
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TypeVar
+
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from sonicspec.errors import AcousticsError
+
+T = TypeVar("T")
 
 __all__ = ["AcousticScene"]
 
@@ -128,7 +133,7 @@ class AcousticScene:
         #: Largest transmission coefficient of any face and band.
         self.max_transmission = float(self.transmission.max())
         self.has_transmission = self.max_transmission > 0
-        self._classes: tuple[np.ndarray, np.ndarray] | None = None
+        self._memo: dict[str, object] = {}
 
         self._embree = rtcore_scene.EmbreeScene()
         # Keep a reference: the Embree geometry must live as long as the scene.
@@ -200,6 +205,13 @@ class AcousticScene:
         distance[hit] = np.where(good, exact, tfar_hit)
         return face, distance
 
+    def memoized(self, key: str, build: Callable[[], T]) -> T:
+        """``build()`` once per scene and ``key``: derived tables that many traces of the same
+        scene reuse (the scene's arrays are read-only, so they never go stale)."""
+        if key not in self._memo:
+            self._memo[key] = build()
+        return self._memo[key]  # type: ignore[return-value]
+
     def coefficient_classes(self) -> tuple[np.ndarray, np.ndarray]:
         """Faces grouped by identical coefficient rows (absorption, scattering, transmission):
         the class of every face ``(F,)`` and one face of every class ``(C,)``; computed once.
@@ -208,16 +220,17 @@ class AcousticScene:
         and every row is then checked against its class's representative, so a key collision
         can only fall back to the exact row comparison, never merge two materials.
         """
-        if self._classes is None:
-            coef = np.concatenate([self.absorption, self.scattering, self.transmission], axis=1)
-            weights = np.random.default_rng(0x5EED).uniform(1.0, 2.0, coef.shape[1])
-            _, first, ids = np.unique(coef @ weights, return_index=True, return_inverse=True)
-            ids = ids.reshape(-1)
-            if not np.array_equal(coef, np.take(coef, np.take(first, ids), axis=0)):
-                _, first, ids = np.unique(coef, axis=0, return_index=True, return_inverse=True)
-                ids = ids.reshape(-1)  # a collision: exact classes
-            self._classes = (ids.astype(np.int64), first.astype(np.int64))
-        return self._classes
+        return self.memoized("coefficient_classes", self._coefficient_classes)
+
+    def _coefficient_classes(self) -> tuple[np.ndarray, np.ndarray]:
+        coef = np.concatenate([self.absorption, self.scattering, self.transmission], axis=1)
+        weights = np.random.default_rng(0x5EED).uniform(1.0, 2.0, coef.shape[1])
+        _, first, ids = np.unique(coef @ weights, return_index=True, return_inverse=True)
+        ids = ids.reshape(-1)
+        if not np.array_equal(coef, np.take(coef, np.take(first, ids), axis=0)):
+            _, first, ids = np.unique(coef, axis=0, return_index=True, return_inverse=True)
+            ids = ids.reshape(-1)  # a collision: exact classes
+        return ids.astype(np.int64), first.astype(np.int64)
 
     def first_hits(
         self, origins: np.ndarray, directions: np.ndarray
