@@ -19,12 +19,17 @@ def histograms(results):
 
 
 def test_receiver_spheres_together_equal_one_by_one():
-    """Seven receivers in one trace, then one at a time: the same sums. Receiver spheres only
-    (no rain), some receivers near walls (small radius cap)."""
+    """Twelve receivers in one trace (enough for the sphere tests to visit only those within
+    reach along the receivers' widest axis), then one at a time (every receiver tested): the
+    same sums. Receiver spheres only (no rain), some receivers near walls (small radius cap)."""
+    from sonicspec.acoustics._trace_kernels import CULL_ABOVE
+
     scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), alpha=0.3, s=0.4, n_bands=2)
     src = np.array([1.0, 1.0, 1.5])
     rcvs = np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0], [2.5, 4.0, 0.5], [5.9, 4.9, 2.9],
-                     [0.2, 2.5, 1.5], [3.0, 2.5, 1.5], [3.2, 2.6, 1.4]])
+                     [0.2, 2.5, 1.5], [3.0, 2.5, 1.5], [3.2, 2.6, 1.4], [0.5, 0.5, 0.5],
+                     [5.5, 4.5, 2.5], [1.5, 4.8, 1.0], [4.5, 0.3, 2.7], [2.0, 2.0, 2.0]])
+    assert len(rcvs) > CULL_ABOVE
     settings = RayTraceSettings(n_rays=600, max_time_s=0.3, diffuse_rain=False,
                                 specular_order_excluded=0)
     together = trace_rays(scene, src, rcvs, np.random.default_rng(2), settings)

@@ -26,8 +26,12 @@ _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
 (F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
- F_CHILD_P, F_E0) = range(11)
-I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT = range(8)
+ F_CHILD_P, F_E0, F_R_MAX) = range(12)
+(I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT,
+ I_AXIS) = range(9)
+# With more receivers than this, sphere tests only visit those whose coordinate along the
+# receivers' widest axis lies within reach of the segment (receivers sorted along it).
+CULL_ABOVE = 8
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -51,7 +55,7 @@ def bounce(
     pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
     face, tfar, u, rain_offset,
     planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
-    rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off,
+    rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key,
     air, fp, ip,
     hist, dirsum,
     req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
@@ -72,6 +76,7 @@ def bounce(
     rain_scale = fp[F_RAIN_SCALE]
     n_bins, excluded, rain, directions = ip[I_N_BINS], ip[I_EXCLUDED], ip[I_RAIN], ip[I_DIRECTIONS]
     stride, has_air, convex, split = ip[I_STRIDE], ip[I_AIR], ip[I_CONVEX], ip[I_SPLIT]
+    axis, r_max = ip[I_AXIS], fp[F_R_MAX]
     bin_len = c * bin_s
     inv_bin_len = 1.0 / bin_len
     n_slots = n_rcv if stride == 1 else (n_rcv + stride - 1) // stride
@@ -103,7 +108,22 @@ def bounce(
         if rain == 1 and last_diffuse[i]:
             eligible = False
         if eligible:
-            for k in range(n_rcv):
+            j0, j1 = 0, n_rcv
+            if n_rcv > CULL_ABOVE:  # the receivers whose axis coordinate the segment can reach
+                o_a, d_a = pos[i, axis], dirs[i, axis]
+                lo, hi = -math.inf, math.inf
+                if d_a >= 0.0:
+                    lo = o_a - r_max
+                    if t < math.inf:
+                        hi = o_a + t * d_a + r_max
+                if d_a <= 0.0:
+                    hi = o_a + r_max
+                    if t < math.inf:
+                        lo = o_a + t * d_a - r_max
+                j0 = np.searchsorted(rcv_key, lo, side="left")
+                j1 = np.searchsorted(rcv_key, hi, side="right")
+            for j in range(j0, j1):
+                k = rcv_order[j]
                 wx, wy, wz = rcv_pos[k, 0] - ox, rcv_pos[k, 1] - oy, rcv_pos[k, 2] - oz
                 tc = wx * dx + wy * dy + wz * dz
                 d2 = wx * wx + wy * wy + wz * wz - tc * tc

@@ -458,7 +458,7 @@ def _trace_batch(
     stride = 1 if limit == 0 or rcv.n <= limit else -(-rcv.n // limit)
     n_slots = rcv.n if stride == 1 else -(-rcv.n // stride)
     to_p2 = 1.0 / (4.0 * math.pi)  # p² per unit "energy per area": see the module docstring
-    fp = np.zeros(11)
+    fp = np.zeros(12)
     fp[K.F_SPEED] = st.speed_of_sound_m_s
     fp[K.F_BIN] = st.bin_s
     fp[K.F_RADIUS] = st.receiver_radius_m
@@ -469,7 +469,7 @@ def _trace_batch(
     fp[K.F_TO_P2] = to_p2
     # ΔΩ/π per πR², converted to p², times the rain's subsampling weight.
     fp[K.F_RAIN_SCALE] = stride * to_p2 / (math.pi * math.pi * st.receiver_radius_m**2)
-    ip = np.zeros(8, dtype=np.int64)
+    ip = np.zeros(9, dtype=np.int64)
     ip[K.I_N_BINS] = n_bins
     ip[K.I_EXCLUDED] = st.specular_order_excluded
     ip[K.I_RAIN] = int(st.diffuse_rain)
@@ -481,6 +481,9 @@ def _trace_batch(
     ip[K.I_SPLIT] = int(split)
     fp[K.F_CHILD_P] = st.splitting
     fp[K.F_E0] = 1.0 / st.n_rays
+    # No detection sphere is larger than this: the reach of the receiver culling.
+    fp[K.F_R_MAX] = (1.0 + 1e-9) * max(st.receiver_radius_m, float(rcv.cap.max())) + 1e-9
+    ip[K.I_AXIS] = rcv.axis
     plane_n, plane_off = rcv.planes if rcv.planes is not None else (_NO_PLANES, _NO_OFFSETS)
 
     # Separate streams: ray paths do not depend on how the rain is subsampled or walked.
@@ -509,7 +512,7 @@ def _trace_batch(
             face, tfar, u, offsets,
             ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
             ev.ps_t, ev.split_gain,
-            rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off,
+            rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key,
             air, fp, ip,
             acc.energy, acc.directions,
             req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
@@ -679,6 +682,9 @@ class _Receivers:
     cap: np.ndarray  # (K,) largest specular-detection radius
     planes: tuple[np.ndarray, np.ndarray] | None  # a convex room's inward planes (n, d)
     inside: np.ndarray  # (K,) receiver strictly inside those planes
+    axis: int  # the axis along which the receivers spread widest
+    order: np.ndarray  # (K,) receivers sorted along it
+    key: np.ndarray  # (K,) their coordinates along it, ascending
 
     @property
     def n(self) -> int:
@@ -690,8 +696,11 @@ class _Receivers:
         inside = np.zeros(len(receivers), dtype=bool)
         if planes is not None:
             inside = (receivers @ planes[0].T - planes[1]).min(axis=1) > _INSIDE_M
+        axis = int(np.argmax(np.ptp(receivers, axis=0)))
+        order = np.argsort(receivers[:, axis], kind="stable")
         return cls(pos=np.ascontiguousarray(receivers), cap=np.ascontiguousarray(cap),
-                   planes=planes, inside=inside)
+                   planes=planes, inside=inside, axis=axis, order=order.astype(np.int64),
+                   key=np.ascontiguousarray(receivers[order, axis]))
 
 
 def _convex_planes(scene: AcousticScene) -> tuple[np.ndarray, np.ndarray] | None:
