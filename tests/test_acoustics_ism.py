@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pyroomacoustics as pra
 import pytest
@@ -181,6 +183,31 @@ def test_candidate_limit_warns_and_reports_completed_order():
         res = image_sources(scene, src, mic, max_order=3, max_candidates=100)
     assert res.max_order == 2
     assert res.arrivals[0].order.max() == 2
+
+
+@pytest.mark.parametrize("limit", [40, 100, 149, 150, 200])
+def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, limit: int):
+    """The count that stops an order before its images are built gives the same decision and
+    arrivals as building them (limits around the 150 order-3 candidates of this shoebox, with
+    a path-length limit that keeps every one of them, and one that keeps only some)."""
+    from sonicspec.acoustics import image_sources as ism
+
+    verts, faces = shoebox(5.0, 4.0, 3.0)
+    scene = uniform_scene(verts, faces)
+    src, mic = np.array([1.2, 1.5, 1.1]), np.array([[3.3, 2.2, 1.7]])
+    for max_path in (1000.0, 20.0):
+        runs = []
+        for early in (True, False):
+            if not early:
+                monkeypatch.setattr(ism, "_provably_too_many", lambda *a, **k: False)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                res = image_sources(scene, src, mic, max_order=3, max_candidates=limit,
+                                    max_path_length_m=max_path)
+            runs.append((res.max_order, res.arrivals[0].times_s.tobytes(),
+                         [str(w.message) for w in caught]))
+            monkeypatch.undo()
+        assert runs[0] == runs[1]
 
 
 def test_image_source_errors():

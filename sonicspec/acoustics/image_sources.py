@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -66,6 +66,8 @@ class PlanarRegions:
     region_faces: np.ndarray
     reflection_energy: np.ndarray
     distance_tol_m: float = 0.0
+    #: Tables derived from the regions and their scene (the reach table), built once.
+    memo: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_regions(self) -> int:
@@ -348,7 +350,12 @@ def image_sources(
     src = source[0]
     n_rcv = len(receivers)
     tol = scene.eps_m
-    reach = _reach_tables(scene, regions, tol) if max_order >= 2 else None
+    reach = None
+    if max_order >= 2:  # built once per regions (a trajectory calls this point by point)
+        key = ("reach", tol)
+        if key not in regions.memo:
+            regions.memo[key] = _reach_tables(scene, regions, tol)
+        reach = regions.memo[key]
     normals, plane_d = regions.normals, regions.plane_d
 
     per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
@@ -366,7 +373,11 @@ def image_sources(
         rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         count = 0
-        for r0 in range(0, len(last_pos), rows):
+        if _provably_too_many(last_pos, planes[:, -1] if order > 1 else None, side, reach,
+                              normals, plane_d, tol, receivers, max_path_length_m,
+                              max_candidates):
+            count = max_candidates + 1  # decided without building the images
+        for r0 in range(0, len(last_pos) if count <= max_candidates else 0, rows):
             sl = slice(r0, r0 + rows)
             dist = last_pos[sl] @ normals.T - plane_d[None, :]  # signed distances
             ok = np.abs(dist) > tol
@@ -427,6 +438,55 @@ def image_sources(
         for parts in per_receiver
     )
     return ImageSourceResult(arrivals=arrivals, max_order=completed)
+
+
+def _provably_too_many(
+    last_pos: np.ndarray,
+    last_plane: np.ndarray | None,
+    side: np.ndarray,
+    reach: np.ndarray | None,
+    normals: np.ndarray,
+    plane_d: np.ndarray,
+    tol: float,
+    receivers: np.ndarray,
+    max_path_length_m: float | None,
+    limit: int,
+) -> bool:
+    """Whether the next order has more than ``limit`` candidates, decided without building
+    the images (in a scan, order 3 overflows after ~0.5 s of building them otherwise).
+
+    Candidates are counted by the same masks as :func:`image_sources`; the path-length filter
+    is accounted for only where it provably keeps a candidate (``|image − r| <= |parent − r|
+    + 2|d|``). False whenever that cannot be shown: the exact count then decides.
+    """
+    n_regions = len(plane_d)
+    if last_plane is not None and reach is not None:
+        bound = int(reach.sum(axis=2)[side, last_plane].sum())
+    else:
+        bound = len(last_pos) * n_regions
+    if bound <= limit:
+        return False
+    nearest = None
+    if max_path_length_m is not None:
+        nearest = np.min(np.linalg.norm(last_pos[:, None, :] - receivers[None, :, :], axis=2),
+                         axis=1)
+    rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
+    count = 0
+    for r0 in range(0, len(last_pos), rows):
+        sl = slice(r0, r0 + rows)
+        dist = last_pos[sl] @ normals.T - plane_d[None, :]
+        ok = np.abs(dist) > tol
+        if last_plane is not None:
+            ok &= np.arange(n_regions)[None, :] != last_plane[sl, None]
+            if reach is not None:
+                ok &= reach[side[sl], last_plane[sl]]
+        if nearest is not None and np.any(
+                ok & (nearest[sl, None] + 2.0 * np.abs(dist) > max_path_length_m)):
+            return False
+        count += int(np.count_nonzero(ok))
+        if count > limit:
+            return True
+    return False
 
 
 def _validate_order(
