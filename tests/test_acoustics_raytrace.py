@@ -122,13 +122,15 @@ def test_t30_follows_kuttruffs_path_length_correction():
 
 @pytest.mark.slow
 def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
-    """Whole RIRs of both tools (16 kHz, image sources to order 3 + rays, ISO air), T30 per
-    octave band by our ISO 3382-1 routine, pyroomacoustics averaged over 6 seeds (its spread
-    is 1–5 % at 10,000 rays). Its hybrid decays 5–9 % faster than Eyring and ~12 % faster
-    than Kuttruff's corrected formula, which we follow within 1 %; so the two tools differ by
-    7–15 % — more than the 10 % asked for, in the direction of its bias (see
-    bench/RESULTS.md). Asserted: the difference stays within 16 %, ours is the longer in
-    every band, and pyroomacoustics stays within 10 % of Eyring (its run is sound)."""
+    """Whole RIRs of both tools (16 kHz, image sources to order 3 + rays; air absorption off in
+    both, as their air models differ), T30 per octave band by our ISO 3382-1 routine,
+    pyroomacoustics averaged over 8 seeds — it is not reproducible even with numpy's seed (its
+    C++ side draws from its own generator), and its per-band spread is 1–5 %. Its hybrid decays
+    ~5 % faster than Eyring, ~10 % faster than Kuttruff's corrected formula, which we follow
+    within 1 % (histogram test above); so the two tools differ by 4–14 % per band, ~10 % on
+    average — not the 10 % per band asked for, in the direction of its bias (see
+    bench/RESULTS.md). Asserted: ours the longer in every band, by under 16 % in each and
+    5–13 % on average, and pyroomacoustics within 10 % of Eyring (its run is sound)."""
     pra = pytest.importorskip("pyroomacoustics")
     from sonicspec.acoustics.bands import default_bands
     from sonicspec.stages import rir as rir_stage
@@ -140,7 +142,7 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
                           np.full((n_faces, len(bands)), 0.5), np.zeros((n_faces, len(bands))))
     settings = rir_stage.RirSettings(
         rays=20_000, sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
-        max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True,
+        max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=False,
         temperature_c=20.0, relative_humidity_pct=50.0, transmission=False,
         diffuse_rain=True, receiver_radius_m=0.1, histogram_bin_s=0.001,
         speed_of_sound_m_s=343.0)  # fmt: skip
@@ -148,10 +150,10 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
                                         np.random.default_rng(0))
     ours = np.array(room_acoustic_figures(rir[0].astype(np.float64), fs, bands).t30_s)
     theirs = []
-    for seed in range(6):
+    for seed in range(8):
         np.random.seed(seed)  # noqa: NPY002 (pyroomacoustics has no generator argument)
         room = pra.ShoeBox(list(size), fs=fs, materials=pra.Material(0.2, 0.5), max_order=3,
-                           ray_tracing=True, air_absorption=True)
+                           ray_tracing=True, air_absorption=False)
         room.set_ray_tracing(n_rays=10_000)
         room.add_source(list(SRC))
         room.add_microphone(list(RCV[0]))
@@ -159,11 +161,12 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
         rir_pra = np.asarray(room.rir[0][0], dtype=np.float64)
         theirs.append(room_acoustic_figures(rir_pra, fs, bands).t30_s)
     theirs = np.mean(theirs, axis=0)
-    eyring = np.array([eyring_t60(210.0, 242.0, 0.2, m)
-                       for m in iso9613_energy_per_m(np.array(bands))])
+    eyring = eyring_t60(210.0, 242.0, 0.2, 0.0)
     assert np.all(np.abs(theirs / eyring - 1) < 0.10), (theirs, eyring)
-    assert np.all(ours > theirs), (ours, theirs)
-    assert np.all(ours / theirs - 1 < 0.16), (ours, theirs)
+    excess = ours / theirs - 1
+    assert np.all(excess > 0), (ours, theirs)
+    assert np.all(excess < 0.16), (ours, theirs)
+    assert 0.05 < excess.mean() < 0.13, (ours, theirs)
 
 
 def test_c50_follows_barrons_revised_theory():
