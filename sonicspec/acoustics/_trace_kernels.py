@@ -65,8 +65,9 @@ def bounce(
 
     Detects each ray's segment in the receiver spheres, moves it to its hit, queues diffuse-rain
     shadow rays (``req_*``; deposited at once where a convex room needs none), picks the next
-    event from ``u`` and updates energy and direction. Returns ``(survivors, shadow rays
-    queued, rays escaped, surface interactions)``; survivors occupy rows ``[0, survivors)``.
+    event from ``u`` and updates energy and direction; a splitting ray may also spawn a child
+    (``c_*``). Returns ``(survivors, shadow rays queued, rays escaped, surface interactions,
+    children)``; survivors occupy rows ``[0, survivors)``, children rows ``[0, children)``.
     """
     n = face.shape[0]
     n_bands = energy.shape[1]
