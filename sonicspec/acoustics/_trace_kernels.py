@@ -25,10 +25,11 @@ _MISS_T = 1e36
 _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
+N_FLOAT_PARAMS, N_INT_PARAMS = 12, 9
 (F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
- F_CHILD_P, F_E0, F_R_MAX) = range(12)
+ F_CHILD_P, F_E0, F_R_MAX) = range(N_FLOAT_PARAMS)
 (I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT,
- I_AXIS) = range(9)
+ I_AXIS) = range(N_INT_PARAMS)
 # With more receivers than this, sphere tests only visit those whose coordinate along the
 # receivers' widest axis lies within reach of the segment (receivers sorted along it).
 CULL_ABOVE = 8

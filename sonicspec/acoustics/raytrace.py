@@ -453,37 +453,11 @@ def _trace_batch(
     the diffuse rain's shadow rays. Ray energies exclude air absorption (applied per bin
     afterwards) except in the termination test.
     """
-    n_bins = acc.energy.shape[1]
     limit = st.rain_receivers_per_hit
     stride = 1 if limit == 0 or rcv.n <= limit else -(-rcv.n // limit)
     n_slots = rcv.n if stride == 1 else -(-rcv.n // stride)
-    to_p2 = 1.0 / (4.0 * math.pi)  # p² per unit "energy per area": see the module docstring
-    fp = np.zeros(12)
-    fp[K.F_SPEED] = st.speed_of_sound_m_s
-    fp[K.F_BIN] = st.bin_s
-    fp[K.F_RADIUS] = st.receiver_radius_m
-    fp[K.F_GROWTH] = st.radius_growth
-    fp[K.F_MAX_LEN] = st.speed_of_sound_m_s * st.max_time_s
-    fp[K.F_E_STOP] = 10.0 ** (-st.energy_threshold_db / 10.0) / st.n_rays
-    fp[K.F_EPS] = scene.eps_m
-    fp[K.F_TO_P2] = to_p2
-    # ΔΩ/π per πR², converted to p², times the rain's subsampling weight.
-    fp[K.F_RAIN_SCALE] = stride * to_p2 / (math.pi * math.pi * st.receiver_radius_m**2)
-    ip = np.zeros(9, dtype=np.int64)
-    ip[K.I_N_BINS] = n_bins
-    ip[K.I_EXCLUDED] = st.specular_order_excluded
-    ip[K.I_RAIN] = int(st.diffuse_rain)
-    ip[K.I_DIRECTIONS] = int(st.directions)
-    ip[K.I_STRIDE] = stride
-    ip[K.I_AIR] = int(np.any(air > 0))
-    ip[K.I_CONVEX] = int(rcv.planes is not None)
+    fp, ip = _kernel_params(scene, rcv, st, air, acc.energy.shape[1], stride)
     split = st.splitting > 0
-    ip[K.I_SPLIT] = int(split)
-    fp[K.F_CHILD_P] = st.splitting
-    fp[K.F_E0] = 1.0 / st.n_rays
-    # No detection sphere is larger than this: the reach of the receiver culling.
-    fp[K.F_R_MAX] = (1.0 + 1e-9) * max(st.receiver_radius_m, float(rcv.cap.max())) + 1e-9
-    ip[K.I_AXIS] = rcv.axis
     plane_n, plane_off = rcv.planes if rcv.planes is not None else (_NO_PLANES, _NO_OFFSETS)
 
     # Separate streams: ray paths do not depend on how the rain is subsampled or walked.
@@ -536,6 +510,38 @@ def _trace_batch(
             n += n_kids
     _walk_rain(scene, rcv, walks, acc, st.directions)
     return escaped, interactions
+
+
+def _kernel_params(scene: AcousticScene, rcv: _Receivers, st: RayTraceSettings,
+                   air: np.ndarray, n_bins: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """The float and integer parameter vectors of :func:`._trace_kernels.bounce`."""
+    to_p2 = 1.0 / (4.0 * math.pi)  # p² per unit "energy per area": see the module docstring
+    fp = np.zeros(K.N_FLOAT_PARAMS)
+    fp[K.F_SPEED] = st.speed_of_sound_m_s
+    fp[K.F_BIN] = st.bin_s
+    fp[K.F_RADIUS] = st.receiver_radius_m
+    fp[K.F_GROWTH] = st.radius_growth
+    fp[K.F_MAX_LEN] = st.speed_of_sound_m_s * st.max_time_s
+    fp[K.F_E_STOP] = 10.0 ** (-st.energy_threshold_db / 10.0) / st.n_rays
+    fp[K.F_EPS] = scene.eps_m
+    fp[K.F_TO_P2] = to_p2
+    # ΔΩ/π per πR², converted to p², times the rain's subsampling weight.
+    fp[K.F_RAIN_SCALE] = stride * to_p2 / (math.pi * math.pi * st.receiver_radius_m**2)
+    fp[K.F_CHILD_P] = st.splitting
+    fp[K.F_E0] = 1.0 / st.n_rays
+    # No detection sphere is larger than this: the reach of the receiver culling.
+    fp[K.F_R_MAX] = (1.0 + 1e-9) * max(st.receiver_radius_m, float(rcv.cap.max())) + 1e-9
+    ip = np.zeros(K.N_INT_PARAMS, dtype=np.int64)
+    ip[K.I_N_BINS] = n_bins
+    ip[K.I_EXCLUDED] = st.specular_order_excluded
+    ip[K.I_RAIN] = int(st.diffuse_rain)
+    ip[K.I_DIRECTIONS] = int(st.directions)
+    ip[K.I_STRIDE] = stride
+    ip[K.I_AIR] = int(np.any(air > 0))
+    ip[K.I_CONVEX] = int(rcv.planes is not None)
+    ip[K.I_SPLIT] = int(st.splitting > 0)
+    ip[K.I_AXIS] = rcv.axis
+    return fp, ip
 
 
 @dataclass(frozen=True, eq=False)
