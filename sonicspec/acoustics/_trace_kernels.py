@@ -56,7 +56,7 @@ def bounce(
     pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
     face, tfar, u, rain_offset,
     planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
-    rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key,
+    rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key, rcv_clear, vol,
     air, fp, ip,
     hist, dirsum,
     req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
@@ -142,7 +142,14 @@ def bounce(
                 tb = int((path + 0.5 * (t_in + t_out)) / bin_len)  # >= 0: floor
                 if tb >= n_bins:
                     continue
-                weight = chord / (4.0 / 3.0 * math.pi * radius * radius * radius) * to_p2
+                if radius <= rcv_clear[k]:
+                    volume = 4.0 / 3.0 * math.pi * radius * radius * radius
+                else:  # the ball reaches surfaces: its free-air volume, tabulated per receiver
+                    x = radius / rcv_cap[k] * (vol.shape[1] - 1)
+                    jv = min(int(x), vol.shape[1] - 2)
+                    frac = x - jv
+                    volume = (1.0 - frac) * vol[k, jv] + frac * vol[k, jv + 1]
+                weight = chord / volume * to_p2
                 total = 0.0
                 for b in range(n_bands):
                     e = energy[i, b] * weight

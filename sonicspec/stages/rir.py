@@ -55,6 +55,7 @@ class RirSettings:
     histogram_bin_s: float
     speed_of_sound_m_s: float
     ray_splitting: float = 0.0
+    free_air_ball_m: float = 0.0
 
     @classmethod
     def from_spec(cls, acoustics: dict[str, Any], sample_rate_hz: int,
@@ -73,6 +74,7 @@ class RirSettings:
                    diffuse_rain=acoustics["detection"] == "diffuse_rain",
                    receiver_radius_m=acoustics["receiver_radius_m"],
                    ray_splitting=acoustics["ray_splitting"],
+                   free_air_ball_m=acoustics["free_air_ball_m"],
                    histogram_bin_s=acoustics["histogram_bin_s"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
@@ -129,6 +131,10 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         receiver_radius_m=settings.receiver_radius_m,
         specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
         diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
+        free_air_volume=settings.free_air_ball_m > 0,
+        max_receiver_radius_m=(max(settings.free_air_ball_m, settings.receiver_radius_m)
+                               if settings.free_air_ball_m > 0
+                               else RayTraceSettings.max_receiver_radius_m),
         # No renderer reads the late field's directions (the tails are diffuse): skip them.
         directions=False)
     traces = trace_rays(scene, mic, points, rng, ray_settings, air, n_threads=n_threads)
