@@ -27,11 +27,11 @@ What it does
   rays, 32 bands asked — the engine caps at 12, checked here —, SH orders 5/3; mono listener);
   (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, image sources to
   order 3, 16 kHz) and at the cheapest setting of a small sweep (rays × image-source order ×
-  specular splitting, several seeds) that stays, in every band and for every seed, near
-  sonicspec's converged answer (``--ref-rays`` rays with splitting): within the ISO 3382-1
-  just-noticeable differences (T30, EDT 5 %, C50 1 dB) if any setting does, else no farther
-  than RLR's defaults are from RLR's own 50 000-ray answer (the accuracy RLR's defaults are
-  used at).
+  specular splitting × free-air ball, several seeds) that stays, in every band and for every
+  seed, near sonicspec's converged answer (``--ref-rays`` rays with splitting): within the
+  ISO 3382-1 just-noticeable differences (T30, EDT 5 %, C50 1 dB) if any setting does, else
+  no farther than RLR's defaults are from RLR's own 50 000-ray answer (the accuracy RLR's
+  defaults are used at).
   sonicspec is timed per RIR with its Embree scene, planar regions and tracer tables built
   once per mesh and its compiled kernels loaded once per process (as the rir stage does);
   that cost is reported too. sonicspec also on 2 threads.
@@ -208,9 +208,11 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
 
 
 # --------------------------------------------------------------------------- sonicspec (child)
-def sonicspec_settings(rays: int, order: int, splitting: float = 0.0) -> RirSettings:
+def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: float = 0.0
+                       ) -> RirSettings:
     acoustics = AcousticsSpec().model_dump(mode="json")
-    acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting)
+    acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting,
+                     free_air_ball_m=ball)
     return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
 
 
@@ -241,8 +243,8 @@ def prepared_scene(tmp: Path, settings: RirSettings):
 
 
 def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int,
-                    seed: int, splitting: float) -> dict:
-    settings = sonicspec_settings(rays, order, splitting)
+                    seed: int, splitting: float, ball: float) -> dict:
+    settings = sonicspec_settings(rays, order, splitting, ball)
     scene, regions, setup_wall, setup_cpu = prepared_scene(tmp, settings)
     walls, cpus, rir = [], [], None
     for _ in range(repeats):
@@ -253,6 +255,7 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
         rir = out if rir is None else rir
     np.save(tmp / f"rir_sonicspec_{rays}_{order}_{threads}.npy", rir)
     return {"engine": "sonicspec", "rays": rays, "order": order, "splitting": splitting,
+            "ball": ball,
             "order_done": order_done,
             "threads": threads,
             "wall_s": walls, "cpu_s": cpus, "setup_wall_s": setup_wall,
@@ -272,9 +275,9 @@ def deviation(fig: dict, ref: dict) -> dict:
 
 
 def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
-                candidates: list[tuple[int, int, float]]) -> dict:
+                candidates: list[tuple[int, int, float, float]]) -> dict:
     """sonicspec's converged answer (specular splitting, its lowest-variance estimator), then
-    every candidate (rays, order, splitting) over seeds."""
+    every candidate (rays, order, splitting, free-air ball) over seeds."""
     ref_settings = sonicspec_settings(ref_rays, 3, REF_SPLITTING)
     scene, regions, _, _ = prepared_scene(tmp, ref_settings)
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
@@ -282,8 +285,8 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
     ref = figures(sonicspec_rir(scene, regions, ref_settings, 0, threads)[0], SAMPLE_RATE_HZ)
     ref_wall = time.perf_counter() - t0
     rows = []
-    for rays, order, splitting in candidates:
-        settings = sonicspec_settings(rays, order, splitting)
+    for rays, order, splitting, ball in candidates:
+        settings = sonicspec_settings(rays, order, splitting, ball)
         cpus, devs, figs = [], [], []
         for seed in seeds:
             c0 = time.process_time()
@@ -292,7 +295,8 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
             figs.append(figures(rir, SAMPLE_RATE_HZ))
             devs.append(deviation(figs[-1], ref))
         t30 = np.array([f["t30_s"] for f in figs], float)
-        rows.append({"rays": rays, "order": order, "splitting": splitting, "cpu_s": cpus,
+        rows.append({"rays": rays, "order": order, "splitting": splitting, "ball": ball,
+                     "cpu_s": cpus,
                      "worst": {k: max(d[k] for d in devs) for k in JND},
                      "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
     return {"ref_rays": ref_rays, "ref_wall_s": ref_wall, "ref_threads": threads, "ref": ref,
@@ -402,7 +406,8 @@ def main() -> int:
         if kind == "rlr":
             result = child_rlr(tmp, rest[0], int(rest[1]))
         elif kind == "sonicspec":
-            result = child_sonicspec(tmp, *(int(x) for x in rest[:5]), float(rest[5]))
+            result = child_sonicspec(tmp, *(int(x) for x in rest[:5]), float(rest[5]),
+                                     float(rest[6]))
         elif kind == "diagnose":
             result = child_diagnose(tmp)
         else:
@@ -419,11 +424,12 @@ def main() -> int:
 
     ref_rays = 20_000 if args.quick and args.ref_rays == 50_000 else args.ref_rays
     seeds = [1, 2] if args.quick else [1, 2, 3]
-    candidates = [(1000, 1, 0.0), (5000, 1, 0.0), (20_000, 3, 0.0),
-                  (1000, 1, 1.0), (2000, 1, 1.0), (5000, 1, 1.0), (5000, 2, 1.0)]
+    candidates = [(1000, 1, 0.0, 0.0), (5000, 1, 0.0, 0.0), (20_000, 3, 0.0, 0.0),
+                  (1000, 1, 1.0, 0.0), (2000, 1, 1.0, 0.0), (5000, 1, 1.0, 0.0),
+                  (5000, 2, 1.0, 0.0), (2000, 1, 1.0, 2.5), (5000, 2, 1.0, 2.5)]
     if not args.quick:
-        candidates[2:2] = [(2000, 1, 0.0), (10_000, 1, 0.0), (20_000, 1, 0.0)]
-        candidates += [(10_000, 2, 1.0)]
+        candidates[2:2] = [(2000, 1, 0.0, 0.0), (10_000, 1, 0.0, 0.0), (20_000, 1, 0.0, 0.0)]
+        candidates += [(10_000, 2, 1.0, 0.0), (5000, 1, 1.0, 2.5), (10_000, 2, 1.0, 2.5)]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         t0 = time.perf_counter()
@@ -462,16 +468,18 @@ def main() -> int:
         print("sonicspec sweep: done", flush=True)
         cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
         results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"],
-                            "splitting": cheap["splitting"], "rule": rule}
+                            "splitting": cheap["splitting"], "ball": cheap["ball"],
+                            "rule": rule}
         default = AcousticsSpec()
-        for label, rays, order, splitting in (
-                ("default", default.rays, default.image_source_order, default.ray_splitting),
-                ("cheap", cheap["rays"], cheap["order"], cheap["splitting"])):
+        for label, rays, order, splitting, ball in (
+                ("default", default.rays, default.image_source_order, default.ray_splitting,
+                 default.free_air_ball_m),
+                ("cheap", cheap["rays"], cheap["order"], cheap["splitting"], cheap["ball"])):
             for threads, cores in ((1, "0"), (2, "0,1")):
                 reps = 1 if rays >= 20_000 else 3
                 results[f"sonicspec_{label}_{threads}"] = run_child(
                     tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
-                    str(threads), str(reps), "1", str(splitting))
+                    str(threads), str(reps), "1", str(splitting), str(ball))
             print(f"sonicspec {label}: done", flush=True)
         if not args.quick:
             results["diagnosis"] = run_child(tmp, "0,1", 2, "--child", "diagnose")
@@ -485,7 +493,7 @@ def main() -> int:
 
 def cheap_label(cheap: dict) -> str:
     return (f"{cheap['rays']:,} rays, order {cheap['order']}, splitting "
-            f"{cheap['splitting']:g}")
+            f"{cheap['splitting']:g}, free-air ball {cheap['ball']:g} m")
 
 
 def report(results: dict) -> None:
@@ -506,13 +514,13 @@ def report(results: dict) -> None:
           f"sonicspec at {sweep['ref_rays']:,} rays (order 3, splitting {REF_SPLITTING:g}). JND: "
           "T30 and EDT within 5 %, C50 "
           "within 1 dB; RLR: no worse than RLR defaults against its own 50 000-ray run\n")
-    print("| rays | image-source order | splitting | CPU per RIR | T30 | EDT | C50 | T30 spread "
-          "over seeds | JND | RLR |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| rays | image-source order | splitting | free-air ball (m) | CPU per RIR | T30 | EDT "
+          "| C50 | T30 spread over seeds | JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sweep["candidates"]:
         w = r["worst"]
         marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
-        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | "
+        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
               f"{np.median(r['cpu_s']):.2f} s | "
               f"{100 * w['t30']:.1f} % | {100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | "
               f"{100 * r['t30_spread']:.1f} % | {marks[0]} | {marks[1]} |")
