@@ -51,6 +51,29 @@ def _lambert(sx, sy, sz, u1, u2):  # pragma: no cover - compiled
             -x * (s * sx) - y * sy + z * sz)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_bands(hist, k, tb, row, scale):  # pragma: no cover - compiled
+    """Adds ``row · scale`` to receiver ``k``'s bin ``tb``; returns the band sum added."""
+    total = 0.0
+    for b in range(row.shape[0]):
+        e = row[b] * scale
+        hist[k, tb, b] += e
+        total += e
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_directions(dirsum, k, tb, total, ux, uy, uz, departure):  # pragma: no cover
+    """Adds the energy-weighted arrival (against travel direction ``u``) and departure
+    direction sums of one contribution of band-summed energy ``total``."""
+    dirsum[k, tb, 0] -= ux * total
+    dirsum[k, tb, 1] -= uy * total
+    dirsum[k, tb, 2] -= uz * total
+    dirsum[k, tb, 3] += departure[0] * total
+    dirsum[k, tb, 4] += departure[1] * total
+    dirsum[k, tb, 5] += departure[2] * total
+
+
 @njit(cache=True, nogil=True)
 def bounce(
     pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
@@ -149,19 +172,9 @@ def bounce(
                     jv = min(int(x), vol.shape[1] - 2)
                     frac = x - jv
                     volume = (1.0 - frac) * vol[k, jv] + frac * vol[k, jv + 1]
-                weight = chord / volume * to_p2
-                total = 0.0
-                for b in range(n_bands):
-                    e = energy[i, b] * weight
-                    hist[k, tb, b] += e
-                    total += e
+                total = _add_bands(hist, k, tb, energy[i], chord / volume * to_p2)
                 if directions == 1:
-                    dirsum[k, tb, 0] -= dx * total
-                    dirsum[k, tb, 1] -= dy * total
-                    dirsum[k, tb, 2] -= dz * total
-                    dirsum[k, tb, 3] += departure[i, 0] * total
-                    dirsum[k, tb, 4] += departure[i, 1] * total
-                    dirsum[k, tb, 5] += departure[i, 2] * total
+                    _add_directions(dirsum, k, tb, total, dx, dy, dz, departure[i])
         if miss:
             escaped += 1
             continue
@@ -207,18 +220,9 @@ def bounce(
                 geom = dot / d * solid * rain_scale
                 ux, uy, uz = vx / d, vy / d, vz / d
                 if free_start and rcv_inside[k]:  # nothing can block it: deposit now
-                    total = 0.0
-                    for b in range(n_bands):
-                        e = scratch[b] * geom
-                        hist[k, tb, b] += e
-                        total += e
+                    total = _add_bands(hist, k, tb, scratch, geom)
                     if directions == 1:
-                        dirsum[k, tb, 0] -= ux * total
-                        dirsum[k, tb, 1] -= uy * total
-                        dirsum[k, tb, 2] -= uz * total
-                        dirsum[k, tb, 3] += departure[i, 0] * total
-                        dirsum[k, tb, 4] += departure[i, 1] * total
-                        dirsum[k, tb, 5] += departure[i, 2] * total
+                        _add_directions(dirsum, k, tb, total, ux, uy, uz, departure[i])
                     continue
                 req_origin[n_req, 0], req_origin[n_req, 1], req_origin[n_req, 2] = qx, qy, qz
                 req_dir[n_req, 0], req_dir[n_req, 1], req_dir[n_req, 2] = ux, uy, uz
@@ -314,16 +318,15 @@ def deposit(req_k, req_bin, req_dir, req_energy, req_dep, blocked, trans, direct
         if blocked[m]:
             continue
         k, tb = req_k[m], req_bin[m]
-        total = 0.0
-        for b in range(n_bands):
-            e = req_energy[m, b] * trans[m, b] if use_trans else req_energy[m, b]
-            hist[k, tb, b] += e
-            total += e
+        if use_trans:
+            total = 0.0
+            for b in range(n_bands):
+                e = req_energy[m, b] * trans[m, b]
+                hist[k, tb, b] += e
+                total += e
+        else:
+            total = _add_bands(hist, k, tb, req_energy[m], 1.0)
         if directions:
-            dirsum[k, tb, 0] -= req_dir[m, 0] * total
-            dirsum[k, tb, 1] -= req_dir[m, 1] * total
-            dirsum[k, tb, 2] -= req_dir[m, 2] * total
-            dirsum[k, tb, 3] += req_dep[m, 0] * total
-            dirsum[k, tb, 4] += req_dep[m, 1] * total
-            dirsum[k, tb, 5] += req_dep[m, 2] * total
+            _add_directions(dirsum, k, tb, total, req_dir[m, 0], req_dir[m, 1], req_dir[m, 2],
+                            req_dep[m])
 
