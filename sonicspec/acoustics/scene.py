@@ -177,11 +177,9 @@ class AcousticScene:
         n = len(origins)
         if n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
-        out = self._embree.run(
-            self._to_f32(origins), np.ascontiguousarray(directions, dtype=np.float32), output=1
-        )
-        face = out["primID"].astype(np.int64)
-        tfar = out["tfar"].astype(np.float64)
+        face, tfar = self.first_hits(origins, directions)
+        face = face.astype(np.int64)
+        tfar = tfar.astype(np.float64)
         miss = (face < 0) | (tfar >= _EMBREE_MISS)
         any_miss = bool(miss.any())
         if any_miss:  # (np.compress: much faster than boolean indexing of (n, 3) arrays)
