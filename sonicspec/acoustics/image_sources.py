@@ -379,13 +379,8 @@ def image_sources(
             count = max_candidates + 1  # decided without building the images
         for r0 in range(0, len(last_pos) if count <= max_candidates else 0, rows):
             sl = slice(r0, r0 + rows)
-            dist = last_pos[sl] @ normals.T - plane_d[None, :]  # signed distances
-            ok = np.abs(dist) > tol
-            if order > 1:
-                last = planes[sl, -1]
-                ok &= np.arange(n_regions)[None, :] != last[:, None]
-                if reach is not None:
-                    ok &= reach[side[sl], last]
+            dist, ok = _candidates(last_pos[sl], planes[sl, -1] if order > 1 else None,
+                                   side[sl], reach, normals, plane_d, tol)
             par, pln = np.nonzero(ok)
             d = dist[par, pln]
             pos = last_pos[sl][par] - 2.0 * d[:, None] * normals[pln]
@@ -440,6 +435,27 @@ def image_sources(
     return ImageSourceResult(arrivals=arrivals, max_order=completed)
 
 
+def _candidates(
+    last_pos: np.ndarray,
+    last_plane: np.ndarray | None,
+    side: np.ndarray,
+    reach: np.ndarray | None,
+    normals: np.ndarray,
+    plane_d: np.ndarray,
+    tol: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distances ``(M, P)`` of the parent images to every region plane, and which
+    (parent, region) pairs make candidates: off the plane, not the parent's own last region,
+    and reachable from its side (the reach table)."""
+    dist = last_pos @ normals.T - plane_d[None, :]
+    ok = np.abs(dist) > tol
+    if last_plane is not None:
+        ok &= np.arange(len(plane_d))[None, :] != last_plane[:, None]
+        if reach is not None:
+            ok &= reach[side, last_plane]
+    return dist, ok
+
+
 def _provably_too_many(
     last_pos: np.ndarray,
     last_plane: np.ndarray | None,
@@ -474,12 +490,8 @@ def _provably_too_many(
     count = 0
     for r0 in range(0, len(last_pos), rows):
         sl = slice(r0, r0 + rows)
-        dist = last_pos[sl] @ normals.T - plane_d[None, :]
-        ok = np.abs(dist) > tol
-        if last_plane is not None:
-            ok &= np.arange(n_regions)[None, :] != last_plane[sl, None]
-            if reach is not None:
-                ok &= reach[side[sl], last_plane[sl]]
+        dist, ok = _candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
+                               side[sl], reach, normals, plane_d, tol)
         if nearest is not None and np.any(
                 ok & (nearest[sl, None] + 2.0 * np.abs(dist) > max_path_length_m)):
             return False
