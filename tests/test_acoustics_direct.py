@@ -8,7 +8,7 @@ import pytest
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
-from sonicspec.testing.rooms import extruded_room, shoebox, uniform_scene
+from sonicspec.testing.rooms import extruded_room, partitioned_shoebox, shoebox, uniform_scene
 
 FS_HZ = 16_000
 C = 343.0
@@ -51,11 +51,7 @@ def test_air_absorption_is_half_the_energy_exponent_in_amplitude():
 
 def room_with_partition(tau):
     """6 x 4 x 3 m shoebox split at x = 3 by a single-sheet partition of transmission tau."""
-    verts, faces = shoebox(6, 4, 3)
-    wall_v = np.array([[3, 0, 0], [3, 4, 0], [3, 4, 3], [3, 0, 3]], dtype=float)
-    wall_f = np.array([[0, 1, 2], [0, 2, 3]]) + len(verts)
-    verts = np.vstack([verts, wall_v])
-    faces = np.vstack([faces, wall_f])
+    verts, faces = partitioned_shoebox(6, 4, 3, 3)
     n_bands = 3
     f = len(faces)
     tr = np.zeros((f, n_bands))

@@ -93,28 +93,30 @@ SRC = np.array([2.1, 3.3, 1.4])
 RCV = np.array([[7.2, 4.9, 1.6]])
 
 
-def test_t30_within_10_percent_of_eyring_with_air_absorption():
+@pytest.fixture(scope="module")
+def shoebox_t30():
+    """T30 per band of the 10 × 7 × 3 m room (α 0.2, s 0.5, ISO air), 2,000 rays: traced once
+    for the Eyring and the Kuttruff test."""
     verts, faces = shoebox(10.0, 7.0, 3.0)
     scene = uniform_scene(verts, faces, alpha=0.2, s=0.5)
     air = iso9613_energy_per_m(BANDS_HZ)
     settings = RayTraceSettings(n_rays=2000, max_time_s=1.2)
     energy, res = total_histogram(scene, SRC, RCV, np.random.default_rng(7), settings, air)
-    t30 = schroeder_t30(energy, res.histogram.bin_s)
+    return schroeder_t30(energy, res.histogram.bin_s), res, air
+
+
+def test_t30_within_10_percent_of_eyring_with_air_absorption(shoebox_t30):
+    t30, res, air = shoebox_t30
     eyring = np.array([eyring_t60(210.0, 242.0, 0.2, m) for m in air])
     assert np.all(np.abs(t30 / eyring - 1) < 0.10), (t30, eyring)
     assert res.escaped_ray_fraction == 0.0
 
 
-def test_t30_follows_kuttruffs_path_length_correction():
+def test_t30_follows_kuttruffs_path_length_correction(shoebox_t30):
     """Eyring assumes every free path is 4V/S long; their spread (γ² ≈ 0.40 in this room,
     sampled without the tracer) lengthens the decay by 1/(1 + γ²/2 · ln(1 − α)) ≈ +4.6 %.
     The tracer's T30 follows the corrected formula within 2 % in every band."""
-    verts, faces = shoebox(10.0, 7.0, 3.0)
-    scene = uniform_scene(verts, faces, alpha=0.2, s=0.5)
-    air = iso9613_energy_per_m(BANDS_HZ)
-    settings = RayTraceSettings(n_rays=2000, max_time_s=1.2)
-    energy, res = total_histogram(scene, SRC, RCV, np.random.default_rng(7), settings, air)
-    t30 = schroeder_t30(energy, res.histogram.bin_s)
+    t30, _, air = shoebox_t30
     paths = shoebox_free_paths((10.0, 7.0, 3.0))
     kuttruff = kuttruff_t60(210.0, 242.0, 0.2, paths.var() / paths.mean() ** 2, air)
     assert np.all(np.abs(t30 / kuttruff - 1) < 0.02), (t30, kuttruff)
@@ -304,10 +306,7 @@ def test_energy_is_counted_once_whatever_the_image_source_order():
 
 
 def test_transmission_carries_energy_into_a_closed_neighbouring_room():
-    verts, faces = shoebox(8.0, 4.0, 3.0)
-    wall_v = np.array([[4, 0, 0], [4, 4, 0], [4, 4, 3], [4, 0, 3]], dtype=float)
-    verts = np.vstack([verts, wall_v])
-    faces = np.vstack([faces, np.array([[0, 1, 2], [0, 2, 3]]) + 8])
+    verts, faces = rooms.partitioned_shoebox(8.0, 4.0, 3.0, 4.0)
     src, rcv = np.array([1.5, 2.0, 1.5]), np.array([[6.5, 2.2, 1.4]])
     settings = RayTraceSettings(n_rays=2000, max_time_s=0.5, specular_order_excluded=0)
     level = []
@@ -493,14 +492,7 @@ def test_specular_splitting_is_unbiased():
     the energy before and after 50 ms, averaged over 4 seeds, agrees between one continuing
     ray per hit and specular splitting at two rates (the seed-to-seed spread of each mean is
     1–2 %); a mistake in the children's weights shows as a bias of ~10 % or more."""
-    verts, faces = shoebox(10.0, 7.0, 2.7)
-    tri = verts[faces]
-    normal_z = np.abs(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]) > 0
-    ceiling = normal_z & (tri[:, 0, 2] > 1.0)
-    alpha = np.where(ceiling, 0.6, np.where(normal_z, 0.3, 0.05))[:, None].repeat(2, axis=1)
-    tau = np.zeros((len(faces), 2))
-    tau[:, 1] = 0.02
-    scene = AcousticScene(verts, faces, alpha, np.full((len(faces), 2), 0.1), tau)
+    scene = rooms.flutter_scene(tau_high_band=0.02)
     src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     windows = {}
     for rate, rays in ((0.0, 20_000), (0.3, 8_000), (1.0, 4_000)):

@@ -7,7 +7,14 @@ import pytest
 
 from sonicspec.acoustics import raytrace
 from sonicspec.acoustics.raytrace import RayTraceSettings, receiver_clearance_m, trace_rays
-from sonicspec.testing.rooms import extruded_room, shoebox, uniform_scene
+from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.testing.rooms import (
+    extruded_room,
+    flutter_scene,
+    partitioned_shoebox,
+    shoebox,
+    uniform_scene,
+)
 
 L_ROOM = ([(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)],
           [(0, 1, 2), (0, 2, 3), (0, 3, 5), (3, 4, 5)])
@@ -16,6 +23,13 @@ L_ROOM = ([(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)],
 def histograms(results):
     return [(r.histogram.energy, r.histogram.direction_sum, r.histogram.departure_sum)
             for r in results]
+
+
+def assert_same_histograms(results_a, results_b, rtol: float = 1e-12) -> None:
+    """Energies and both direction sums of every receiver agree (up to summation order)."""
+    for a, b in zip(histograms(results_a), histograms(results_b), strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_allclose(x, y, rtol=rtol, atol=1e-30)
 
 
 def test_receiver_spheres_together_equal_one_by_one():
@@ -36,8 +50,7 @@ def test_receiver_spheres_together_equal_one_by_one():
     for i in range(len(rcvs)):
         (alone,) = trace_rays(scene, src, rcvs[i:i + 1], np.random.default_rng(2), settings)
         assert alone.histogram.energy.sum() > 0
-        for a, b in zip(histograms([alone])[0], histograms([together[i]])[0], strict=True):
-            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-30)
+        assert_same_histograms([alone], [together[i]], rtol=1e-9)
 
 
 @pytest.mark.parametrize("flip", [False, True])
@@ -64,9 +77,7 @@ def test_convex_shortcut_gives_what_the_shadow_rays_give(monkeypatch):
     fast = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
     monkeypatch.setattr(raytrace, "_CONVEX_MAX_FACES", 0)
     slow = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
-    for a, b in zip(histograms(fast), histograms(slow), strict=True):
-        for x, y in zip(a, b, strict=True):
-            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-30)
+    assert_same_histograms(fast, slow)
 
 
 @pytest.mark.parametrize("room", ["shoebox", "L"])
@@ -105,14 +116,11 @@ def test_roulette_through_transmitting_walls_is_unbiased():
     1/max τ. The rain that reaches the closed neighbouring room through the partition (the
     energy minus a run in which no blocked shadow ray is walked) matches walking every one of
     them. Ray paths use their own random stream, so all runs trace the very same rays."""
-    verts, faces = shoebox(8.0, 4.0, 3.0)
-    wall = np.array([[4, 0, 0], [4, 4, 0], [4, 4, 3], [4, 0, 3]], dtype=float)
-    verts = np.vstack([verts, wall])
-    faces = np.vstack([faces, np.array([[0, 1, 2], [0, 2, 3]]) + 8])
+    verts, faces = partitioned_shoebox(8.0, 4.0, 3.0, 4.0)
     tau = np.zeros((len(faces), 2))
     tau[-2:] = [0.05, 0.2]
-    scene = uniform_scene(verts, faces, alpha=0.2, s=0.5, n_bands=2)
-    scene = type(scene)(scene.vertices, scene.faces, scene.absorption, scene.scattering, tau)
+    scene = AcousticScene(verts, faces, np.full((len(faces), 2), 0.2),
+                          np.full((len(faces), 2), 0.5), tau)
     src, rcv = np.array([1.5, 2.0, 1.5]), np.array([[6.5, 2.2, 1.4]])
     settings = RayTraceSettings(n_rays=3000, max_time_s=0.4, specular_order_excluded=0)
     energy = {}
@@ -138,9 +146,7 @@ def test_walking_blocked_shadow_rays_in_batches_gives_the_same_sums(monkeypatch)
     monkeypatch.setattr(raytrace, "_WALK_BATCH", 1)
     stepwise = trace_rays(scene, src, rcvs, np.random.default_rng(6), settings)
     assert batched[1].histogram.energy.sum() > 0  # round the corner from the source
-    for a, b in zip(histograms(batched), histograms(stepwise), strict=True):
-        for x, y in zip(a, b, strict=True):
-            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-30)
+    assert_same_histograms(batched, stepwise)
 
 
 def test_free_air_volume_of_a_ball_cut_by_walls():
@@ -170,13 +176,7 @@ def test_free_air_ball_measures_the_same_late_field():
     """A flutter room (absorbing ceiling, hard walls, scattering 0.1): the late-detection ball
     grown to 2.5 m through floor and ceiling, with its free-air volume, gives the energy of the
     clearance-capped sphere (4 seeds each; the seed-to-seed spread of each mean is 1–2 %)."""
-    verts, faces = shoebox(10.0, 7.0, 2.7)
-    tri = verts[faces]
-    normal_z = np.abs(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]) > 0
-    ceiling = normal_z & (tri[:, 0, 2] > 1.0)
-    alpha = np.where(ceiling, 0.6, np.where(normal_z, 0.3, 0.05))[:, None].repeat(2, axis=1)
-    scene = type(uniform_scene(verts, faces, n_bands=2))(
-        verts, faces, alpha, np.full((len(faces), 2), 0.1), np.zeros((len(faces), 2)))
+    scene = flutter_scene()
     src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     windows = []
     for ball in (False, True):

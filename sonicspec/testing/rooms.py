@@ -39,3 +39,27 @@ def uniform_scene(verts: np.ndarray, faces: np.ndarray, alpha: float = 0.2, s: f
     f = len(faces)
     return AcousticScene(verts, faces, np.full((f, n_bands), alpha), np.full((f, n_bands), s),
                          np.full((f, n_bands), tau))
+
+
+def flutter_scene(tau_high_band: float = 0.0) -> AcousticScene:
+    """A 10 × 7 × 2.7 m room whose late field is not diffuse, in two bands: absorbing ceiling
+    (α 0.6), floor α 0.3, hard walls α 0.05, scattering 0.1 everywhere, so near-horizontal
+    rays carry the tail; transmission ``tau_high_band`` in the second band."""
+    verts, faces = shoebox(10.0, 7.0, 2.7)
+    tri = verts[faces]
+    horizontal = np.abs(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]) > 0
+    ceiling = horizontal & (tri[:, 0, 2] > 1.0)
+    alpha = np.where(ceiling, 0.6, np.where(horizontal, 0.3, 0.05))[:, None].repeat(2, axis=1)
+    tau = np.zeros((len(faces), 2))
+    tau[:, 1] = tau_high_band
+    return AcousticScene(verts, faces, alpha, np.full((len(faces), 2), 0.1), tau)
+
+
+def partitioned_shoebox(lx: float, ly: float, lz: float, x_m: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """A shoebox split at ``x = x_m`` by a single-sheet, full-height partition whose two
+    triangles are the last two faces (so tests can give it its own coefficients)."""
+    verts, faces = shoebox(lx, ly, lz)
+    wall = np.array([[x_m, 0, 0], [x_m, ly, 0], [x_m, ly, lz], [x_m, 0, lz]], dtype=float)
+    return (np.vstack([verts, wall]),
+            np.vstack([faces, np.array([[0, 1, 2], [0, 2, 3]]) + len(verts)]))
