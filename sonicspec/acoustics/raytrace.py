@@ -695,7 +695,7 @@ def _free_air_volumes(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarr
     for k, (x, c) in enumerate(zip(receivers, cap, strict=True)):
         radii = np.linspace(0.0, c, n_radii)
         pts = x + (radii[1:, None, None] * dirs[None, :, :]).reshape(-1, 3)
-        face, _ = scene.intersect(pts, np.broadcast_to(probe, pts.shape))
+        face, _ = scene.first_hits(pts, np.broadcast_to(probe, pts.shape))  # faces only
         air = (face >= 0) & (np.take(scene.normals, np.maximum(face, 0), axis=0) @ probe < 0)
         share = np.concatenate([[1.0], air.reshape(n_radii - 1, n_directions).mean(axis=1)])
         shell = 4.0 * math.pi * radii**2 * share
