@@ -24,6 +24,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from sonicspec.acoustics import _image_source_kernels as KI
 from sonicspec.acoustics.arrivals import KIND_SPECULAR, Arrivals
 from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
 from sonicspec.acoustics.scene import AcousticScene
@@ -222,6 +223,23 @@ def _reach_tables(scene: AcousticScene, regions: PlanarRegions, tol: float) -> n
     return reach
 
 
+def _region_boxes(scene: AcousticScene, regions: PlanarRegions) -> np.ndarray:
+    """``(P, 2, 3)``: each region's bounding box (lower, upper corner), widened by more than a
+    point the barycentric test calls inside can lie outside it (the region's triangles may lie
+    ``distance_tol_m`` off its plane, and the test allows ``1e-9`` in barycentric units).
+    Built once per regions (``regions.memo``)."""
+    key = "region_boxes"
+    if key not in regions.memo:
+        tri = scene.vertices[scene.faces[regions.region_faces]]  # (F, 3, 3), by region
+        starts = regions.region_start[:-1]
+        lower = np.minimum.reduceat(tri.min(axis=1), starts, axis=0)
+        upper = np.maximum.reduceat(tri.max(axis=1), starts, axis=0)
+        margin = (2.0 * regions.distance_tol_m + 1e-6 * max(1.0, float(np.abs(tri).max()))
+                  + 1e-6 * (upper - lower).max(axis=1, keepdims=True))
+        regions.memo[key] = np.ascontiguousarray(np.stack([lower - margin, upper + margin], 1))
+    return regions.memo[key]
+
+
 # Regions with more triangles than this are tested with an Embree probe ray, not barycentrics.
 _MAX_TRIANGLES_FOR_BARYCENTRIC = 64
 
@@ -255,28 +273,11 @@ def _inside_regions(
         hit = (face >= 0) & (dist < 2.0 * probe)
         inside[idx] = hit & (regions.face_region[np.maximum(face, 0)] == region[idx])
     small = np.flatnonzero(~big)
-    if small.size == 0:
-        return inside
-    order = small[np.argsort(region[small], kind="stable")]
-    uniq, first = np.unique(region[order], return_index=True)
-    bounds = np.append(first, len(order))
-    for k in range(len(uniq)):
-        idx = order[bounds[k] : bounds[k + 1]]
-        p = uniq[k]
-        fcs = regions.region_faces[regions.region_start[p] : regions.region_start[p + 1]]
-        tri = scene.vertices[scene.faces[fcs]]
-        a = tri[:, 0]
-        v0, v1 = tri[:, 1] - a, tri[:, 2] - a
-        d00 = np.einsum("ij,ij->i", v0, v0)
-        d01 = np.einsum("ij,ij->i", v0, v1)
-        d11 = np.einsum("ij,ij->i", v1, v1)
-        den = d00 * d11 - d01 * d01
-        v2 = points[idx][:, None, :] - a[None]
-        d20 = np.einsum("mtj,tj->mt", v2, v0)
-        d21 = np.einsum("mtj,tj->mt", v2, v1)
-        v = (d11 * d20 - d01 * d21) / den
-        w = (d00 * d21 - d01 * d20) / den
-        inside[idx] = np.any((v >= -tol) & (w >= -tol) & (v + w <= 1 + tol), axis=1)
+    if small.size:
+        KI.inside_small_regions(np.ascontiguousarray(points, dtype=np.float64),
+                                region.astype(np.int64), small, _region_boxes(scene, regions),
+                                regions.region_start, regions.region_faces, scene.faces,
+                                scene.vertices, tol, inside)
     return inside
 
 
