@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sonicspec.acoustics import _trace_kernels as K
 from sonicspec.acoustics import raytrace
 from sonicspec.acoustics.raytrace import RayTraceSettings, receiver_clearance_m, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
@@ -149,27 +150,67 @@ def test_walking_blocked_shadow_rays_in_batches_gives_the_same_sums(monkeypatch)
     assert_same_histograms(batched, stepwise)
 
 
-def test_free_air_volume_of_a_ball_cut_by_walls():
-    """The tabulated free-air volume of a receiver's ball against the closed form: a ball of
+def test_visible_air_volume_of_a_ball_cut_by_walls():
+    """The tabulated visible-air volume of a receiver's ball against the closed form: a ball of
     radius R whose centre is h < R from one wall loses a cap of height R − h; near a corner it
     loses two (overlapping only beyond the radii tested); within the clearance, the whole ball."""
     scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), n_bands=1)
     receivers = np.array([[3.0, 2.5, 1.0], [0.6, 0.8, 1.5]])
     cap = np.array([2.0, 0.75])
-    volume = raytrace._free_air_volumes(scene, receivers, cap)
+    _, volume = raytrace._visible_air(scene, receivers, cap)
     radii = np.linspace(0.0, 1.0, volume.shape[1])[None, :] * cap[:, None]
-
-    def ball_minus_caps(r, depths):
-        v = 4.0 / 3.0 * np.pi * r**3
-        for h in depths:
-            q = np.clip(r - h, 0.0, None)
-            v = v - np.pi * q**2 * (3 * r - q) / 3.0
-        return v
-
     expected = np.stack([ball_minus_caps(radii[0], [1.0]), ball_minus_caps(radii[1], [0.6])])
     big = radii > 0.3  # (the tracer uses the exact ball below the clearance)
     np.testing.assert_allclose(volume[big], expected[big], rtol=0.01)
     assert volume[0, -1] < 0.95 * 4.0 / 3.0 * np.pi * 2.0**3  # the floor cut something off
+
+
+def ball_minus_caps(r, depths):
+    """Volume of a ball of radius ``r`` cut by planes at ``depths`` from its centre."""
+    v = 4.0 / 3.0 * np.pi * r**3
+    for h in depths:
+        q = np.clip(r - h, 0.0, None)
+        v = v - np.pi * q**2 * (3 * r - q) / 3.0
+    return v
+
+
+def test_visible_air_stops_at_a_thin_partition():
+    """Air behind a single-sheet partition is not the receiver's: the ball 0.5 m from it
+    loses the cap beyond it, though there is air on the other side."""
+    scene = uniform_scene(*partitioned_shoebox(8.0, 5.0, 3.0, 4.0), n_bands=1)
+    receivers = np.array([[3.5, 2.5, 1.5]])
+    _, volume = raytrace._visible_air(scene, receivers, np.array([1.2]))
+    np.testing.assert_allclose(volume[0, -1], ball_minus_caps(1.2, [0.5]), rtol=0.01)
+
+
+def test_cube_cells_are_indexed_as_the_kernel_looks_them_up():
+    """Every cell's centre direction maps back to its own index, and the cells tile the
+    sphere (solid angles sum to 4π)."""
+    dirs, solid = raytrace._cube_cells(5)
+    found = [K.cube_cell(*d, 5) for d in dirs]
+    np.testing.assert_array_equal(found, np.arange(len(dirs)))
+    assert solid.sum() == pytest.approx(4.0 * np.pi, rel=1e-12)
+
+
+def test_free_air_ball_does_not_count_the_room_behind_a_partition():
+    """Two rooms behind a partition that transmits nothing, the source in the left one. A
+    receiver in the right room 0.5 m from the partition, with a ball that reaches 2 m into
+    the source's room, gets nothing but the map's slivers (cells whose centre ray meets the
+    partition a little farther than their edge does): under 0.1 % of what its mirror image
+    0.5 m on the source's side gets — which the same ball measures as the small sphere does."""
+    verts, faces = partitioned_shoebox(8.0, 5.0, 3.0, 4.0)
+    scene = uniform_scene(verts, faces, alpha=0.1, s=0.3, n_bands=1)
+    src, rcvs = np.array([2.0, 2.5, 1.5]), np.array([[4.5, 2.5, 1.5], [3.5, 2.5, 1.5]])
+    totals = []
+    for ball in (False, True):
+        settings = RayTraceSettings(n_rays=2000, max_time_s=0.3, specular_order_excluded=0,
+                                    free_air_volume=ball,
+                                    max_receiver_radius_m=2.5 if ball else 1.0)
+        res = trace_rays(scene, src, rcvs, np.random.default_rng(3), settings)
+        totals.append([r.histogram.energy.sum() for r in res])
+    (_, near_small), (behind, near_ball) = totals
+    assert behind < 1e-3 * near_ball
+    assert near_ball == pytest.approx(near_small, rel=0.03)
 
 
 def test_free_air_ball_measures_the_same_late_field():

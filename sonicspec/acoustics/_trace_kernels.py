@@ -25,11 +25,11 @@ _MISS_T = 1e36
 _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
-N_FLOAT_PARAMS, N_INT_PARAMS = 12, 9
+N_FLOAT_PARAMS, N_INT_PARAMS = 12, 10
 (F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
  F_CHILD_P, F_E0, F_R_MAX) = range(N_FLOAT_PARAMS)
 (I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT,
- I_AXIS) = range(N_INT_PARAMS)
+ I_AXIS, I_MAP_N) = range(N_INT_PARAMS)
 # With more receivers than this, sphere tests only visit those whose coordinate along the
 # receivers' widest axis lies within reach of the segment (receivers sorted along it).
 CULL_ABOVE = 8
@@ -49,6 +49,26 @@ def _lambert(sx, sy, sz, u1, u2):  # pragma: no cover - compiled
     return (x * (1.0 + s * sx * sx * a) + y * bb + z * sx,
             x * (s * bb) + y * (s + sy * sy * a) + z * sy,
             -x * (s * sx) - y * sy + z * sz)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def cube_cell(x, y, z, n):  # pragma: no cover - compiled
+    """Index of the cube-map cell (``n × n`` per face) containing direction (x, y, z): face
+    ``2a + (x_a < 0)`` of the major axis ``a``, then the cells along axes ``(a+1) % 3`` and
+    ``(a+2) % 3`` (the order of :func:`.raytrace._cube_cells`)."""
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax >= ay and ax >= az:
+        a, major, u, v = 0, x, y, z
+    elif ay >= az:
+        a, major, u, v = 1, y, z, x
+    else:
+        a, major, u, v = 2, z, x, y
+    m = abs(major)
+    if m == 0.0:
+        return 0
+    i = min(n - 1, max(0, int((u / m + 1.0) * 0.5 * n)))
+    j = min(n - 1, max(0, int((v / m + 1.0) * 0.5 * n)))
+    return (2 * a + (1 if major < 0.0 else 0)) * n * n + i * n + j
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -80,7 +100,7 @@ def bounce(
     face, tfar, u, rain_offset,
     planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
     rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key, rcv_clear, vol,
-    air, fp, ip,
+    depth, air, fp, ip,
     hist, dirsum,
     req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
     c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep,
@@ -105,6 +125,7 @@ def bounce(
     bin_len = c * bin_s
     inv_bin_len = 1.0 / bin_len
     n_slots = n_rcv if stride == 1 else (n_rcv + stride - 1) // stride
+    map_n = ip[I_MAP_N]  # cells per cube-face edge of the visibility maps
     scratch = np.empty(n_bands)
     out = 0
     n_req = 0
@@ -167,7 +188,13 @@ def bounce(
                     continue
                 if radius <= rcv_clear[k]:
                     volume = 4.0 / 3.0 * math.pi * radius * radius * radius
-                else:  # the ball reaches surfaces: its free-air volume, tabulated per receiver
+                else:  # the ball reaches surfaces: count the chord if the receiver sees its
+                    # midpoint, and divide by the volume of the air it sees in the ball
+                    tm = 0.5 * (t_in + t_out)
+                    mx, my, mz = tm * dx - wx, tm * dy - wy, tm * dz - wz
+                    cell = cube_cell(mx, my, mz, map_n)
+                    if mx * mx + my * my + mz * mz >= depth[k, cell] * depth[k, cell]:
+                        continue
                     x = radius / rcv_cap[k] * (vol.shape[1] - 1)
                     jv = min(int(x), vol.shape[1] - 2)
                     frac = x - jv

@@ -51,9 +51,12 @@ Model (every approximation is listed here)
     *clearance* (distance from the receiver to the nearest surface, sampled once per receiver
     by 4096 Embree rays) keeps the sphere in free air so ``V`` is the volume really crossed.
     With ``free_air_volume`` the sphere grows past the clearance (a scan's ceiling caps it
-    near 1 m, where the late tail's horizontal rays need a wider target) and ``V`` is the
-    free-air volume inside it, tabulated once per receiver: the same estimator, averaged
-    over more air (tested against the clearance-capped sphere in a flutter room).
+    near 1 m, where the late tail's horizontal rays need a wider target); beyond the
+    clearance a chord counts only if the receiver sees its midpoint, and ``V`` is the volume
+    of the air the receiver sees inside the sphere — both from one visibility map per
+    receiver (see ``_visible_air``). The same estimator, averaged over more of the
+    receiver's own room, never over air behind a wall (tested against the clearance-capped
+    sphere in a flutter room and against a partition).
     It only counts segments whose last reflection was specular
     and whose path either has a diffuse reflection somewhere or more than
     ``specular_order_excluded`` reflections — purely specular paths up to that order are the
@@ -161,10 +164,10 @@ class RayTraceSettings:
     free_air_volume : bool
         False: the specular-detection sphere stops growing at the receiver's clearance, so it
         always lies in free air. True: it grows to ``max_receiver_radius_m`` through nearby
-        surfaces, and its volume ``V`` is the free air inside it, tabulated once per receiver
-        (8,192 fixed quadrature points, one Embree ray each). More crossings, less noise; the
-        energy density is then averaged over the free air within that radius (including air
-        behind a thin wall, if any).
+        surfaces; there it counts only the air the receiver sees (a visibility map of 6,144
+        Embree rays per receiver gives both the test and the volume ``V``). More crossings,
+        less noise; the late energy density is then averaged over the visible air within that
+        radius (never over air behind a wall or furniture).
     splitting : float
         0: one continuing ray per hit (see the module docstring). r > 0: specular splitting
         — a ray never scattered goes on specularly with the specular share, and its scattered
@@ -299,10 +302,11 @@ def trace_rays(
     if settings.free_air_volume:
         radius_cap = np.full(len(receivers), max(settings.receiver_radius_m,
                                                  settings.max_receiver_radius_m))
-        volume = _free_air_volumes(scene, receivers, radius_cap)
+        depth, volume = _visible_air(scene, receivers, radius_cap)
     else:
         radius_cap, volume = clear, np.zeros((len(receivers), 2))
-    rcv = _Receivers.build(scene, receivers, radius_cap, clear, volume)
+        depth = np.zeros((len(receivers), 0))
+    rcv = _Receivers.build(scene, receivers, radius_cap, clear, volume, depth)
     sizes = [
         min(settings.batch_size, settings.n_rays - start)
         for start in range(0, settings.n_rays, settings.batch_size)
@@ -505,7 +509,7 @@ def _trace_batch(
             ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
             ev.ps_t, ev.split_gain,
             rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
-            rcv.volume,
+            rcv.volume, rcv.depth,
             air, fp, ip,
             acc.energy, acc.directions,
             req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
@@ -560,6 +564,7 @@ def _kernel_params(scene: AcousticScene, rcv: _Receivers, st: RayTraceSettings,
     ip[K.I_CONVEX] = int(rcv.planes is not None)
     ip[K.I_SPLIT] = int(st.splitting > 0)
     ip[K.I_AXIS] = rcv.axis
+    ip[K.I_MAP_N] = round(math.sqrt(rcv.depth.shape[1] / 6.0))
     return fp, ip
 
 
@@ -679,28 +684,58 @@ def receiver_clearance_m(
     return out * math.cos(spacing)
 
 
-def _free_air_volumes(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
-                      n_directions: int = 128, n_radii: int = 65) -> np.ndarray:
-    """Free-air volume of each receiver's ball at radii ``r_j = j/(n_radii-1) · cap``, m³.
+# Cells per cube-face edge of a receiver's visibility map (6 · 32² = 6,144 Embree rays).
+_VISIBILITY_CELLS = 32
 
-    On each sphere ``r_j`` the share ``a_j`` of ``n_directions`` fixed lattice points that lie
-    in air (one Embree ray each: in air when it meets a face from its air side), then
-    ``V(r) = ∫ 4π r² a(r) dr`` by the trapezoid rule — a deterministic quadrature, accurate to
-    ~1 % where the ball first reaches a surface (a random one was off by 10 % there).
+
+def _cube_cells(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit centre directions ``(6n², 3)`` and exact solid angles ``(6n²,)`` of the cells of a
+    cube map, in the order :func:`._trace_kernels.cube_cell` indexes them (face ``2a + (x_a <
+    0)``, then the cell along axis ``(a+1) % 3``, then along ``(a+2) % 3``)."""
+    edges = np.linspace(-1.0, 1.0, n + 1)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+
+    def corner(u, v):  # solid angle of the face rectangle [0, u] × [0, v] at distance 1
+        return np.arctan(u * v / np.sqrt(1.0 + u * u + v * v))
+
+    u0, v0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
+    u1, v1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
+    cell = (corner(u1, v1) - corner(u0, v1) - corner(u1, v0) + corner(u0, v0)).ravel()
+    uc, vc = (g.ravel() for g in np.meshgrid(mid, mid, indexing="ij"))
+    dirs, solid = [], []
+    for face in range(6):
+        a, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
+        d = np.empty((n * n, 3))
+        d[:, a], d[:, (a + 1) % 3], d[:, (a + 2) % 3] = sign, uc, vc
+        dirs.append(d / np.linalg.norm(d, axis=1, keepdims=True))
+        solid.append(cell)
+    return np.concatenate(dirs), np.concatenate(solid)
+
+
+def _visible_air(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
+                 n_radii: int = 65, n_cells: int = _VISIBILITY_CELLS
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Each receiver's visibility map and the volume of the air it sees within radii
+    ``r_j = j/(n_radii-1) · cap``.
+
+    The map holds, per cube-map cell, the distance from the receiver to the first surface
+    along the cell's centre direction (one Embree ray each; ``inf`` where the ray escapes).
+    The visible region is the union of each cell's cone cut at that distance, so its volume
+    within ``r`` is exactly ``Σ_cells ΔΩ · min(d, r)³ / 3``, and the tracer tests a point
+    against the same map: the estimator and its volume describe the same region. Air behind
+    a wall or a cupboard is not part of it, wherever the ball reaches.
+
+    Returns ``(depth (K, 6·n_cells²) float64, volume (K, n_radii) m³)``.
     """
-    dirs = fibonacci_sphere(n_directions)
-    probe = np.array([0.36, 0.48, 0.8])
-    probe /= np.linalg.norm(probe)
-    out = np.zeros((len(receivers), n_radii))
-    for k, (x, c) in enumerate(zip(receivers, cap, strict=True)):
-        radii = np.linspace(0.0, c, n_radii)
-        pts = x + (radii[1:, None, None] * dirs[None, :, :]).reshape(-1, 3)
-        face, _ = scene.first_hits(pts, np.broadcast_to(probe, pts.shape))  # faces only
-        air = (face >= 0) & (np.take(scene.normals, np.maximum(face, 0), axis=0) @ probe < 0)
-        share = np.concatenate([[1.0], air.reshape(n_radii - 1, n_directions).mean(axis=1)])
-        shell = 4.0 * math.pi * radii**2 * share
-        out[k, 1:] = np.cumsum(0.5 * (shell[1:] + shell[:-1]) * np.diff(radii))
-    return out
+    dirs, solid = _cube_cells(n_cells)
+    depth = np.empty((len(receivers), len(dirs)))
+    for k, x in enumerate(receivers):
+        face, dist = scene.intersect(np.broadcast_to(x, dirs.shape), dirs)
+        depth[k] = np.where(face >= 0, dist, np.inf)
+    radii = np.linspace(0.0, 1.0, n_radii)[None, :] * cap[:, None]  # (K, J)
+    reach = np.minimum(depth[:, None, :], radii[:, :, None])  # (K, J, cells)
+    volume = (reach**3 @ solid) / 3.0
+    return np.ascontiguousarray(depth), volume
 
 
 def _clearance_below(scene: AcousticScene, receivers: np.ndarray, limit: float) -> np.ndarray:
@@ -735,7 +770,8 @@ class _Receivers:
     order: np.ndarray  # (K,) receivers sorted along it
     key: np.ndarray  # (K,) their coordinates along it, ascending
     clear: np.ndarray  # (K,) largest radius of a ball entirely in free air
-    volume: np.ndarray  # (K, J) free-air volume of the ball at radii j/(J-1) · cap
+    volume: np.ndarray  # (K, J) volume of the visible air in the ball at radii j/(J-1) · cap
+    depth: np.ndarray  # (K, cells) visibility map (see _visible_air); (K, 0) when not used
 
     @property
     def n(self) -> int:
@@ -743,7 +779,7 @@ class _Receivers:
 
     @classmethod
     def build(cls, scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
-              clear: np.ndarray, volume: np.ndarray) -> _Receivers:
+              clear: np.ndarray, volume: np.ndarray, depth: np.ndarray) -> _Receivers:
         planes = _convex_planes(scene)
         inside = np.zeros(len(receivers), dtype=bool)
         if planes is not None:
@@ -753,7 +789,8 @@ class _Receivers:
         return cls(pos=np.ascontiguousarray(receivers), cap=np.ascontiguousarray(cap),
                    planes=planes, inside=inside, axis=axis, order=order.astype(np.int64),
                    key=np.ascontiguousarray(receivers[order, axis]),
-                   clear=np.ascontiguousarray(clear), volume=np.ascontiguousarray(volume))
+                   clear=np.ascontiguousarray(clear), volume=np.ascontiguousarray(volume),
+                   depth=np.ascontiguousarray(depth))
 
 
 def _convex_planes(scene: AcousticScene) -> tuple[np.ndarray, np.ndarray] | None:

@@ -64,10 +64,11 @@ class AcousticsSpec(SpecModel):
         ge=0,
         le=5.0,
         description="Radius, metres, to which the late specular-detection ball may grow "
-        "through nearby surfaces, its volume then being the free air inside it (tabulated once "
-        "per receiver). 0: the ball stops at the receiver's clearance and at 1 m. In scans "
-        "whose ceiling caps the ball near 1 m, 2.5 lowers the seed-to-seed T30 spread about "
-        "1.5x for ~35 % more CPU; the late energy is then averaged over that much air.",
+        "past nearby surfaces; beyond them it counts only the air the receiver sees (a "
+        "visibility map per receiver gives the test and the volume). 0: the ball stops at the "
+        "receiver's clearance and at 1 m. In scans whose ceiling caps the ball near 1 m, 2.5–4 "
+        "lowers the seed-to-seed T30 spread about 1.5–2x; the late energy is then averaged "
+        "over that much of the receiver's visible air.",
     )
     ray_splitting: float = Field(
         0.0,
