@@ -102,6 +102,23 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
     return AcousticScene(mesh.vertices, mesh.faces, a[index], s[index], t[index])
 
 
+def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSettings:
+    """The tracer's settings for one RIR job; ``specular_order`` is the image-source order
+    completed (those purely specular paths are left out of the trace)."""
+    ball = settings.free_air_ball_m
+    return RayTraceSettings(
+        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
+        energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
+        receiver_radius_m=settings.receiver_radius_m,
+        specular_order_excluded=specular_order, speed_of_sound_m_s=settings.speed_of_sound_m_s,
+        diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
+        free_air_volume=ball > 0,
+        max_receiver_radius_m=(max(ball, settings.receiver_radius_m) if ball > 0
+                               else RayTraceSettings.max_receiver_radius_m),
+        # No renderer reads the late field's directions (the tails are diffuse): skip them.
+        directions=False)
+
+
 def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                   settings: RirSettings, rng: np.random.Generator,
                   regions=None, microphone: dict[str, Any] | None = None,
@@ -125,19 +142,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     direct = direct_sound(scene, mic, points, air, c)
     ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
                         max_path_length_m=c * settings.max_rir_length_s)
-    ray_settings = RayTraceSettings(
-        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
-        energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
-        receiver_radius_m=settings.receiver_radius_m,
-        specular_order_excluded=ism.max_order, speed_of_sound_m_s=c,
-        diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
-        free_air_volume=settings.free_air_ball_m > 0,
-        max_receiver_radius_m=(max(settings.free_air_ball_m, settings.receiver_radius_m)
-                               if settings.free_air_ball_m > 0
-                               else RayTraceSettings.max_receiver_radius_m),
-        # No renderer reads the late field's directions (the tails are diffuse): skip them.
-        directions=False)
-    traces = trace_rays(scene, mic, points, rng, ray_settings, air, n_threads=n_threads)
+    traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
+                        air, n_threads=n_threads)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
     render = _renderer(microphone, settings, hrirs)
     rirs, facts = [], []
