@@ -25,9 +25,10 @@ What it does
   (a) RLR defaults (44.1 kHz, 5 000 indirect rays, 4 bands); (a') the same with 50 000 rays,
   RLR's own converged answer for (a); (b) RLR at SonicSim's settings (16 kHz, 50 000 indirect
   rays, 32 bands asked — the engine caps at 12, checked here —, SH orders 5/3; mono listener);
-  (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, image sources to
-  order 3, 16 kHz) and at the cheapest setting of a small sweep (rays × image-source order ×
-  specular splitting × visible-air ball, several seeds) that stays, in every band and for
+  (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 5 000 rays with specular
+  splitting 2, a 4 m visible-air ball and roulette 30 dB down, image sources to order 3,
+  16 kHz) and at the cheapest setting of a small sweep (rays × image-source order × specular
+  splitting × visible-air ball × roulette, several seeds) that stays, in every band and for
   every seed, near sonicspec's converged answer (``--ref-rays`` rays with splitting, mean of
   three seeds): within the ISO 3382-1 just-noticeable differences (T30, EDT 5 %, C50 1 dB) if
   any setting does, else no farther than RLR's defaults are from RLR's own 50 000-ray answer
@@ -216,11 +217,11 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
 
 
 # --------------------------------------------------------------------------- sonicspec (child)
-def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: float = 0.0
-                       ) -> RirSettings:
+def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: float = 0.0,
+                       roulette: float = 0.0) -> RirSettings:
     acoustics = AcousticsSpec().model_dump(mode="json")
     acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting,
-                     free_air_ball_m=ball)
+                     free_air_ball_m=ball, roulette_db=roulette)
     return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
 
 
@@ -286,8 +287,8 @@ def prepared_scene(tmp: Path, settings: RirSettings):
 
 
 def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int,
-                    seed: int, splitting: float, ball: float) -> dict:
-    settings = sonicspec_settings(rays, order, splitting, ball)
+                    seed: int, splitting: float, ball: float, roulette: float) -> dict:
+    settings = sonicspec_settings(rays, order, splitting, ball, roulette)
     scene, regions, setup_wall, setup_cpu = prepared_scene(tmp, settings)
     walls, cpus, rir = [], [], None
     for _ in range(repeats):
@@ -298,7 +299,7 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
         rir = out if rir is None else rir
     np.save(tmp / f"rir_sonicspec_{rays}_{order}_{threads}.npy", rir)
     return {"engine": "sonicspec", "rays": rays, "order": order, "splitting": splitting,
-            "ball": ball,
+            "ball": ball, "roulette": roulette,
             "order_done": order_done,
             "threads": threads,
             "wall_s": walls, "cpu_s": cpus, "setup_wall_s": setup_wall,
@@ -332,8 +333,8 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
     ref_expected = {k: np.mean([e[k] for _, e in ref_runs], axis=0).tolist()
                     for k in ("t30_s", "edt_s", "c50_db")}
     rows = []
-    for rays, order, splitting, ball in candidates:
-        settings = sonicspec_settings(rays, order, splitting, ball)
+    for rays, order, splitting, ball, roulette in candidates:
+        settings = sonicspec_settings(rays, order, splitting, ball, roulette)
         cpus, devs, exps = [], [], []
         for seed in seeds:
             c0 = time.process_time()
@@ -343,6 +344,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
             devs.append(deviation(expected, ref_expected))
         t30 = np.array([f["t30_s"] for f in exps], float)
         rows.append({"rays": rays, "order": order, "splitting": splitting, "ball": ball,
+                     "roulette": roulette,
                      "cpu_s": cpus, "expected": exps,
                      "worst": {k: max(d[k] for d in devs) for k in JND},
                      "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
@@ -455,7 +457,7 @@ def main() -> int:
             result = child_rlr(tmp, rest[0], int(rest[1]))
         elif kind == "sonicspec":
             result = child_sonicspec(tmp, *(int(x) for x in rest[:5]), float(rest[5]),
-                                     float(rest[6]))
+                                     float(rest[6]), float(rest[7]))
         elif kind == "diagnose":
             result = child_diagnose(tmp)
         else:
@@ -472,12 +474,15 @@ def main() -> int:
 
     ref_rays = 20_000 if args.quick and args.ref_rays == 50_000 else args.ref_rays
     seeds = [1, 2] if args.quick else [1, 2, 3]
-    candidates = [(2000, 1, 0.0, 0.0), (5000, 2, 0.0, 0.0), (20_000, 3, 0.0, 0.0),
-                  (5000, 2, 0.0, 4.0), (2000, 2, 1.0, 4.0), (5000, 2, 1.0, 4.0)]
+    # (rays, image-source order, splitting rate, visible-air ball m, roulette dB)
+    candidates = [(2000, 1, 0.0, 0.0, 0.0), (5000, 2, 0.0, 0.0, 0.0), (20_000, 3, 0.0, 0.0, 0.0),
+                  (5000, 2, 1.0, 4.0, 0.0), (5000, 2, 2.0, 4.0, 20.0), (5000, 2, 2.0, 4.0, 30.0)]
     if not args.quick:
-        candidates += [(5000, 1, 0.0, 0.0), (20_000, 2, 0.0, 4.0), (2000, 2, 1.0, 0.0),
-                       (5000, 2, 1.0, 0.0), (10_000, 2, 1.0, 0.0), (2000, 1, 1.0, 4.0),
-                       (5000, 2, 1.0, 2.5), (10_000, 2, 1.0, 4.0), (20_000, 2, 1.0, 4.0)]
+        candidates += [(5000, 2, 0.0, 4.0, 0.0), (20_000, 2, 0.0, 4.0, 0.0),
+                       (5000, 2, 1.0, 0.0, 0.0), (10_000, 2, 1.0, 0.0, 0.0),
+                       (10_000, 2, 1.0, 4.0, 0.0), (20_000, 2, 1.0, 4.0, 0.0),
+                       (5000, 2, 0.0, 4.0, 30.0), (3000, 2, 2.0, 4.0, 30.0),
+                       (8000, 2, 1.0, 4.0, 20.0), (10_000, 2, 2.0, 4.0, 30.0)]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         t0 = time.perf_counter()
@@ -517,17 +522,19 @@ def main() -> int:
         cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
         results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"],
                             "splitting": cheap["splitting"], "ball": cheap["ball"],
+                            "roulette": cheap["roulette"],
                             "rule": rule}
         default = AcousticsSpec()
-        for label, rays, order, splitting, ball in (
+        for label, rays, order, splitting, ball, roulette in (
                 ("default", default.rays, default.image_source_order, default.ray_splitting,
-                 default.free_air_ball_m),
-                ("cheap", cheap["rays"], cheap["order"], cheap["splitting"], cheap["ball"])):
+                 default.free_air_ball_m, default.roulette_db),
+                ("cheap", cheap["rays"], cheap["order"], cheap["splitting"], cheap["ball"],
+                 cheap["roulette"])):
             for threads, cores in ((1, "0"), (2, "0,1")):
                 reps = 1 if rays >= 20_000 else 3
                 results[f"sonicspec_{label}_{threads}"] = run_child(
                     tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
-                    str(threads), str(reps), "1", str(splitting), str(ball))
+                    str(threads), str(reps), "1", str(splitting), str(ball), str(roulette))
             print(f"sonicspec {label}: done", flush=True)
         if not args.quick:
             results["diagnosis"] = run_child(tmp, "0,1", 2, "--child", "diagnose")
@@ -539,9 +546,16 @@ def main() -> int:
     return 0
 
 
+def defaults_label() -> str:
+    d = AcousticsSpec()
+    return (f"{d.rays:,} rays, order {d.image_source_order}, splitting {d.ray_splitting:g}, "
+            f"visible-air ball {d.free_air_ball_m:g} m, roulette {d.roulette_db:g} dB")
+
+
 def cheap_label(cheap: dict) -> str:
     return (f"{cheap['rays']:,} rays, order {cheap['order']}, splitting "
-            f"{cheap['splitting']:g}, visible-air ball {cheap['ball']:g} m")
+            f"{cheap['splitting']:g}, visible-air ball {cheap['ball']:g} m, roulette "
+            f"{cheap['roulette']:g} dB")
 
 
 def report(results: dict) -> None:
@@ -573,13 +587,14 @@ def report(results: dict) -> None:
           ", ".join(fmt(v, ".2f") for v in sweep["ref_expected"]["t30_s"]) + " s; EDT " +
           ", ".join(fmt(v, ".2f") for v in sweep["ref_expected"]["edt_s"]) + " s; C50 " +
           ", ".join(fmt(v, ".1f") for v in sweep["ref_expected"]["c50_db"]) + " dB\n")
-    print("| rays | image-source order | splitting | visible-air ball (m) | CPU per RIR | T30 | "
-          "EDT | C50 | T30 spread over seeds | JND | RLR |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| rays | image-source order | splitting | visible-air ball (m) | roulette (dB) | "
+          "CPU per RIR | T30 | EDT | C50 | T30 spread over seeds | JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sweep["candidates"]:
         w = r["worst"]
         marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
         print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
+              f"{r['roulette']:g} | "
               f"{np.median(r['cpu_s']):.2f} s | "
               f"{100 * w['t30']:.1f} % | {100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | "
               f"{100 * r['t30_spread']:.1f} % | {marks[0]} | {marks[1]} |")
@@ -591,7 +606,7 @@ def report(results: dict) -> None:
             ("RLR defaults, 50 000 rays", results["rlr_default_50k"]),
             ("RLR SonicSim (16 kHz, 50 000 rays, 32→12 bands)", results["rlr_sonicsim"]),
             (f"sonicspec reference ({sweep['ref_rays']:,} rays)", {"figures": sweep["ref"]}),
-            ("sonicspec spec defaults (20 000 rays, order 3)", ss_default),
+            (f"sonicspec spec defaults ({defaults_label()})", ss_default),
             (f"sonicspec cheap ({cheap_label(cheap)})", results["sonicspec_cheap_1"])]
     print("\nTime per RIR (min over repeats; 1 thread = pinned to one core)\n")
     print("| engine, setting | threads | CPU | wall | of which RLR simulate() | load avg |")

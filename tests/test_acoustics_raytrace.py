@@ -508,3 +508,28 @@ def test_specular_splitting_is_unbiased():
         np.testing.assert_allclose(windows[rate], windows[0.0], rtol=0.05)
     with pytest.raises(AcousticsError, match="splitting"):
         RayTraceSettings(splitting=-1.0)
+
+
+def test_russian_roulette_of_weak_rays_is_unbiased():
+    """The same flutter room: stopping rays 20 dB down with probability 1 − E/E_r (survivors
+    raised to E_r) keeps the energy of three windows (early, 50–300 ms, 300–600 ms), averaged
+    over 8 seeds, within 3 %, 3 % and 6 % of following every ray to 80 dB (standard errors of
+    each mean: 0.3, 0.3 and 1.5–2 %), while the rays take fewer than half the hits."""
+    scene = rooms.flutter_scene(tau_high_band=0.02)
+    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
+    windows, hits = {}, {}
+    for roulette in (0.0, 20.0):
+        settings = RayTraceSettings(n_rays=8000, max_time_s=0.6, specular_order_excluded=1,
+                                    roulette_db=roulette, splitting=1.0)
+        sums, n_hits = [], []
+        for seed in range(8):
+            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
+            e = res.histogram.energy
+            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
+            n_hits.append(res.mean_reflections)
+        windows[roulette], hits[roulette] = np.mean(sums, axis=0), np.mean(n_hits)
+    np.testing.assert_allclose(windows[20.0][:2], windows[0.0][:2], rtol=0.03)
+    np.testing.assert_allclose(windows[20.0][2], windows[0.0][2], rtol=0.06)
+    assert hits[20.0] < 0.5 * hits[0.0]
+    with pytest.raises(AcousticsError, match="roulette_db"):
+        RayTraceSettings(roulette_db=-1.0)

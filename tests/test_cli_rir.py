@@ -11,7 +11,7 @@ import pytest
 import soundfile as sf
 
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
-from sonicspec.acoustics.theory import eyring_t60
+from sonicspec.acoustics.theory import kuttruff_t60, shoebox_free_paths
 from sonicspec.cli import main
 from sonicspec.testing.hrtf import write_tiny_sofa
 
@@ -60,7 +60,10 @@ def test_shoebox_rir_matches_eyring_and_free_field(spec: Path, tmp_path: Path, c
     facts = json.loads(out)
     bands = facts["figures"]["bands_hz"]
     m = air_energy_coefficient_per_m(bands)
-    expected = eyring_t60(210.0, 2 * (70 + 30 + 21), 0.2, m)
+    # What the tracer converges to here (Eyring with Kuttruff's path-length correction, +4.6 %;
+    # the tracer test holds it to 2 %); one RIR's low bands add a few % of synthesis noise.
+    paths = shoebox_free_paths((10.0, 7.0, 3.0), n_paths=200_000)
+    expected = kuttruff_t60(210.0, 2 * (70 + 30 + 21), 0.2, paths.var() / paths.mean() ** 2, m)
     t30 = np.array(facts["figures"]["t30_s"])
     assert t30 == pytest.approx(expected, rel=0.10)
     # The file holds the RIR: float32 WAV at the spec rate, the direct sound at r/c.

@@ -25,9 +25,12 @@ _MISS_T = 1e36
 _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
-N_FLOAT_PARAMS, N_INT_PARAMS = 12, 10
+N_FLOAT_PARAMS, N_INT_PARAMS = 13, 10
 (F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
- F_CHILD_P, F_E0, F_R_MAX) = range(N_FLOAT_PARAMS)
+ F_CHILD_P, F_E0, F_R_MAX, F_E_ROULETTE) = range(N_FLOAT_PARAMS)
+# Column of ``u`` holding the roulette draw (after the event, two direction and the split
+# draws); present only when roulette is on.
+U_ROULETTE = 4
 (I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT,
  I_AXIS, I_MAP_N) = range(N_INT_PARAMS)
 # With more receivers than this, sphere tests only visit those whose coordinate along the
@@ -118,7 +121,7 @@ def bounce(
     n_rcv = rcv_pos.shape[0]
     c, bin_s, r0, growth = fp[F_SPEED], fp[F_BIN], fp[F_RADIUS], fp[F_GROWTH]
     max_len, e_stop, eps, to_p2 = fp[F_MAX_LEN], fp[F_E_STOP], fp[F_EPS], fp[F_TO_P2]
-    rain_scale = fp[F_RAIN_SCALE]
+    rain_scale, e_roulette = fp[F_RAIN_SCALE], fp[F_E_ROULETTE]
     n_bins, excluded, rain, directions = ip[I_N_BINS], ip[I_EXCLUDED], ip[I_RAIN], ip[I_DIRECTIONS]
     stride, has_air, convex, split = ip[I_STRIDE], ip[I_AIR], ip[I_CONVEX], ip[I_SPLIT]
     axis, r_max = ip[I_AXIS], fp[F_R_MAX]
@@ -318,6 +321,15 @@ def bounce(
         else:  # transmitted: straight on
             ex, ey, ez = dx, dy, dz
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if e_roulette > 0.0 and strongest < e_roulette and alive_time:
+            # Russian roulette: a weak ray goes on with probability strongest / e_roulette,
+            # raised back to that level (unbiased); most weak rays stop here, cheaply.
+            keep = strongest / e_roulette
+            if u[i, U_ROULETTE] >= keep:
+                continue
+            for b in range(n_bands):
+                energy[out, b] = energy[out, b] / keep
+            strongest = e_roulette
         if not (strongest >= e_stop and alive_time):
             continue
         off = -eps if event == 0 else eps

@@ -175,6 +175,13 @@ class RayTraceSettings:
         band energy, ``E₀`` its launch energy), weighted by the inverse. Unbiased either way;
         it removes the chance of whether a long specular chain survives, the dominant noise
         of the late field in rooms with little scattering.
+    roulette_db : float
+        0: a ray is followed until ``energy_threshold_db`` down or ``max_time_s``. r > 0:
+        once its strongest band (with air) falls ``r`` dB below its launch energy, Russian
+        roulette: it goes on with probability ``E/E_r`` and its energy is raised to ``E_r``
+        (unbiased). Weak rays then stop after a few more hits on average instead of spending
+        tens of hits on the last tens of dB, and the tail past ``energy_threshold_db`` is no
+        longer cut when ``r < energy_threshold_db`` (rays then stop only at ``max_time_s``).
     """
 
     n_rays: int = 20_000
@@ -192,6 +199,7 @@ class RayTraceSettings:
     directions: bool = True
     splitting: float = 0.0
     free_air_volume: bool = False
+    roulette_db: float = 0.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -216,6 +224,7 @@ class RayTraceSettings:
             ("speed_of_sound_m_s", self.speed_of_sound_m_s, self.speed_of_sound_m_s > 0, "> 0"),
             ("batch_size", self.batch_size, self.batch_size >= 1, ">= 1"),
             ("splitting", self.splitting, self.splitting >= 0, ">= 0 (0: off)"),
+            ("roulette_db", self.roulette_db, self.roulette_db >= 0, ">= 0 (0: off)"),
             (
                 "rain_receivers_per_hit",
                 self.rain_receivers_per_hit,
@@ -480,6 +489,8 @@ def _trace_batch(
     n_slots = rcv.n if stride == 1 else -(-rcv.n // stride)
     fp, ip = _kernel_params(scene, rcv, st, air, acc.energy.shape[1], stride)
     split = st.splitting > 0
+    # Uniform draws per hit: event, two for a direction, the split and the roulette draws.
+    n_draws = K.U_ROULETTE + 1 if st.roulette_db > 0 else (4 if split else 3)
     plane_n, plane_off = rcv.planes if rcv.planes is not None else (_NO_PLANES, _NO_OFFSETS)
 
     # Separate streams: ray paths do not depend on how the rain is subsampled or walked.
@@ -498,7 +509,7 @@ def _trace_batch(
     interactions = 0
     while n:
         face, tfar = scene.first_hits(pos[:n], dirs[:n])
-        u = rng.random((n, 4 if split else 3))
+        u = rng.random((n, n_draws))
         offsets = rain_rng.integers(0, stride, n) if stride > 1 else no_offsets
         m = n * n_slots if st.diffuse_rain else 0
         req = _RainQueue.empty(m, scene.n_bands, st.directions)
@@ -552,6 +563,8 @@ def _kernel_params(scene: AcousticScene, rcv: _Receivers, st: RayTraceSettings,
     fp[K.F_RAIN_SCALE] = stride * to_p2 / (math.pi * math.pi * st.receiver_radius_m**2)
     fp[K.F_CHILD_P] = st.splitting
     fp[K.F_E0] = 1.0 / st.n_rays
+    fp[K.F_E_ROULETTE] = (10.0 ** (-st.roulette_db / 10.0) / st.n_rays if st.roulette_db > 0
+                          else 0.0)
     # No detection sphere is larger than this: the reach of the receiver culling.
     fp[K.F_R_MAX] = (1.0 + 1e-9) * max(st.receiver_radius_m, float(rcv.cap.max())) + 1e-9
     ip = np.zeros(K.N_INT_PARAMS, dtype=np.int64)
@@ -729,13 +742,13 @@ def _visible_air(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
     """
     dirs, solid = _cube_cells(n_cells)
     depth = np.empty((len(receivers), len(dirs)))
+    volume = np.empty((len(receivers), n_radii))
     for k, x in enumerate(receivers):
         face, dist = scene.intersect(np.broadcast_to(x, dirs.shape), dirs)
         depth[k] = np.where(face >= 0, dist, np.inf)
-    radii = np.linspace(0.0, 1.0, n_radii)[None, :] * cap[:, None]  # (K, J)
-    reach = np.minimum(depth[:, None, :], radii[:, :, None])  # (K, J, cells)
-    volume = (reach**3 @ solid) / 3.0
-    return np.ascontiguousarray(depth), volume
+        reach = np.minimum(depth[k][None, :], np.linspace(0.0, cap[k], n_radii)[:, None])
+        volume[k] = (reach**3 @ solid) / 3.0
+    return depth, volume
 
 
 def _clearance_below(scene: AcousticScene, receivers: np.ndarray, limit: float) -> np.ndarray:

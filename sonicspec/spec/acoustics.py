@@ -15,7 +15,10 @@ class AcousticsSpec(SpecModel):
     """Tracer settings: image sources for the early part, stochastic rays for the late part."""
 
     rays: int = Field(
-        20_000, ge=100, le=10_000_000, description="Rays traced per source for the late part."
+        5_000,
+        ge=100,
+        le=10_000_000,
+        description="Rays launched per source for the late part (splitting adds children).",
     )
     image_source_order: int = Field(
         3, ge=0, le=8, description="Highest reflection order found exactly by image sources."
@@ -60,25 +63,36 @@ class AcousticsSpec(SpecModel):
         0.1, gt=0, le=2.0, description="Radius of the detection sphere around a receiver, metres."
     )
     free_air_ball_m: float = Field(
-        0.0,
+        4.0,
         ge=0,
         le=5.0,
         description="Radius, metres, to which the late specular-detection ball may grow "
         "past nearby surfaces; beyond them it counts only the air the receiver sees (a "
         "visibility map per receiver gives the test and the volume). 0: the ball stops at the "
-        "receiver's clearance and at 1 m. In scans whose ceiling caps the ball near 1 m, 2.5–4 "
-        "lowers the seed-to-seed T30 spread about 1.5–2x; the late energy is then averaged "
-        "over that much of the receiver's visible air.",
+        "receiver's clearance and at 1 m. In scans whose ceiling caps the ball near 1 m, the "
+        "default 4 m lowers the seed-to-seed T30 spread about 2x; the late energy is then "
+        "averaged over that much of the receiver's visible air.",
     )
     ray_splitting: float = Field(
-        0.0,
+        2.0,
         ge=0,
         le=100.0,
         description="Specular splitting rate r: a ray never scattered goes on specularly and "
         "sends its scattered share as a child ray with probability min(1, r x its energy / "
-        "launch energy). 0: off (one continuing ray per hit). Unbiased either way; for scans "
-        "with little scattering (s about 0.1) r = 1 halves the seed-to-seed T30 spread at "
-        "equal CPU time; in diffuse rooms it costs about 1.7x per ray for nothing.",
+        "launch energy). 0: off (one continuing ray per hit). Unbiased either way; in scans "
+        "with little scattering (s about 0.1) the late decay rides on a few long specular "
+        "chains, and splitting (with roulette_db) cuts the seed-to-seed T30 spread several "
+        "times at equal CPU; in diffuse rooms it costs a little and gains nothing.",
+    )
+    roulette_db: float = Field(
+        30.0,
+        ge=0,
+        le=200.0,
+        description="Russian roulette of weak rays, dB below their launch energy: a ray that "
+        "falls this far goes on with probability E/E_r, its energy raised to E_r (unbiased). "
+        "0: off (rays are followed to energy_threshold_db). Below energy_threshold_db it also "
+        "keeps the tail past that threshold. The default 30 cuts the tracer's CPU time ~2.5x "
+        "in scans for about the same seed-to-seed spread.",
     )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
