@@ -15,7 +15,7 @@ class AcousticsSpec(SpecModel):
     """Tracer settings: image sources for the early part, stochastic rays for the late part."""
 
     rays: int = Field(
-        5_000,
+        20_000,
         ge=100,
         le=10_000_000,
         description="Rays launched per source for the late part (splitting adds children).",
@@ -63,26 +63,29 @@ class AcousticsSpec(SpecModel):
         0.1, gt=0, le=2.0, description="Radius of the detection sphere around a receiver, metres."
     )
     free_air_ball_m: float = Field(
-        4.0,
+        0.0,
         ge=0,
         le=5.0,
         description="Radius, metres, to which the late specular-detection ball may grow "
         "past nearby surfaces; beyond them it counts only the air the receiver sees (a "
         "visibility map per receiver gives the test and the volume). 0: the ball stops at the "
-        "receiver's clearance and at 1 m. In scans whose ceiling caps the ball near 1 m, the "
-        "default 4 m lowers the seed-to-seed T30 spread about 2x; the late energy is then "
-        "averaged over that much of the receiver's visible air.",
+        "receiver's clearance and at 1 m. In scans whose ceiling caps the ball near 1 m, 4 "
+        "(with ray_splitting) lowers the seed-to-seed T30 spread about 2x; the late energy is "
+        "then averaged over that much of the receiver's visible air. Each crossing costs per "
+        "receiver: with many trajectory points in a small room it can cost 4x the trace.",
     )
     ray_splitting: float = Field(
-        2.0,
+        0.0,
         ge=0,
         le=100.0,
         description="Specular splitting rate r: a ray never scattered goes on specularly and "
         "sends its scattered share as a child ray with probability min(1, r x its energy / "
         "launch energy). 0: off (one continuing ray per hit). Unbiased either way; in scans "
         "with little scattering (s about 0.1) the late decay rides on a few long specular "
-        "chains, and splitting (with roulette_db) cuts the seed-to-seed T30 spread several "
-        "times at equal CPU; in diffuse rooms it costs a little and gains nothing.",
+        "chains, and r = 2 with free_air_ball_m 4 cuts the seed-to-seed T30 spread several "
+        "times at equal CPU (see specs/sonicset.yaml); in diffuse rooms it gains nothing, and "
+        "in live rooms (low absorption) it is costly: a ray keeps its energy, so it spawns "
+        "children at many bounces.",
     )
     roulette_db: float = Field(
         30.0,
@@ -91,8 +94,8 @@ class AcousticsSpec(SpecModel):
         description="Russian roulette of weak rays, dB below their launch energy: a ray that "
         "falls this far goes on with probability E/E_r, its energy raised to E_r (unbiased). "
         "0: off (rays are followed to energy_threshold_db). Below energy_threshold_db it also "
-        "keeps the tail past that threshold. The default 30 cuts the tracer's CPU time ~2.5x "
-        "in scans for about the same seed-to-seed spread.",
+        "keeps the tail past that threshold. The default 30 halves the tracer's CPU time in "
+        "absorbing rooms for about the same seed-to-seed spread.",
     )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
