@@ -74,7 +74,7 @@ from bench_navigation import apartment, subdivide
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
-from sonicspec.acoustics.metrics import decay_times_from_histogram, room_acoustic_figures
+from sonicspec.acoustics.metrics import figures_from_energy, room_acoustic_figures
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.synthesis import synthesize_rir
@@ -259,18 +259,7 @@ def traced_rir(scene, regions, settings: RirSettings, seed: int, n_threads: int
     rir = synthesize_rir(arrivals, hist, settings.sample_rate_hz, rng,
                          max_length_s=settings.max_rir_length_s, bands_hz=settings.bands_hz)
     energy = hist.energy + arrivals.energy_histogram(hist.bin_s, hist.energy.shape[0])
-    return rir, expected_figures(energy, hist.bin_s)
-
-
-def expected_figures(energy: np.ndarray, bin_s: float) -> dict:
-    """T30, EDT (ISO 3382-1 fits of the Schroeder curve) and C50 per band of an energy-time
-    histogram ``(n_bins, n_bands)`` whose first non-empty bin is the direct sound."""
-    decay = decay_times_from_histogram(energy, bin_s)
-    onset = int(np.argmax(energy.sum(axis=1) > 0))
-    split = onset + round(0.05 / bin_s)
-    early, late = energy[onset:split].sum(axis=0), energy[split:].sum(axis=0)
-    return {"t30_s": decay["t30_s"].tolist(), "edt_s": decay["edt_s"].tolist(),
-            "c50_db": (10.0 * np.log10(early / late)).tolist()}
+    return rir, figures_from_energy(energy, hist.bin_s)
 
 
 def prepared_scene(tmp: Path, settings: RirSettings):
@@ -330,7 +319,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
     t0 = time.perf_counter()
     ref_runs = [traced_rir(scene, regions, ref_settings, seed, threads) for seed in REF_SEEDS]
     ref_wall = (time.perf_counter() - t0) / len(REF_SEEDS)
-    ref_expected = {k: np.mean([e[k] for _, e in ref_runs], axis=0).tolist()
+    ref_expected = {k: np.mean(np.array([e[k] for _, e in ref_runs], float), axis=0).tolist()
                     for k in ("t30_s", "edt_s", "c50_db")}
     rows = []
     for rays, order, splitting, ball, roulette in candidates:

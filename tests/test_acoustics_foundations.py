@@ -12,6 +12,7 @@ from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.metrics import (
     decay_times_from_histogram,
     direct_to_reverberant_db,
+    figures_from_energy,
     room_acoustic_figures,
 )
 from sonicspec.acoustics.theory import (
@@ -176,6 +177,28 @@ def test_decay_times_from_histograms() -> None:
     got = decay_times_from_histogram(energy, bin_s)
     assert got["t30_s"] == pytest.approx([0.5, 1.0], rel=1e-3)
 
+
+
+def test_figures_from_energy_of_exponential_decays() -> None:
+    """T30 and EDT of an exact exponential are its decay time; C50 the ratio of the two
+    geometric sums (the first 50 bins after the onset against the rest); leading empty bins
+    (the time of flight) are skipped; a band with no late energy gives None, not an error."""
+    bin_s, t60 = 0.001, (0.5, 1.0)
+    t = np.arange(2000) * bin_s
+    decays = np.stack([np.exp(-6 * math.log(10) * t / t60[0]),
+                       np.exp(-6 * math.log(10) * t / t60[1])], axis=1)
+    energy = np.vstack([np.zeros((17, 2)), decays])
+    got = figures_from_energy(energy, bin_s)
+    assert got["t30_s"] == pytest.approx(list(t60), rel=1e-3)
+    assert got["edt_s"] == pytest.approx(list(t60), rel=1e-3)
+    q = np.exp(-6 * math.log(10) * bin_s / np.array(t60))
+    c50 = 10 * np.log10((1 - q**50) / (q**50 - q**2000))
+    assert got["c50_db"] == pytest.approx(c50.tolist(), abs=1e-6)
+    one_bin = np.zeros((100, 1))
+    one_bin[3] = 1.0
+    assert figures_from_energy(one_bin, bin_s)["c50_db"] == [None]
+    with pytest.raises(AcousticsError, match="n_bins, n_bands"):
+        figures_from_energy(np.ones(10), bin_s)
 
 # --- theory --------------------------------------------------------------------------------
 

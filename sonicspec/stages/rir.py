@@ -24,6 +24,7 @@ from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.bands import default_bands
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.metrics import figures_from_energy
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.synthesis import synthesize_rir
@@ -124,7 +125,8 @@ def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSe
 def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                   settings: RirSettings, rng: np.random.Generator,
                   regions=None, microphone: dict[str, Any] | None = None,
-                  hrirs: HrirSet | None = None, n_threads: int = 1
+                  hrirs: HrirSet | None = None, n_threads: int = 1,
+                  expected_figures: bool = False
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs ``(channels, samples)`` from every source position to the microphone, and facts.
 
@@ -132,7 +134,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     receivers the early arrivals are traced from each source to the microphone, so their
     directions are directions of arrival at the microphone. A binaural microphone with a SOFA
     HRTF needs its measured set in ``hrirs`` (see :func:`load_hrirs`). ``n_threads`` only
-    changes how fast the rays are traced, never the bytes.
+    changes how fast the rays are traced, never the bytes. ``expected_figures`` adds each
+    RIR's figures without the late noise's draw (``metrics.figures_from_energy``) to its
+    facts as ``"expected"``.
     """
     microphone = microphone or {"kind": "mono", "trajectory": {"kind": "static"}}
     check_receiver(microphone, hrirs)
@@ -163,6 +167,10 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": ism.max_order,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction})
+        if expected_figures:
+            hist = traces[k].histogram
+            energy = hist.energy + arrivals.energy_histogram(hist.bin_s, hist.n_bins)
+            facts[-1]["expected"] = figures_from_energy(energy, hist.bin_s)
     return rirs, facts
 
 
@@ -271,7 +279,8 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     scene = acoustic_scene(mesh, spec.materials.model_dump(mode="json"), settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
     (rir,), (facts,) = simulate_rirs(scene, np.asarray(mic_m), np.asarray([source_m]),
-                                     settings, rng, microphone=microphone, hrirs=hrirs)
+                                     settings, rng, microphone=microphone, hrirs=hrirs,
+                                     expected_figures=True)
     # Figures of the first channel (the omni W channel for ambisonics).
     figures = room_acoustic_figures(rir[0], spec.sample_rate_hz, settings.bands_hz)
     facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
@@ -297,6 +306,16 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
         f"{'T30 (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["t30_s"]),
         f"{'EDT (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["edt_s"]),
         f"{'C50 (dB)':>10} " + " ".join(f"{num(v, '7.2f')}" for v in fig["c50_db"]),
+    ]
+    if "expected" in facts:  # the same fits on the energy the RIR was synthesised to have
+        exp = facts["expected"]
+        lines += [
+            "expected (the energy it was synthesised to have, without the noise draw):",
+            f"{'T30 (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in exp["t30_s"]),
+            f"{'EDT (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in exp["edt_s"]),
+            f"{'C50 (dB)':>10} " + " ".join(f"{num(v, '7.2f')}" for v in exp["c50_db"]),
+        ]
+    lines += [
         f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
         f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
         f" dB, DRR {num(fig['drr_db'], '.2f')} dB; escaped rays "
