@@ -94,6 +94,12 @@ JND = {"t30": 0.05, "edt": 0.05, "c50_db": 1.0}
 # the clearance-capped sphere (no averaging over more air), over these seeds.
 REF_SPLITTING = 1.0
 REF_SEEDS = (0, 10, 20)
+# Settings tried when both engines get every scattering coefficient 1 (rays, order, splitting,
+# ball, roulette): a diffuse late field, where plain rays with diffuse rain converge fast.
+DIFFUSE_CANDIDATES = [(500, 1, 0.0, 0.0, 30.0), (1000, 1, 0.0, 0.0, 30.0),
+                      (2000, 1, 0.0, 0.0, 30.0), (2000, 2, 0.0, 0.0, 30.0),
+                      (5000, 2, 0.0, 0.0, 30.0), (1000, 1, 0.0, 0.0, 0.0),
+                      (20_000, 3, 0.0, 0.0, 30.0)]
 RLR_LABEL = "<sonicspec-material-{:03d}>"  # unique: no label is a substring of another
 
 
@@ -120,6 +126,21 @@ def rlr_material_json(mesh: SceneMesh, path: Path) -> None:
     out += [dict(entries[name], labels=[RLR_LABEL.format(k)])
             for k, name in enumerate(mesh.materials)]
     path.write_text(json.dumps({"materials": out}), encoding="utf-8")
+
+
+def diffuse_material_json(plain: Path, path: Path) -> None:
+    """The same entries with every scattering coefficient 1 (the physics RLR computes: its
+    results do not change with the table's scattering, see the diagnosis)."""
+    doc = json.loads(plain.read_text())
+    for entry in doc["materials"]:
+        entry["scattering"] = [20.0, 1.0, 20000.0, 1.0]
+    path.write_text(json.dumps(doc))
+
+
+def diffuse_scene(scene: AcousticScene) -> AcousticScene:
+    """``scene`` with every scattering coefficient 1."""
+    return AcousticScene(scene.vertices, scene.faces, scene.absorption,
+                         np.ones_like(scene.scattering), scene.transmission)
 
 
 def check_positions(scene, source: np.ndarray, mic: np.ndarray) -> float:
@@ -196,11 +217,13 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
     import rlr_audio_propagation as rlr  # benchmark-only optional dependency
 
     mesh = load_mesh(tmp)
-    cfg = rlr_config(name, rlr)
+    diffuse = name.endswith("_diffuse")
+    cfg = rlr_config(name.removesuffix("_diffuse"), rlr)
+    materials = tmp / ("rlr_materials_diffuse.json" if diffuse else "rlr_materials.json")
     walls, cpus, sims, ir = [], [], [], None
     for _ in range(repeats):
         w0, c0 = time.perf_counter(), time.process_time()
-        out, t_sim = rlr_rir(rlr, cfg, mesh, tmp / "rlr_materials.json")
+        out, t_sim = rlr_rir(rlr, cfg, mesh, materials)
         walls.append(time.perf_counter() - w0)
         cpus.append(time.process_time() - c0)
         sims.append(t_sim)
@@ -308,13 +331,16 @@ def deviation(fig: dict, ref: dict) -> dict:
 
 
 def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
-                candidates: list[tuple[int, int, float, float]]) -> dict:
+                candidates: list[tuple[int, int, float, float]], diffuse: bool = False) -> dict:
     """sonicspec's converged answer (specular splitting, its lowest-variance estimator, the
     mean of ``REF_SEEDS``), then every candidate (rays, order, splitting, free-air ball) over
     seeds. Convergence is judged on the expected figures (see :func:`traced_rir`); the RIRs'
     own figures are kept for the side-by-side tables."""
     ref_settings = sonicspec_settings(ref_rays, 3, REF_SPLITTING)
     scene, regions, _, _ = prepared_scene(tmp, ref_settings)
+    if diffuse:  # every scattering coefficient 1: the physics RLR computes
+        scene = diffuse_scene(scene)
+        regions = planar_regions(scene)
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
     t0 = time.perf_counter()
     ref_runs = [traced_rir(scene, regions, ref_settings, seed, threads) for seed in REF_SEEDS]
@@ -353,11 +379,7 @@ def child_diagnose(tmp: Path) -> dict:
 
     mesh = load_mesh(tmp)
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
-    doc = json.loads((tmp / "rlr_materials.json").read_text())
-    for entry in doc["materials"]:
-        entry["scattering"] = [20.0, 1.0, 20000.0, 1.0]
     diffuse_json = tmp / "rlr_materials_diffuse.json"
-    diffuse_json.write_text(json.dumps(doc))
     out: dict = {}
     cfg = rlr_config("sonicsim", rlr)
     out["rlr_diffuse"] = figures(rlr_rir(rlr, cfg, mesh, diffuse_json)[0], cfg.sample_rate)
@@ -452,7 +474,8 @@ def main() -> int:
         else:
             spec = json.loads(rest[0])
             result = child_sweep(tmp, spec["ref_rays"], spec["seeds"],
-                                 [tuple(c) for c in spec["candidates"]])
+                                 [tuple(c) for c in spec["candidates"]],
+                                 spec.get("diffuse", False))
         Path(args.child_out).write_text(json.dumps(result))
         return 0
 
@@ -481,6 +504,7 @@ def main() -> int:
                  face_material=mesh.face_material)
         (tmp / "materials.json").write_text(json.dumps(list(mesh.materials)))
         rlr_material_json(mesh, tmp / "rlr_materials.json")
+        diffuse_material_json(tmp / "rlr_materials.json", tmp / "rlr_materials_diffuse.json")
         settings = sonicspec_settings(1000, 1)
         scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
         distance = check_positions(scene, SOURCE_M, MIC_M)
@@ -526,6 +550,17 @@ def main() -> int:
                     tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
                     str(threads), str(reps), "1", str(splitting), str(ball), str(roulette))
             print(f"sonicspec {label}: done", flush=True)
+        # The same physics in both engines: every scattering coefficient 1.
+        for name, reps in (("default_diffuse", 3), ("default_50k_diffuse", 1),
+                           ("sonicsim_diffuse", 1)):
+            results[f"rlr_{name}"] = run_child(tmp, "0", 1, "--child", "rlr", name, str(reps))
+        results["rlr_own_error_diffuse"] = deviation(
+            results["rlr_default_diffuse"]["figures"],
+            results["rlr_default_50k_diffuse"]["figures"])
+        results["sweep_diffuse"] = run_child(tmp, "0,1", 2, "--child", "sweep", json.dumps(
+            {"ref_rays": ref_rays, "seeds": seeds, "candidates": DIFFUSE_CANDIDATES,
+             "diffuse": True}))
+        print("same physics (scattering 1): done", flush=True)
         if not args.quick:
             results["diagnosis"] = run_child(tmp, "0,1", 2, "--child", "diagnose")
             print("diagnosis: done", flush=True)
@@ -577,17 +612,7 @@ def report(results: dict) -> None:
           ", ".join(fmt(v, ".2f") for v in sweep["ref_expected"]["t30_s"]) + " s; EDT " +
           ", ".join(fmt(v, ".2f") for v in sweep["ref_expected"]["edt_s"]) + " s; C50 " +
           ", ".join(fmt(v, ".1f") for v in sweep["ref_expected"]["c50_db"]) + " dB\n")
-    print("| rays | image-source order | splitting | visible-air ball (m) | roulette (dB) | "
-          "CPU per RIR | T30 | EDT | C50 | T30 spread over seeds | JND | RLR |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for r in sweep["candidates"]:
-        w = r["worst"]
-        marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
-        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
-              f"{r['roulette']:g} | "
-              f"{np.median(r['cpu_s']):.2f} s | "
-              f"{100 * w['t30']:.1f} % | {100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | "
-              f"{100 * r['t30_spread']:.1f} % | {marks[0]} | {marks[1]} |")
+    sweep_table(sweep, own)
     rule = {"jnd": "within the JND", "rlr": "no worse than RLR defaults' own error (no "
             "candidate within the JND)", "none": "NO candidate passes either rule; the closest"}
     print(f"cheap setting: {cheap_label(cheap)} — fastest {rule[cheap['rule']]}")
@@ -626,6 +651,8 @@ def report(results: dict) -> None:
             print(f"- vs {label}: sonicspec {s_label} {warm:.2f}× (target {target:g}×: "
                   f"{verdict}); with the once-per-mesh setup {cold:.2f}×")
 
+    report_same_physics(results)
+
     diag = results.get("diagnosis")
     if diag:
         print("\nDiagnosis (T30 per band, s)")
@@ -641,6 +668,47 @@ def report(results: dict) -> None:
         print(f"- energies re the free-field direct sound (1/(4πr))²: RLR direct "
               f"{diag['rlr_direct_db']:+.1f} dB, RLR reverberant {diag['rlr_indirect_db']:+.1f} "
               f"dB, sonicspec reverberant {diag['sonicspec_reverberant_db']:+.1f} dB")
+
+
+def sweep_table(sweep: dict, own: dict) -> None:
+    print("| rays | order | splitting | ball (m) | roulette (dB) | CPU per RIR | T30 | EDT | C50 "
+          "| T30 spread | JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sweep["candidates"]:
+        w = r["worst"]
+        marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
+        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
+              f"{r['roulette']:g} | {np.median(r['cpu_s']):.2f} s | {100 * w['t30']:.1f} % | "
+              f"{100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | {100 * r['t30_spread']:.1f} % | "
+              f"{marks[0]} | {marks[1]} |")
+
+
+def report_same_physics(results: dict) -> None:
+    """Both engines with every scattering coefficient 1 (the physics RLR computes whatever
+    the table says): the speed targets at equal accuracy on equal physics."""
+    sweep, own = results["sweep_diffuse"], results["rlr_own_error_diffuse"]
+    t_def = min(results["rlr_default_diffuse"]["cpu_s"])
+    t_sim = min(results["rlr_sonicsim_diffuse"]["cpu_s"])
+    print("\nSame physics: every scattering coefficient 1 in both engines. RLR defaults "
+          f"{t_def:.2f} s, RLR at SonicSim's settings {t_sim:.2f} s (1 thread); RLR defaults "
+          f"against its own 50 000 rays: T30 {100 * own['t30']:.1f} %, EDT "
+          f"{100 * own['edt']:.1f} %, C50 {own['c50_db']:.2f} dB. sonicspec's expected figures "
+          f"against the mean of its {len(REF_SEEDS)} converged runs "
+          f"({sweep['ref_rays']:,} rays), worst band and seed:\n")
+    print("Expected figures of the converged runs' mean: T30 " +
+          ", ".join(fmt(v, ".2f") for v in sweep["ref_expected"]["t30_s"]) + " s\n")
+    sweep_table(sweep, own)
+    for label, limit in (("within the JND", JND), ("within RLR's own error", own)):
+        ok = [r for r in sweep["candidates"] if all(r["worst"][k] <= limit[k] for k in JND)]
+        if not ok:
+            print(f"\nno setting {label}")
+            continue
+        best = min(ok, key=lambda r: np.median(r["cpu_s"]))
+        t = float(np.median(best["cpu_s"]))
+        print(f"\nfastest {label}: {best['rays']:,} rays, order {best['order']}, roulette "
+              f"{best['roulette']:g} dB: {t:.2f} s per RIR = {t_def / t:.1f}× RLR defaults "
+              f"(target 3×: {'met' if t_def / t >= 3 else 'missed'}), {t_sim / t:.1f}× RLR at "
+              f"SonicSim's settings (target 20×: {'met' if t_sim / t >= 20 else 'missed'})")
 
 
 if __name__ == "__main__":
