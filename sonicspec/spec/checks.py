@@ -464,6 +464,13 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
             f"{a.rays} rays leave audible Monte-Carlo noise in the late reverberation; "
             f"use at least {MIN_RAYS_WITHOUT_WARNING}",
         )
+    if a.roulette_db >= a.energy_threshold_db:
+        yield _warn(
+            ("acoustics", "roulette_db"),
+            f"roulette_db = {a.roulette_db:g} is not below energy_threshold_db = "
+            f"{a.energy_threshold_db:g}: rays stop at the threshold before the roulette starts, "
+            "so it has no effect; lower it (the default is 30) or set it to 0",
+        )
 
 
 def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
