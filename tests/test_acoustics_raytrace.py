@@ -531,5 +531,30 @@ def test_russian_roulette_of_weak_rays_is_unbiased():
     np.testing.assert_allclose(windows[20.0][:2], windows[0.0][:2], rtol=0.03)
     np.testing.assert_allclose(windows[20.0][2], windows[0.0][2], rtol=0.06)
     assert hits[20.0] < 0.5 * hits[0.0]
+
+
+def test_the_scan_estimators_together_are_unbiased():
+    """The `sonicset` preset's tracer — specular splitting 2, a 4 m visible-air ball and
+    roulette 30 dB down, each tested alone above — against plain rays followed to 80 dB, in
+    the same flutter room (8 seeds each): the early, 50–300 ms and 300–600 ms energies agree
+    within 3 %, 3 % and 7 % (standard errors of the means, first band: 0.7–0.8, 0.5–0.6 and
+    1.2–2.5 %),
+    with a third of the rays and about a seventh of the CPU."""
+    scene = rooms.flutter_scene(tau_high_band=0.02)
+    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
+    windows = []
+    for options in ({"n_rays": 12_000},
+                    {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0,
+                     "free_air_volume": True, "max_receiver_radius_m": 4.0}):
+        settings = RayTraceSettings(max_time_s=0.6, specular_order_excluded=1, **options)
+        sums = []
+        for seed in range(8):
+            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
+            e = res.histogram.energy
+            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
+        windows.append(np.mean(sums, axis=0))
+    plain, preset = windows
+    np.testing.assert_allclose(preset[:2], plain[:2], rtol=0.03)
+    np.testing.assert_allclose(preset[2], plain[2], rtol=0.07)
     with pytest.raises(AcousticsError, match="roulette_db"):
         RayTraceSettings(roulette_db=-1.0)
