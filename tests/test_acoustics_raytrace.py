@@ -538,8 +538,7 @@ def test_the_scan_estimators_together_are_unbiased():
     roulette 30 dB down, each tested alone above — against plain rays followed to 80 dB, in
     the same flutter room (8 seeds each): the early, 50–300 ms and 300–600 ms energies agree
     within 3 %, 3 % and 7 % (standard errors of the means, first band: 0.7–0.8, 0.5–0.6 and
-    1.2–2.5 %),
-    with a third of the rays and about a seventh of the CPU."""
+    1.2–2.5 %), with a third of the rays and about a seventh of the CPU."""
     scene = rooms.flutter_scene(tau_high_band=0.02)
     src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     windows = []
