@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -29,6 +31,8 @@ from sonicspec.acoustics.arrivals import KIND_SPECULAR, Arrivals
 from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
+
+T = TypeVar("T")
 
 __all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_regions"]
 
@@ -67,12 +71,19 @@ class PlanarRegions:
     region_faces: np.ndarray
     reflection_energy: np.ndarray
     distance_tol_m: float = 0.0
-    #: Tables derived from the regions and their scene (the reach table), built once.
+    #: Tables derived from the regions and their scene (reach table, bounding boxes).
     memo: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_regions(self) -> int:
         return int(self.normals.shape[0])
+
+    def memoized(self, key: Hashable, build: Callable[[], T]) -> T:
+        """``build()`` once per regions and ``key`` (as :meth:`AcousticScene.memoized`): a
+        trajectory calls the image-source search point by point on the same regions."""
+        if key not in self.memo:
+            self.memo[key] = build()
+        return self.memo[key]  # type: ignore[return-value]
 
 
 def planar_regions(
@@ -227,17 +238,18 @@ def _region_boxes(scene: AcousticScene, regions: PlanarRegions) -> np.ndarray:
     """``(P, 2, 3)``: each region's bounding box (lower, upper corner), widened by more than a
     point the barycentric test calls inside can lie outside it (the region's triangles may lie
     ``distance_tol_m`` off its plane, and the test allows ``1e-9`` in barycentric units).
-    Built once per regions (``regions.memo``)."""
-    key = "region_boxes"
-    if key not in regions.memo:
+    Built once per regions."""
+
+    def build() -> np.ndarray:
         tri = scene.vertices[scene.faces[regions.region_faces]]  # (F, 3, 3), by region
         starts = regions.region_start[:-1]
         lower = np.minimum.reduceat(tri.min(axis=1), starts, axis=0)
         upper = np.maximum.reduceat(tri.max(axis=1), starts, axis=0)
         margin = (2.0 * regions.distance_tol_m + 1e-6 * max(1.0, float(np.abs(tri).max()))
                   + 1e-6 * (upper - lower).max(axis=1, keepdims=True))
-        regions.memo[key] = np.ascontiguousarray(np.stack([lower - margin, upper + margin], 1))
-    return regions.memo[key]
+        return np.ascontiguousarray(np.stack([lower - margin, upper + margin], 1))
+
+    return regions.memoized("region_boxes", build)
 
 
 # Regions with more triangles than this are tested with an Embree probe ray, not barycentrics.
@@ -352,12 +364,10 @@ def image_sources(
     n_rcv = len(receivers)
     tol = scene.eps_m
     reach = None
-    if max_order >= 2:  # built once per regions (a trajectory calls this point by point)
-        key = ("reach", tol)
-        if key not in regions.memo:
-            regions.memo[key] = _reach_tables(scene, regions, tol)
-        reach = regions.memo[key]
-    normals, plane_d = regions.normals, regions.plane_d
+    if max_order >= 2:
+        reach = regions.memoized(("reach", tol), lambda: _reach_tables(scene, regions, tol))
+    normals = regions.normals
+    candidates = _CandidateTest(normals, regions.plane_d, tol, reach)
 
     per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
     # The image tree, one order at a time: chain[i, j] is the image after j+1 reflections,
@@ -374,14 +384,14 @@ def image_sources(
         rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         count = 0
-        if _provably_too_many(last_pos, planes[:, -1] if order > 1 else None, side, reach,
-                              normals, plane_d, tol, receivers, max_path_length_m,
-                              max_candidates):
+        last_plane = planes[:, -1] if order > 1 else None
+        if _provably_too_many(candidates, last_pos, last_plane, side, receivers,
+                              max_path_length_m, max_candidates):
             count = max_candidates + 1  # decided without building the images
         for r0 in range(0, len(last_pos) if count <= max_candidates else 0, rows):
             sl = slice(r0, r0 + rows)
-            dist, ok = _candidates(last_pos[sl], planes[sl, -1] if order > 1 else None,
-                                   side[sl], reach, normals, plane_d, tol)
+            dist, ok = candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
+                                  side[sl])
             par, pln = np.nonzero(ok)
             d = dist[par, pln]
             pos = last_pos[sl][par] - 2.0 * d[:, None] * normals[pln]
@@ -436,35 +446,35 @@ def image_sources(
     return ImageSourceResult(arrivals=arrivals, max_order=completed)
 
 
-def _candidates(
-    last_pos: np.ndarray,
-    last_plane: np.ndarray | None,
-    side: np.ndarray,
-    reach: np.ndarray | None,
-    normals: np.ndarray,
-    plane_d: np.ndarray,
-    tol: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Signed distances ``(M, P)`` of the parent images to every region plane, and which
-    (parent, region) pairs make candidates: off the plane, not the parent's own last region,
-    and reachable from its side (the reach table)."""
-    dist = last_pos @ normals.T - plane_d[None, :]
-    ok = np.abs(dist) > tol
-    if last_plane is not None:
-        ok &= np.arange(len(plane_d))[None, :] != last_plane[:, None]
-        if reach is not None:
-            ok &= reach[side, last_plane]
-    return dist, ok
+@dataclass(frozen=True, eq=False)
+class _CandidateTest:
+    """Which (parent image, region) pairs make candidate images: the region planes, the
+    off-plane tolerance and the reach table (None: every region is reachable)."""
+
+    normals: np.ndarray
+    plane_d: np.ndarray
+    tol: float
+    reach: np.ndarray | None
+
+    def __call__(self, last_pos: np.ndarray, last_plane: np.ndarray | None, side: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances ``(M, P)`` of the parent images to every region plane, and which
+        pairs make candidates: off the plane, not the parent's own last region, and reachable
+        from its side."""
+        dist = last_pos @ self.normals.T - self.plane_d[None, :]
+        ok = np.abs(dist) > self.tol
+        if last_plane is not None:
+            ok &= np.arange(len(self.plane_d))[None, :] != last_plane[:, None]
+            if self.reach is not None:
+                ok &= self.reach[side, last_plane]
+        return dist, ok
 
 
 def _provably_too_many(
+    candidates: _CandidateTest,
     last_pos: np.ndarray,
     last_plane: np.ndarray | None,
     side: np.ndarray,
-    reach: np.ndarray | None,
-    normals: np.ndarray,
-    plane_d: np.ndarray,
-    tol: float,
     receivers: np.ndarray,
     max_path_length_m: float | None,
     limit: int,
@@ -476,9 +486,9 @@ def _provably_too_many(
     is accounted for only where it provably keeps a candidate (``|image − r| <= |parent − r|
     + 2|d|``). False whenever that cannot be shown: the exact count then decides.
     """
-    n_regions = len(plane_d)
-    if last_plane is not None and reach is not None:
-        bound = int(reach.sum(axis=2)[side, last_plane].sum())
+    n_regions = len(candidates.plane_d)
+    if last_plane is not None and candidates.reach is not None:
+        bound = int(candidates.reach.sum(axis=2)[side, last_plane].sum())
     else:
         bound = len(last_pos) * n_regions
     if bound <= limit:
@@ -491,8 +501,8 @@ def _provably_too_many(
     count = 0
     for r0 in range(0, len(last_pos), rows):
         sl = slice(r0, r0 + rows)
-        dist, ok = _candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
-                               side[sl], reach, normals, plane_d, tol)
+        dist, ok = candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
+                              side[sl])
         if nearest is not None and np.any(
                 ok & (nearest[sl, None] + 2.0 * np.abs(dist) > max_path_length_m)):
             return False
