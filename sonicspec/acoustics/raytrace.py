@@ -581,7 +581,7 @@ def _kernel_params(scene: AcousticScene, rcv: _Receivers, st: RayTraceSettings,
     ip[K.I_CONVEX] = int(rcv.planes is not None)
     ip[K.I_SPLIT] = int(st.splitting > 0)
     ip[K.I_AXIS] = rcv.axis
-    ip[K.I_MAP_N] = round(math.sqrt(rcv.depth.shape[1] / 6.0))
+    ip[K.I_MAP_N] = _VISIBILITY_CELLS if rcv.depth.shape[1] else 0
     return fp, ip
 
 
@@ -687,18 +687,24 @@ def receiver_clearance_m(
     the rays can be missed (the radius is then slightly too large near them).
     """
     receivers = check_points("receivers", receivers)
-    dirs = fibonacci_sphere(n_directions)
     spacing = math.sqrt(4.0 * math.pi / n_directions)
-    out = np.zeros(len(receivers))
-    # Several receivers per Embree call (about 2^18 rays): far fewer calls for many receivers.
-    per = max(1, (1 << 18) // n_directions)
+    dist = _hit_distances(scene, receivers, fibonacci_sphere(n_directions))
+    return dist.min(axis=1) * math.cos(spacing)
+
+
+def _hit_distances(scene: AcousticScene, receivers: np.ndarray, dirs: np.ndarray
+                   ) -> np.ndarray:
+    """Distance ``(K, D)`` from every receiver to the first surface along every direction
+    (``inf`` where the ray escapes), several receivers per Embree call (about 2^18 rays):
+    far fewer calls for many receivers."""
+    out = np.empty((len(receivers), len(dirs)))
+    per = max(1, (1 << 18) // len(dirs))
     for r0 in range(0, len(receivers), per):
         block = receivers[r0 : r0 + per]
-        _, dist = scene.intersect(
-            np.repeat(block, n_directions, axis=0), np.tile(dirs, (len(block), 1))
-        )
-        out[r0 : r0 + len(block)] = dist.reshape(len(block), n_directions).min(axis=1)
-    return out * math.cos(spacing)
+        _, dist = scene.intersect(np.repeat(block, len(dirs), axis=0),
+                                  np.tile(dirs, (len(block), 1)))
+        out[r0 : r0 + len(block)] = dist.reshape(len(block), len(dirs))
+    return out
 
 
 # Cells per cube-face edge of a receiver's visibility map (6 · 32² = 6,144 Embree rays).
@@ -745,11 +751,9 @@ def _visible_air(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
     Returns ``(depth (K, 6·n_cells²) float64, volume (K, n_radii) m³)``.
     """
     dirs, solid = _cube_cells(n_cells)
-    depth = np.empty((len(receivers), len(dirs)))
+    depth = _hit_distances(scene, receivers, dirs)
     volume = np.empty((len(receivers), n_radii))
-    for k, x in enumerate(receivers):
-        face, dist = scene.intersect(np.broadcast_to(x, dirs.shape), dirs)
-        depth[k] = np.where(face >= 0, dist, np.inf)
+    for k in range(len(receivers)):  # per receiver: (radii × cells) stays small
         reach = np.minimum(depth[k][None, :], np.linspace(0.0, cap[k], n_radii)[:, None])
         volume[k] = (reach**3 @ solid) / 3.0
     return depth, volume
