@@ -71,17 +71,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_navigation import apartment, subdivide
 
-from sonicspec.acoustics.arrivals import Arrivals
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.image_sources import image_sources, planar_regions
-from sonicspec.acoustics.metrics import figures_from_energy, room_acoustic_figures
+from sonicspec.acoustics.image_sources import planar_regions
+from sonicspec.acoustics.metrics import room_acoustic_figures
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.synthesis import synthesize_rir
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec
-from sonicspec.stages.rir import RirSettings, acoustic_scene, ray_trace_settings, simulate_rirs
+from sonicspec.stages.rir import RirSettings, acoustic_scene, simulate_rirs
 
 BANDS_HZ = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0)
 SOURCE_M = np.array([12.5, 9.0, 1.5])  # the 10 × 7 m room at x 10..20, y 7..14
@@ -249,40 +246,19 @@ def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: floa
 
 
 def sonicspec_rir(scene, regions, settings: RirSettings, seed: int, n_threads: int
-                  ) -> tuple[np.ndarray, int]:
+                  ) -> tuple[np.ndarray, dict]:
     """One mono RIR by the rir stage's ``simulate_rirs`` (the same bytes whatever
-    ``n_threads``), and the image-source order completed (3 stops at 2 in this scene: more
-    than 2 M candidates; its warning is silenced here)."""
+    ``n_threads``) and its facts: the image-source order completed (3 stops at 2 in this scene:
+    more than 2 M candidates; its warning is silenced here) and the *expected* figures of the
+    same trace (``facts["expected"]``): T30, EDT and C50 per band of the energy the RIR is
+    synthesised to have, free of the synthesis noise that makes one RIR's low-band figures
+    fluctuate (at 125 Hz a second noise draw over the same trace moves EDT by ~20 %)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         (rir,), (facts,) = simulate_rirs(scene, MIC_M, SOURCE_M[None], settings,
                                          np.random.default_rng(seed), regions=regions,
-                                         n_threads=n_threads)
-    return rir[0].astype(np.float64), facts["image_source_order"]
-
-
-def traced_rir(scene, regions, settings: RirSettings, seed: int, n_threads: int
-               ) -> tuple[np.ndarray, dict]:
-    """The mono RIR of :func:`sonicspec_rir` (the same steps and random draws as the rir
-    stage) and the *expected* figures of the same trace: T30, EDT and C50 per band from the
-    energy the RIR is synthesised to have (early arrivals plus the tracer's histogram), free of
-    the synthesis noise that makes one RIR's low-band figures fluctuate (at 125 Hz a second
-    noise draw over the same trace moves EDT by ~20 %)."""
-    air, c = settings.air(), settings.speed_of_sound_m_s
-    rng = np.random.default_rng(seed)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        (direct,) = direct_sound(scene, MIC_M, SOURCE_M[None], air, c)
-        ism = image_sources(scene, MIC_M, SOURCE_M[None], settings.image_source_order, air, c,
-                            regions, max_path_length_m=c * settings.max_rir_length_s)
-    (trace,) = trace_rays(scene, MIC_M, SOURCE_M[None], rng,
-                          ray_trace_settings(settings, ism.max_order), air, n_threads=n_threads)
-    arrivals = Arrivals.concatenate([direct, ism.arrivals[0]])
-    hist = trace.histogram
-    rir = synthesize_rir(arrivals, hist, settings.sample_rate_hz, rng,
-                         max_length_s=settings.max_rir_length_s, bands_hz=settings.bands_hz)
-    energy = hist.energy + arrivals.energy_histogram(hist.bin_s, hist.energy.shape[0])
-    return rir, figures_from_energy(energy, hist.bin_s)
+                                         n_threads=n_threads, expected_figures=True)
+    return rir[0].astype(np.float64), facts
 
 
 def prepared_scene(tmp: Path, settings: RirSettings):
@@ -305,7 +281,8 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
     walls, cpus, rir = [], [], None
     for _ in range(repeats):
         w0, c0 = time.perf_counter(), time.process_time()
-        out, order_done = sonicspec_rir(scene, regions, settings, seed, threads)
+        out, facts = sonicspec_rir(scene, regions, settings, seed, threads)
+        order_done = facts["image_source_order"]
         walls.append(time.perf_counter() - w0)
         cpus.append(time.process_time() - c0)
         rir = out if rir is None else rir
@@ -334,7 +311,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
                 candidates: list[tuple[int, int, float, float]], diffuse: bool = False) -> dict:
     """sonicspec's converged answer (specular splitting, its lowest-variance estimator, the
     mean of ``REF_SEEDS``), then every candidate (rays, order, splitting, free-air ball) over
-    seeds. Convergence is judged on the expected figures (see :func:`traced_rir`); the RIRs'
+    seeds. Convergence is judged on the expected figures (see :func:`sonicspec_rir`); the RIRs'
     own figures are kept for the side-by-side tables."""
     ref_settings = sonicspec_settings(ref_rays, 3, REF_SPLITTING)
     scene, regions, _, _ = prepared_scene(tmp, ref_settings)
@@ -343,9 +320,11 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
         regions = planar_regions(scene)
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
     t0 = time.perf_counter()
-    ref_runs = [traced_rir(scene, regions, ref_settings, seed, threads) for seed in REF_SEEDS]
+    ref_runs = [sonicspec_rir(scene, regions, ref_settings, seed, threads)
+                for seed in REF_SEEDS]
     ref_wall = (time.perf_counter() - t0) / len(REF_SEEDS)
-    ref_expected = {k: np.mean(np.array([e[k] for _, e in ref_runs], float), axis=0).tolist()
+    ref_expected = {k: np.mean(np.array([f["expected"][k] for _, f in ref_runs], float),
+                               axis=0).tolist()
                     for k in ("t30_s", "edt_s", "c50_db")}
     rows = []
     for rays, order, splitting, ball, roulette in candidates:
@@ -353,7 +332,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
         cpus, devs, exps = [], [], []
         for seed in seeds:
             c0 = time.process_time()
-            _, expected = traced_rir(scene, regions, settings, seed, 1)
+            expected = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]
             cpus.append(time.process_time() - c0)
             exps.append(expected)
             devs.append(deviation(expected, ref_expected))
@@ -365,7 +344,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
                      "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
     return {"ref_rays": ref_rays, "ref_wall_s": ref_wall, "ref_threads": threads,
             "ref": figures(ref_runs[0][0], SAMPLE_RATE_HZ), "ref_expected": ref_expected,
-            "ref_expected_runs": [e for _, e in ref_runs], "candidates": rows}
+            "ref_expected_runs": [f["expected"] for _, f in ref_runs], "candidates": rows}
 
 
 def child_diagnose(tmp: Path) -> dict:
