@@ -63,6 +63,15 @@ def test_convex_room_planes_face_inwards_whatever_the_winding(flip: bool):
     assert np.any(np.array([5.0, 1.5, 1.2]) @ normals.T - offsets < 0)  # outside
 
 
+def traced_before_and_after(monkeypatch, name: str, value, scene, src, rcvs, settings,
+                            seed: int) -> tuple[list, list]:
+    """The same trace (same seed) before and after setting ``raytrace.<name>`` to ``value``:
+    for shortcuts that must not change the sums."""
+    before = trace_rays(scene, src, rcvs, np.random.default_rng(seed), settings)
+    monkeypatch.setattr(raytrace, name, value)
+    return before, trace_rays(scene, src, rcvs, np.random.default_rng(seed), settings)
+
+
 def test_non_convex_room_or_transmission_keeps_every_shadow_ray():
     scene = uniform_scene(*extruded_room(*L_ROOM, 3.0), n_bands=1)
     assert raytrace._convex_planes(scene) is None
@@ -75,10 +84,8 @@ def test_convex_shortcut_gives_what_the_shadow_rays_give(monkeypatch):
     src = np.array([1.0, 1.0, 1.5])
     rcvs = np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0], [5.95, 4.95, 0.05]])
     settings = RayTraceSettings(n_rays=500, max_time_s=0.4)
-    fast = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
-    monkeypatch.setattr(raytrace, "_CONVEX_MAX_FACES", 0)
-    slow = trace_rays(scene, src, rcvs, np.random.default_rng(4), settings)
-    assert_same_histograms(fast, slow)
+    assert_same_histograms(*traced_before_and_after(
+        monkeypatch, "_CONVEX_MAX_FACES", 0, scene, src, rcvs, settings, seed=4))
 
 
 @pytest.mark.parametrize("room", ["shoebox", "L"])
@@ -143,9 +150,8 @@ def test_walking_blocked_shadow_rays_in_batches_gives_the_same_sums(monkeypatch)
     src = np.array([1.0, 1.0, 1.5])
     rcvs = np.array([[5.0, 1.5, 1.2], [1.5, 5.0, 2.0], [2.0, 2.0, 0.5]])
     settings = RayTraceSettings(n_rays=400, max_time_s=0.3)
-    batched = trace_rays(scene, src, rcvs, np.random.default_rng(6), settings)
-    monkeypatch.setattr(raytrace, "_WALK_BATCH", 1)
-    stepwise = trace_rays(scene, src, rcvs, np.random.default_rng(6), settings)
+    batched, stepwise = traced_before_and_after(
+        monkeypatch, "_WALK_BATCH", 1, scene, src, rcvs, settings, seed=6)
     assert batched[1].histogram.energy.sum() > 0  # round the corner from the source
     assert_same_histograms(batched, stepwise)
 
