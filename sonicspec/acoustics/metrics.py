@@ -140,12 +140,16 @@ def figures_from_energy(energy: np.ndarray, bin_s: float) -> dict[str, list[floa
     filled = np.flatnonzero(e.sum(axis=1) > 0)
     onset = int(filled[0]) if filled.size else 0
     split = onset + round(0.05 / bin_s)
-    c50 = [_clarity(e[onset:, b], split - onset) for b in range(e.shape[1])]
+    c50 = np.array([_clarity(e[onset:, b], split - onset) for b in range(e.shape[1])])
+    return {"t30_s": _json_ready(decay["t30_s"]), "edt_s": _json_ready(decay["edt_s"]),
+            "c50_db": _json_ready(c50)}
 
-    def clean(values):
-        return [None if math.isnan(v) else float(v) for v in values]
 
-    return {"t30_s": clean(decay["t30_s"]), "edt_s": clean(decay["edt_s"]), "c50_db": clean(c50)}
+def _json_ready(v):
+    """Arrays as lists of floats and NaN as None (JSON has no NaN)."""
+    if isinstance(v, np.ndarray):
+        return [_json_ready(float(x)) for x in v]
+    return None if isinstance(v, float) and math.isnan(v) else v
 
 
 def _clarity(energy: np.ndarray, split: int) -> float:
@@ -169,17 +173,11 @@ class RoomAcousticFigures:
 
     def to_dict(self) -> dict:
         """JSON-ready (NaN becomes None)."""
-
-        def clean(v):
-            if isinstance(v, np.ndarray):
-                return [clean(float(x)) for x in v]
-            return None if isinstance(v, float) and math.isnan(v) else v
-
         return {"bands_hz": list(self.bands_hz),
-                **{k: clean(getattr(self, k)) for k in ("t20_s", "t30_s", "edt_s", "c50_db",
-                                                         "c80_db", "d50")},
-                "broadband": {k: clean(v) for k, v in self.broadband.items()},
-                "drr_db": clean(self.drr_db)}
+                **{k: _json_ready(getattr(self, k)) for k in ("t20_s", "t30_s", "edt_s",
+                                                               "c50_db", "c80_db", "d50")},
+                "broadband": {k: _json_ready(v) for k, v in self.broadband.items()},
+                "drr_db": _json_ready(self.drr_db)}
 
 
 def _single(x: np.ndarray, sample_rate_hz: float) -> dict[str, float]:

@@ -297,24 +297,22 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
     def num(v, fmt):
         return "—" if v is None else format(v, fmt)
 
+    def per_band(figures: dict[str, Any]) -> list[str]:
+        return [f"{label:>10} " + " ".join(num(v, fmt) for v in figures[key])
+                for label, key, fmt in (("T30 (s)", "t30_s", "7.3f"), ("EDT (s)", "edt_s", "7.3f"),
+                                        ("C50 (dB)", "c50_db", "7.2f"))]
+
     lines = [
         f"RIR in {facts['scene_id']}: source {facts['source_m']} -> mic {facts['mic_m']} "
         f"({facts['distance_m']:.2f} m), {facts['samples']} samples at "
         f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
         f"order {facts['image_source_order']}), direct path {facts['direct']}",
         f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
-        f"{'T30 (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["t30_s"]),
-        f"{'EDT (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in fig["edt_s"]),
-        f"{'C50 (dB)':>10} " + " ".join(f"{num(v, '7.2f')}" for v in fig["c50_db"]),
+        *per_band(fig),
     ]
     if "expected" in facts:  # the same fits on the energy the RIR was synthesised to have
-        exp = facts["expected"]
-        lines += [
-            "expected (the energy it was synthesised to have, without the noise draw):",
-            f"{'T30 (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in exp["t30_s"]),
-            f"{'EDT (s)':>10} " + " ".join(f"{num(v, '7.3f')}" for v in exp["edt_s"]),
-            f"{'C50 (dB)':>10} " + " ".join(f"{num(v, '7.2f')}" for v in exp["c50_db"]),
-        ]
+        lines.append("expected (the energy it was synthesised to have, without the noise draw):")
+        lines += per_band(facts["expected"])
     lines += [
         f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
         f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
