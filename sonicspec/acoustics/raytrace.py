@@ -96,8 +96,9 @@ Model (every approximation is listed here)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -621,23 +622,25 @@ class _RainQueue:
                    np.empty(m, dtype=np.int64), np.empty((m, n_bands)),
                    np.empty((m if directions else 0, 3)))
 
+    def _arrays(self) -> tuple[np.ndarray, ...]:
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+    def _map(self, fn: Callable[[np.ndarray], np.ndarray]) -> _RainQueue:
+        """``fn`` on every field's rows; an empty field (departures not kept) stays empty."""
+        return _RainQueue(*(fn(x) if len(x) else x for x in self._arrays()))
+
     def take(self, rows: np.ndarray) -> _RainQueue:
-        dep = np.take(self.departure, rows, axis=0) if len(self.departure) else self.departure
-        return _RainQueue(*(np.take(x, rows, axis=0) for x in (
-            self.origin, self.direction, self.length, self.receiver, self.bin, self.energy)),
-            dep)
+        return self._map(lambda x: np.take(x, rows, axis=0))
+
+    def head(self, n: int) -> _RainQueue:
+        return self._map(lambda x: x[:n])
 
     @classmethod
     def concatenate(cls, queues: list[_RainQueue]) -> _RainQueue:
         if len(queues) == 1:
             return queues[0]
-        return cls(*(np.concatenate([getattr(q, name) for q in queues]) for name in (
-            "origin", "direction", "length", "receiver", "bin", "energy", "departure")))
-
-    def head(self, n: int) -> _RainQueue:
-        dep = self.departure[:n] if len(self.departure) else self.departure
-        return _RainQueue(self.origin[:n], self.direction[:n], self.length[:n],
-                          self.receiver[:n], self.bin[:n], self.energy[:n], dep)
+        return cls(*(np.concatenate(parts) for parts in zip(*(q._arrays() for q in queues),
+                                                             strict=True)))
 
 
 def _settle_rain(scene: AcousticScene, req: _RainQueue, rng: np.random.Generator,
