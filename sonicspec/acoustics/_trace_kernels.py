@@ -75,6 +75,21 @@ def cube_cell(x, y, z, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _scaled(src, i, gain, ev, cls, div, dst, j, air, path, has_air):  # pragma: no cover
+    """Writes ``dst[j] = src[i] · gain[ev, cls] / div`` (per band; ``dst`` may be ``src``
+    with ``j <= i``) and returns its largest band after air absorption over ``path`` metres:
+    the energy the termination and roulette tests see."""
+    strongest = 0.0
+    for b in range(src.shape[1]):
+        e = src[i, b] * gain[ev, cls, b] / div
+        dst[j, b] = e
+        if has_air == 1:
+            e = e * math.exp(-air[b] * path)
+        strongest = max(strongest, e)
+    return strongest
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _add_bands(hist, k, tb, row, scale):  # pragma: no cover - compiled
     """Adds ``row · scale`` to receiver ``k``'s bin ``tb``; returns the band sum added."""
     total = 0.0
@@ -281,13 +296,8 @@ def bounce(
                 peak = max(peak, energy[i, b])
             q = min(1.0, fp[F_CHILD_P] * peak / fp[F_E0])
             if event == 1 and alive_time and u[i, 3] < q:
-                strongest = 0.0
-                for b in range(n_bands):
-                    e = energy[i, b] * split_gain[2, cls, b] / q
-                    c_energy[n_child, b] = e
-                    if has_air == 1:
-                        e = e * math.exp(-air[b] * travelled)
-                    strongest = max(strongest, e)
+                strongest = _scaled(energy, i, split_gain, 2, cls, q, c_energy, n_child, air,
+                                    travelled, has_air)
                 if strongest >= e_stop:
                     ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
                     norm = math.sqrt(ex * ex + ey * ey + ez * ez)
@@ -307,13 +317,8 @@ def bounce(
             # The continuing event by band-mean weights (0 transmit, 1 specular, 2 diffuse),
             # reweighted per band (unbiased).
             event = 0 if pick < p_t[cls] else (1 if pick < p_ts[cls] else 2)
-        strongest = 0.0
-        for b in range(n_bands):
-            e = energy[i, b] * table[event, cls, b]
-            energy[out, b] = e
-            if has_air == 1:
-                e = e * math.exp(-air[b] * travelled)
-            strongest = max(strongest, e)
+        strongest = _scaled(energy, i, table, event, cls, 1.0, energy, out, air, travelled,
+                            has_air)
         if event == 1:  # specular mirror
             ex, ey, ez = dx - 2.0 * cos_in * nx, dy - 2.0 * cos_in * ny, dz - 2.0 * cos_in * nz
         elif event == 2:  # Lambert around the facing normal
