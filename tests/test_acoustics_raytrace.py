@@ -7,7 +7,10 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from numba import njit
 
+from sonicspec.acoustics import _trace_kernels as K
+from sonicspec.acoustics import raytrace
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources
@@ -531,6 +534,77 @@ def test_russian_roulette_of_weak_rays_is_unbiased():
     np.testing.assert_allclose(windows[20.0][:2], windows[0.0][:2], rtol=0.03)
     np.testing.assert_allclose(windows[20.0][2], windows[0.0][2], rtol=0.06)
     assert hits[20.0] < 0.5 * hits[0.0]
+
+
+def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
+    """The same flutter room, where near-horizontal rays carry the tail: sending half of the
+    launched and scattered directions to thin horizontal bands (weighted by plain / mixed
+    density) keeps the early, 50–300 ms and 300–600 ms energies of plain rays followed to
+    80 dB (8 seeds each; within 4 %, 3 % and 7 %: standard errors of the means 0.7–0.9, 0.5–0.7
+    and 0.5–2.6 %); on top of the `sonicset` preset's estimators the 300–600 ms energy's
+    seed-to-seed spread falls by more than half (measured: 1.3 % → 0.5 % standard error)."""
+    scene = rooms.flutter_scene(tau_high_band=0.02)
+    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
+    preset = {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0, "free_air_volume": True,
+              "max_receiver_radius_m": 4.0}
+    windows, spread = [], []
+    for options in ({"n_rays": 12_000}, preset, {**preset, "guiding": 0.5}):
+        settings = RayTraceSettings(max_time_s=0.6, specular_order_excluded=1, **options)
+        sums = []
+        for seed in range(8):
+            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
+            e = res.histogram.energy
+            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
+        windows.append(np.mean(sums, axis=0))
+        spread.append(np.std(sums, axis=0)[2] / windows[-1][2])
+    plain, _, guided = windows
+    np.testing.assert_allclose(guided[0], plain[0], rtol=0.04)
+    np.testing.assert_allclose(guided[1], plain[1], rtol=0.03)
+    np.testing.assert_allclose(guided[2], plain[2], rtol=0.07)
+    assert np.all(spread[2] < 0.5 * spread[1]), spread
+    for bad in (-0.1, 1.0):
+        with pytest.raises(AcousticsError, match="guiding"):
+            RayTraceSettings(guiding=bad)
+    with pytest.raises(AcousticsError, match="guiding_widths"):
+        RayTraceSettings(guiding=0.5, guiding_widths=(0.0,))
+
+
+@njit  # not cached: a cache would not see edits of the kernel it inlines
+def _scatter_many(normal, u, beta, widths):
+    """The tracer's diffuse direction and weight for every row of draws ``u``."""
+    out = np.empty((u.shape[0], 4))
+    for i in range(u.shape[0]):
+        out[i] = K._scatter(normal[0], normal[1], normal[2], u[i, 0], u[i, 1], u[i, 2], beta,
+                            widths)
+    return out
+
+
+def test_guided_directions_carry_the_plain_densities():
+    """Weights of guided directions (β = 0.5, the three bands) make their averages those of
+    the plain densities: off a wall, a floor and a tilted face, E[w] = 1, E[w·cosθ] = 2/3
+    (Lambert) and E[w·1(|z| < 0.01)] = the Lambert share of that band (from 4·10⁵ plain
+    draws); launched from the source, E[w] = 1, E[w·z²] = 1/3 and E[w·1(|z| < 0.01)] = 0.01
+    (uniform sphere)."""
+    widths = np.array(RayTraceSettings().guiding_widths)
+    rng = np.random.default_rng(3)
+    n = 400_000
+    for normal in ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.6, 0.0, 0.8)):
+        u = rng.random((n, 3))
+        guided = _scatter_many(np.array(normal), u, 0.5, widths)
+        plain = _scatter_many(np.array(normal), u, 0.0, widths)[:, :3]
+        plain /= np.linalg.norm(plain, axis=1, keepdims=True)
+        w, d = guided[:, 3], guided[:, :3]
+        band = np.mean(np.abs(plain[:, 2]) < 0.01)
+        assert abs(w.mean() - 1) < 0.01, (normal, w.mean())
+        assert abs(np.mean(w * (d @ np.array(normal))) - 2 / 3) < 0.01, normal
+        assert abs(np.mean(w * (np.abs(d[:, 2]) < 0.01)) - band) < 0.1 * band + 2e-4, normal
+        assert np.mean(np.abs(d[:, 2]) < 0.01) > 10 * band + 0.01  # the bands are visited
+    dirs, w = raytrace._guided_launch(n, rng, 0.5, tuple(widths))
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, rtol=1e-12)
+    assert abs(w.mean() - 1) < 0.002
+    assert abs(np.mean(w * dirs[:, 2] ** 2) - 1 / 3) < 0.002
+    assert abs(np.mean(w * (np.abs(dirs[:, 2]) < 0.01)) - 0.01) < 0.0005
+    assert np.mean(np.abs(dirs[:, 2]) < 0.01) > 0.15
 
 
 def test_the_scan_estimators_together_are_unbiased():

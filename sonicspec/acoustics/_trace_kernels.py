@@ -25,12 +25,13 @@ _MISS_T = 1e36
 _INSIDE_M = 1e-9
 
 # Layout of the float and integer parameter vectors passed to :func:`bounce`.
-N_FLOAT_PARAMS, N_INT_PARAMS = 13, 10
+N_FLOAT_PARAMS, N_INT_PARAMS = 14, 10
 (F_SPEED, F_BIN, F_RADIUS, F_GROWTH, F_MAX_LEN, F_E_STOP, F_EPS, F_TO_P2, F_RAIN_SCALE,
- F_CHILD_P, F_E0, F_R_MAX, F_E_ROULETTE) = range(N_FLOAT_PARAMS)
-# Column of ``u`` holding the roulette draw (after the event, two direction and the split
-# draws); present only when roulette is on.
-U_ROULETTE = 4
+ F_CHILD_P, F_E0, F_R_MAX, F_E_ROULETTE, F_GUIDE) = range(N_FLOAT_PARAMS)
+# Columns of ``u`` holding the roulette draw (after the event, two direction and the split
+# draws; present when roulette or guiding is on) and the guiding's proposal pick (present only
+# when guiding is on).
+U_ROULETTE, U_GUIDE = 4, 5
 (I_N_BINS, I_EXCLUDED, I_RAIN, I_DIRECTIONS, I_STRIDE, I_AIR, I_CONVEX, I_SPLIT,
  I_AXIS, I_MAP_N) = range(N_INT_PARAMS)
 # With more receivers than this, sphere tests only visit those whose coordinate along the
@@ -52,6 +53,48 @@ def _lambert(sx, sy, sz, u1, u2):  # pragma: no cover - compiled
     return (x * (1.0 + s * sx * sx * a) + y * bb + z * sx,
             x * (s * bb) + y * (s + sy * sy * a) + z * sy,
             -x * (s * sx) - y * sy + z * sz)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _scatter(sx, sy, sz, u1, u2, pick, beta, widths):  # pragma: no cover - compiled
+    """A diffuse direction off a surface with facing unit normal s, and its weight.
+
+    Without guiding (``beta`` 0): a Lambert direction, weight 1. With guiding: drawn from the
+    mixture ``(1-β)·Lambert + β/J·Σ_j B_j``, where ``B_j`` is uniform over the horizontal band
+    ``|z| < widths[j]`` (a direction behind the surface is mirrored through it), and weighted
+    by ``p_Lambert / p_mixture`` (unbiased). ``B_j``'s density at a front direction d counts
+    both ways to reach it: drawn in the band, or mirrored from ``R(d) = d - 2(d·s)s`` in it.
+    """
+    n_w = widths.shape[0]
+    if beta > 0.0 and pick < beta:
+        w = widths[min(int(pick / beta * n_w), n_w - 1)]
+        ez = w * (2.0 * u1 - 1.0)
+        rr = math.sqrt(max(0.0, 1.0 - ez * ez))
+        ex, ey = rr * math.cos(2.0 * math.pi * u2), rr * math.sin(2.0 * math.pi * u2)
+        dot = ex * sx + ey * sy + ez * sz
+        if dot < 0.0:
+            ex, ey, ez = ex - 2.0 * dot * sx, ey - 2.0 * dot * sy, ez - 2.0 * dot * sz
+    else:
+        ex, ey, ez = _lambert(sx, sy, sz, u1, u2)
+    if beta == 0.0:
+        return ex, ey, ez, 1.0  # not normalised: the caller does
+    norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+    ex, ey, ez = ex / norm, ey / norm, ez / norm
+    cos = max(0.0, ex * sx + ey * sy + ez * sz)
+    mirrored_z = ez - 2.0 * cos * sz
+    density = (1.0 - beta) * cos / math.pi
+    for j in range(n_w):
+        hits = (1.0 if abs(ez) < widths[j] else 0.0) + (1.0 if abs(mirrored_z) < widths[j]
+                                                        else 0.0)
+        density += beta / n_w * hits / (4.0 * math.pi * widths[j])
+    return ex, ey, ez, (cos / math.pi) / density if density > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _reweigh(row, j, weight):  # pragma: no cover - compiled
+    """Multiplies ``row[j]``'s bands by ``weight``."""
+    for b in range(row.shape[1]):
+        row[j, b] *= weight
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -114,14 +157,14 @@ def _add_directions(dirsum, k, tb, total, ux, uy, uz, departure):  # pragma: no 
 
 @njit(cache=True, nogil=True)
 def bounce(
-    pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
+    pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref,
     face, tfar, u, rain_offset,
     planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
     rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key, rcv_clear, vol,
-    depth, air, fp, ip,
+    depth, air, fp, ip, widths,
     hist, dirsum,
     req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
-    c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep,
+    c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep, c_ref,
 ):  # pragma: no cover - compiled; exercised through raytrace.trace_rays
     """One bounce step of ``n = len(face)`` live rays, compacting the survivors in place.
 
@@ -130,13 +173,17 @@ def bounce(
     event from ``u`` and updates energy and direction; a splitting ray may also spawn a child
     (``c_*``). Returns ``(survivors, shadow rays queued, rays escaped, surface interactions,
     children)``; survivors occupy rows ``[0, survivors)``, children rows ``[0, children)``.
+
+    ``ref`` is each ray's importance-sampling weight of its last sampled direction (1 without
+    guiding): the termination and roulette levels scale with it, so a ray the guiding sent
+    where energy lives long, with a weight to match, is not stopped for that weight.
     """
     n = face.shape[0]
     n_bands = energy.shape[1]
     n_rcv = rcv_pos.shape[0]
     c, bin_s, r0, growth = fp[F_SPEED], fp[F_BIN], fp[F_RADIUS], fp[F_GROWTH]
     max_len, e_stop, eps, to_p2 = fp[F_MAX_LEN], fp[F_E_STOP], fp[F_EPS], fp[F_TO_P2]
-    rain_scale, e_roulette = fp[F_RAIN_SCALE], fp[F_E_ROULETTE]
+    rain_scale, e_roulette, beta = fp[F_RAIN_SCALE], fp[F_E_ROULETTE], fp[F_GUIDE]
     n_bins, excluded, rain, directions = ip[I_N_BINS], ip[I_EXCLUDED], ip[I_RAIN], ip[I_DIRECTIONS]
     stride, has_air, convex, split = ip[I_STRIDE], ip[I_AIR], ip[I_CONVEX], ip[I_SPLIT]
     axis, r_max = ip[I_AXIS], fp[F_R_MAX]
@@ -296,10 +343,13 @@ def bounce(
                 peak = max(peak, energy[i, b])
             q = min(1.0, fp[F_CHILD_P] * peak / fp[F_E0])
             if event == 1 and alive_time and u[i, 3] < q:
-                strongest = _scaled(energy, i, split_gain, 2, cls, q, c_energy, n_child, air,
-                                    travelled, has_air)
-                if strongest >= e_stop:
-                    ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
+                ex, ey, ez, weight = _scatter(sx, sy, sz, u[i, 1], u[i, 2],
+                                              u[i, U_GUIDE] if beta > 0.0 else 1.0, beta,
+                                              widths)
+                strongest = weight * _scaled(energy, i, split_gain, 2, cls, q, c_energy,
+                                             n_child, air, travelled, has_air)
+                if strongest >= e_stop * weight and weight > 0.0:
+                    _reweigh(c_energy, n_child, weight)
                     norm = math.sqrt(ex * ex + ey * ey + ez * ez)
                     c_pos[n_child, 0] = hx + eps * sx
                     c_pos[n_child, 1] = hy + eps * sy
@@ -307,6 +357,7 @@ def bounce(
                     c_dirs[n_child, 0] = ex / norm
                     c_dirs[n_child, 1] = ey / norm
                     c_dirs[n_child, 2] = ez / norm
+                    c_ref[n_child] = weight
                     c_length[n_child] = travelled
                     c_n_refl[n_child] = n_refl[i] + 1
                     c_dep[n_child, 0] = departure[i, 0]
@@ -319,23 +370,28 @@ def bounce(
             event = 0 if pick < p_t[cls] else (1 if pick < p_ts[cls] else 2)
         strongest = _scaled(energy, i, table, event, cls, 1.0, energy, out, air, travelled,
                             has_air)
+        level = ref[i]
         if event == 1:  # specular mirror
             ex, ey, ez = dx - 2.0 * cos_in * nx, dy - 2.0 * cos_in * ny, dz - 2.0 * cos_in * nz
-        elif event == 2:  # Lambert around the facing normal
-            ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
+        elif event == 2:  # diffuse around the facing normal (Lambert, or guided and weighted)
+            ex, ey, ez, level = _scatter(sx, sy, sz, u[i, 1], u[i, 2],
+                                         u[i, U_GUIDE] if beta > 0.0 else 1.0, beta, widths)
+            if beta > 0.0:
+                _reweigh(energy, out, level)
+                strongest *= level
         else:  # transmitted: straight on
             ex, ey, ez = dx, dy, dz
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
-        if e_roulette > 0.0 and strongest < e_roulette and alive_time:
+        if e_roulette > 0.0 and strongest < e_roulette * level and alive_time:
             # Russian roulette: a weak ray goes on with probability strongest / e_roulette,
             # raised back to that level (unbiased); most weak rays stop here, cheaply.
-            keep = strongest / e_roulette
+            keep = strongest / (e_roulette * level)
             if u[i, U_ROULETTE] >= keep:
                 continue
             for b in range(n_bands):
                 energy[out, b] = energy[out, b] / keep
-            strongest = e_roulette
-        if not (strongest >= e_stop and alive_time):
+            strongest = e_roulette * level
+        if not (strongest >= e_stop * level and alive_time and level > 0.0):
             continue
         off = -eps if event == 0 else eps
         pos[out, 0], pos[out, 1], pos[out, 2] = hx + off * sx, hy + off * sy, hz + off * sz
@@ -347,6 +403,7 @@ def bounce(
         last_diffuse[out] = (event == 2) if reflected else last_diffuse[i]
         departure[out, 0], departure[out, 1], departure[out, 2] = (
             departure[i, 0], departure[i, 1], departure[i, 2])
+        ref[out] = level
         out += 1
     return out, n_req, escaped, hits, n_child
 

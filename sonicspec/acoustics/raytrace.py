@@ -123,6 +123,7 @@ _NO_TRANSMISSION = np.zeros((0, 0))
 # Blocked shadow rays gathered before one walk through the walls (each walk step is one Embree
 # call whatever its size, so walking many at once saves most of the calls).
 _WALK_BATCH = 1 << 15
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 @dataclass(frozen=True)
@@ -187,6 +188,15 @@ class RayTraceSettings:
         (unbiased). Weak rays then stop after a few more hits on average instead of spending
         tens of hits on the last tens of dB, and the tail past ``energy_threshold_db`` is no
         longer cut when ``r < energy_threshold_db`` (rays then stop only at ``max_time_s``).
+    guiding : float
+        0: launch and scattered directions as in the module docstring. β in (0, 1): a share β
+        of them goes to thin horizontal bands (``|z| <`` each of ``guiding_widths``, equal
+        shares), weighted by the ratio of the plain to the mixed density (unbiased). In
+        rooms whose floor and ceiling absorb more than the walls (furnished scans) the late
+        tail rides on near-horizontal rays, a sliver of the sphere that plain sampling hits
+        with few rays: the guided ones put several times more there.
+    guiding_widths : tuple of float
+        Half-widths in ``z`` (the sine of the elevation) of the guiding's bands.
     """
 
     n_rays: int = 20_000
@@ -205,6 +215,8 @@ class RayTraceSettings:
     splitting: float = 0.0
     free_air_volume: bool = False
     roulette_db: float = 0.0
+    guiding: float = 0.0
+    guiding_widths: tuple[float, ...] = (0.005, 0.02, 0.08)
 
     def __post_init__(self) -> None:
         checks = [
@@ -230,6 +242,13 @@ class RayTraceSettings:
             ("batch_size", self.batch_size, self.batch_size >= 1, ">= 1"),
             ("splitting", self.splitting, self.splitting >= 0, ">= 0 (0: off)"),
             ("roulette_db", self.roulette_db, self.roulette_db >= 0, ">= 0 (0: off)"),
+            ("guiding", self.guiding, 0 <= self.guiding < 1, "in [0, 1) (0: off)"),
+            (
+                "guiding_widths",
+                self.guiding_widths,
+                len(self.guiding_widths) > 0 and all(0 < w <= 1 for w in self.guiding_widths),
+                "one or more half-widths in (0, 1]",
+            ),
             (
                 "rain_receivers_per_hit",
                 self.rain_receivers_per_hit,
@@ -248,6 +267,31 @@ def _rotated_fibonacci_sphere(n: int, rng: np.random.Generator) -> np.ndarray:
     q, rr = np.linalg.qr(rng.standard_normal((3, 3)))
     q = q * np.sign(np.diag(rr))  # Haar-uniform orthogonal matrix
     return pts @ q.T
+
+
+def _guided_launch(n: int, rng: np.random.Generator, beta: float,
+                   widths: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` launch directions and their weights: ``round(n·β/J)`` per horizontal band
+    ``|z| < w_j`` (a lattice uniform in ``z`` and golden-ratio spaced in azimuth, randomly
+    shifted), the rest on the rotated Fibonacci sphere. Each component is stratified and has
+    a fixed count, so weighting every direction by ``p_uniform / Σ_j (n_j/n)·p_j`` (the
+    balance heuristic over the components) keeps the sum unbiased."""
+    counts = [round(n * beta / len(widths))] * len(widths)
+    n_sphere = n - sum(counts)
+    parts = [_rotated_fibonacci_sphere(n_sphere, rng)] if n_sphere else []
+    for m, w in zip(counts, widths, strict=True):
+        if m == 0:
+            continue
+        shift = rng.random(2)
+        i = np.arange(m)
+        z = w * (2.0 * (i + shift[0]) / m - 1.0)
+        phi = 2.0 * math.pi * ((i * _GOLDEN + shift[1]) % 1.0)
+        r = np.sqrt(1.0 - z * z)
+        parts.append(np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1))
+    dirs = np.concatenate(parts)
+    az = np.abs(dirs[:, 2])
+    density = n_sphere / n + sum(m / n * (az < w) / w for m, w in zip(counts, widths, strict=True))
+    return dirs, 1.0 / density
 
 
 def trace_rays(
@@ -494,16 +538,23 @@ def _trace_batch(
     n_slots = rcv.n if stride == 1 else -(-rcv.n // stride)
     fp, ip = _kernel_params(scene, rcv, st, air, acc.energy.shape[1], stride)
     split = st.splitting > 0
-    # Uniform draws per hit: event, two for a direction, the split and the roulette draws.
-    n_draws = K.U_ROULETTE + 1 if st.roulette_db > 0 else (4 if split else 3)
+    # Uniform draws per hit: event, two for a direction, the split, the roulette and the
+    # guiding's proposal draws.
+    guided = st.guiding > 0
+    n_draws = (K.U_GUIDE + 1 if guided else
+               K.U_ROULETTE + 1 if st.roulette_db > 0 else (4 if split else 3))
+    widths = np.asarray(st.guiding_widths, dtype=np.float64)
     plane_n, plane_off = rcv.planes if rcv.planes is not None else (_NO_PLANES, _NO_OFFSETS)
 
     # Separate streams: ray paths do not depend on how the rain is subsampled or walked.
     rng, rain_rng = rng.spawn(2)
-    dirs = _rotated_fibonacci_sphere(n, rng)
+    if guided:
+        dirs, ref = _guided_launch(n, rng, st.guiding, st.guiding_widths)
+    else:
+        dirs, ref = _rotated_fibonacci_sphere(n, rng), np.ones(n)
     departure = dirs.copy()
     pos = np.repeat(src[None, :], n, axis=0)
-    energy = np.full((n, scene.n_bands), 1.0 / st.n_rays)
+    energy = np.repeat(ref[:, None] / st.n_rays, scene.n_bands, axis=1)
     length = np.zeros(n)
     n_refl = np.zeros(n, dtype=np.int64)
     any_diffuse = np.zeros(n, dtype=bool)
@@ -520,17 +571,18 @@ def _trace_batch(
         req = _RainQueue.empty(m, scene.n_bands, st.directions)
         kids = _Children.empty(n if split else 0, scene.n_bands)
         n, n_req, esc, hits, n_kids = K.bounce(
-            pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
+            pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref,
             face, tfar, u, offsets,
             ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
             ev.ps_t, ev.split_gain,
             rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
             rcv.volume, rcv.depth,
-            air, fp, ip,
+            air, fp, ip, widths,
             acc.energy, acc.directions,
             req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
             req.departure,
             kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
+            kids.ref,
         )  # fmt: skip
         escaped += esc
         interactions += hits
@@ -539,10 +591,11 @@ def _trace_batch(
             if sum(len(w.length) for w in walks) >= _WALK_BATCH:
                 _walk_rain(scene, rcv, walks, acc, st.directions)
         if n_kids:  # children join the live rays: diffusely reflected once
-            pos, dirs, energy, length, n_refl, departure = (
+            pos, dirs, energy, length, n_refl, departure, ref = (
                 np.concatenate([a[:n], b[:n_kids]]) for a, b in (
                     (pos, kids.pos), (dirs, kids.dirs), (energy, kids.energy),
-                    (length, kids.length), (n_refl, kids.n_refl), (departure, kids.departure)))
+                    (length, kids.length), (n_refl, kids.n_refl), (departure, kids.departure),
+                    (ref, kids.ref)))
             yes = np.ones(n_kids, dtype=bool)
             any_diffuse = np.concatenate([any_diffuse[:n], yes])
             last_diffuse = np.concatenate([last_diffuse[:n], yes])
@@ -570,6 +623,7 @@ def _kernel_params(scene: AcousticScene, rcv: _Receivers, st: RayTraceSettings,
     fp[K.F_E0] = 1.0 / st.n_rays
     fp[K.F_E_ROULETTE] = (10.0 ** (-st.roulette_db / 10.0) / st.n_rays if st.roulette_db > 0
                           else 0.0)
+    fp[K.F_GUIDE] = st.guiding
     # No detection sphere is larger than this: the reach of the receiver culling.
     fp[K.F_R_MAX] = (1.0 + 1e-9) * max(st.receiver_radius_m, float(rcv.cap.max())) + 1e-9
     ip = np.zeros(K.N_INT_PARAMS, dtype=np.int64)
@@ -596,11 +650,12 @@ class _Children:
     length: np.ndarray
     n_refl: np.ndarray
     departure: np.ndarray
+    ref: np.ndarray
 
     @classmethod
     def empty(cls, m: int, n_bands: int) -> _Children:
         return cls(np.empty((m, 3)), np.empty((m, 3)), np.empty((m, n_bands)), np.empty(m),
-                   np.empty(m, dtype=np.int64), np.empty((m, 3)))
+                   np.empty(m, dtype=np.int64), np.empty((m, 3)), np.empty(m))
 
 
 @dataclass(frozen=True, eq=False)

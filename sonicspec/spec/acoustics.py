@@ -97,6 +97,16 @@ class AcousticsSpec(SpecModel):
         "keeps the tail past that threshold. The default 30 halves the tracer's CPU time in "
         "absorbing rooms for about the same seed-to-seed spread.",
     )
+    horizontal_guiding: float = Field(
+        0.0,
+        ge=0,
+        lt=1.0,
+        description="Share of launched and scattered ray directions sent to thin horizontal "
+        "bands (|sin elevation| < 0.005, 0.02 and 0.08), weighted by the ratio of plain to "
+        "mixed density (unbiased). 0: off. Where floor and ceiling absorb more than the walls "
+        "(furnished scans: carpet, acoustic tile) the late tail rides on near-horizontal rays, "
+        "a sliver of the sphere plain sampling reaches with few rays.",
+    )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
     )

@@ -58,6 +58,7 @@ class RirSettings:
     ray_splitting: float = 0.0
     free_air_ball_m: float = 0.0
     roulette_db: float = 0.0
+    horizontal_guiding: float = 0.0
 
     @classmethod
     def from_spec(cls, acoustics: dict[str, Any], sample_rate_hz: int,
@@ -78,6 +79,7 @@ class RirSettings:
                    ray_splitting=acoustics["ray_splitting"],
                    free_air_ball_m=acoustics["free_air_ball_m"],
                    roulette_db=acoustics["roulette_db"],
+                   horizontal_guiding=acoustics["horizontal_guiding"],
                    histogram_bin_s=acoustics["histogram_bin_s"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
@@ -116,6 +118,7 @@ def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSe
         specular_order_excluded=specular_order, speed_of_sound_m_s=settings.speed_of_sound_m_s,
         diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
         roulette_db=settings.roulette_db, free_air_volume=ball > 0,
+        guiding=settings.horizontal_guiding,
         max_receiver_radius_m=(max(ball, settings.receiver_radius_m) if ball > 0
                                else RayTraceSettings.max_receiver_radius_m),
         # No renderer reads the late field's directions (the tails are diffuse): skip them.
