@@ -25,10 +25,10 @@ What it does
   (a) RLR defaults (44.1 kHz, 5 000 indirect rays, 4 bands); (a') the same with 50 000 rays,
   RLR's own converged answer for (a); (b) RLR at SonicSim's settings (16 kHz, 50 000 indirect
   rays, 32 bands asked — the engine caps at 12, checked here —, SH orders 5/3; mono listener);
-  (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 5 000 rays with specular
-  splitting 2, a 4 m visible-air ball and roulette 30 dB down, image sources to order 3,
-  16 kHz) and at the cheapest setting of a small sweep (rays × image-source order × specular
-  splitting × visible-air ball × roulette, several seeds) that stays, in every band and for
+  (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, roulette 30 dB
+  down, horizontal guiding 0.3, image sources to order 3, 16 kHz) and at the cheapest setting
+  of a small sweep (rays × image-source order × specular splitting × visible-air ball ×
+  roulette × horizontal guiding, several seeds) that stays, in every band and for
   every seed, near sonicspec's converged answer (``--ref-rays`` rays with splitting, mean of
   three seeds): within the ISO 3382-1 just-noticeable differences (T30, EDT 5 %, C50 1 dB) if
   any setting does, else no farther than RLR's defaults are from RLR's own 50 000-ray answer
@@ -92,11 +92,12 @@ JND = {"t30": 0.05, "edt": 0.05, "c50_db": 1.0}
 REF_SPLITTING = 1.0
 REF_SEEDS = (0, 10, 20)
 # Settings tried when both engines get every scattering coefficient 1 (rays, order, splitting,
-# ball, roulette): a diffuse late field, where plain rays with diffuse rain converge fast.
-DIFFUSE_CANDIDATES = [(500, 1, 0.0, 0.0, 30.0), (1000, 1, 0.0, 0.0, 30.0),
-                      (2000, 1, 0.0, 0.0, 30.0), (2000, 2, 0.0, 0.0, 30.0),
-                      (5000, 2, 0.0, 0.0, 30.0), (1000, 1, 0.0, 0.0, 0.0),
-                      (20_000, 3, 0.0, 0.0, 30.0)]
+# ball, roulette, guiding): a diffuse late field, where plain rays with diffuse rain converge
+# fast (and horizontal guiding has nothing to find).
+DIFFUSE_CANDIDATES = [(500, 1, 0.0, 0.0, 30.0, 0.0), (1000, 1, 0.0, 0.0, 30.0, 0.0),
+                      (2000, 1, 0.0, 0.0, 30.0, 0.0), (2000, 2, 0.0, 0.0, 30.0, 0.0),
+                      (5000, 2, 0.0, 0.0, 30.0, 0.0), (1000, 1, 0.0, 0.0, 0.0, 0.0),
+                      (20_000, 3, 0.0, 0.0, 30.0, 0.0)]
 RLR_LABEL = "<sonicspec-material-{:03d}>"  # unique: no label is a substring of another
 
 
@@ -238,10 +239,10 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
 
 # --------------------------------------------------------------------------- sonicspec (child)
 def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: float = 0.0,
-                       roulette: float = 0.0) -> RirSettings:
+                       roulette: float = 0.0, guiding: float = 0.0) -> RirSettings:
     acoustics = AcousticsSpec().model_dump(mode="json")
     acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting,
-                     free_air_ball_m=ball, roulette_db=roulette)
+                     free_air_ball_m=ball, roulette_db=roulette, horizontal_guiding=guiding)
     return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
 
 
@@ -275,8 +276,9 @@ def prepared_scene(tmp: Path, settings: RirSettings):
 
 
 def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int,
-                    seed: int, splitting: float, ball: float, roulette: float) -> dict:
-    settings = sonicspec_settings(rays, order, splitting, ball, roulette)
+                    seed: int, splitting: float, ball: float, roulette: float,
+                    guiding: float) -> dict:
+    settings = sonicspec_settings(rays, order, splitting, ball, roulette, guiding)
     scene, regions, setup_wall, setup_cpu = prepared_scene(tmp, settings)
     walls, cpus, rir = [], [], None
     for _ in range(repeats):
@@ -288,7 +290,7 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
         rir = out if rir is None else rir
     np.save(tmp / f"rir_sonicspec_{rays}_{order}_{threads}.npy", rir)
     return {"engine": "sonicspec", "rays": rays, "order": order, "splitting": splitting,
-            "ball": ball, "roulette": roulette,
+            "ball": ball, "roulette": roulette, "guiding": guiding,
             "order_done": order_done,
             "threads": threads,
             "wall_s": walls, "cpu_s": cpus, "setup_wall_s": setup_wall,
@@ -327,8 +329,8 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
                                axis=0).tolist()
                     for k in ("t30_s", "edt_s", "c50_db")}
     rows = []
-    for rays, order, splitting, ball, roulette in candidates:
-        settings = sonicspec_settings(rays, order, splitting, ball, roulette)
+    for rays, order, splitting, ball, roulette, guiding in candidates:
+        settings = sonicspec_settings(rays, order, splitting, ball, roulette, guiding)
         cpus, devs, exps = [], [], []
         for seed in seeds:
             c0 = time.process_time()
@@ -338,7 +340,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
             devs.append(deviation(expected, ref_expected))
         t30 = np.array([f["t30_s"] for f in exps], float)
         rows.append({"rays": rays, "order": order, "splitting": splitting, "ball": ball,
-                     "roulette": roulette,
+                     "roulette": roulette, "guiding": guiding,
                      "cpu_s": cpus, "expected": exps,
                      "worst": {k: max(d[k] for d in devs) for k in JND},
                      "t30_spread": float(np.max(np.std(t30, axis=0) / np.mean(t30, axis=0)))})
@@ -446,8 +448,8 @@ def main() -> int:
         if kind == "rlr":
             result = child_rlr(tmp, rest[0], int(rest[1]))
         elif kind == "sonicspec":
-            result = child_sonicspec(tmp, *(int(x) for x in rest[:5]), float(rest[5]),
-                                     float(rest[6]), float(rest[7]))
+            result = child_sonicspec(tmp, *(int(x) for x in rest[:5]),
+                                     *(float(x) for x in rest[5:9]))
         elif kind == "diagnose":
             result = child_diagnose(tmp)
         else:
@@ -465,16 +467,15 @@ def main() -> int:
 
     ref_rays = 20_000 if args.quick and args.ref_rays == 50_000 else args.ref_rays
     seeds = [1, 2] if args.quick else [1, 2, 3]
-    # (rays, image-source order, splitting rate, visible-air ball m, roulette dB)
-    candidates = [(2000, 1, 0.0, 0.0, 0.0), (5000, 2, 0.0, 0.0, 0.0), (20_000, 3, 0.0, 0.0, 0.0),
-                  (20_000, 3, 0.0, 0.0, 30.0), (5000, 2, 1.0, 4.0, 0.0),
-                  (5000, 2, 2.0, 4.0, 20.0), (5000, 2, 2.0, 4.0, 30.0)]
+    # (rays, image-source order, splitting rate, visible-air ball m, roulette dB, guiding)
+    candidates = [(2000, 1, 0.0, 0.0, 0.0, 0.0), (20_000, 3, 0.0, 0.0, 30.0, 0.0),
+                  (20_000, 3, 0.0, 0.0, 30.0, 0.3), (5000, 2, 2.0, 4.0, 30.0, 0.0),
+                  (3000, 2, 2.0, 4.0, 30.0, 0.5)]
     if not args.quick:
-        candidates += [(5000, 2, 0.0, 4.0, 0.0), (20_000, 2, 0.0, 4.0, 0.0),
-                       (5000, 2, 1.0, 0.0, 0.0), (10_000, 2, 1.0, 0.0, 0.0),
-                       (10_000, 2, 1.0, 4.0, 0.0), (20_000, 2, 1.0, 4.0, 0.0),
-                       (5000, 2, 0.0, 4.0, 30.0), (3000, 2, 2.0, 4.0, 30.0),
-                       (8000, 2, 1.0, 4.0, 20.0), (10_000, 2, 2.0, 4.0, 30.0)]
+        candidates += [(10_000, 2, 1.0, 4.0, 0.0, 0.0), (20_000, 2, 1.0, 4.0, 0.0, 0.0),
+                       (2000, 2, 2.0, 4.0, 30.0, 0.5), (3000, 2, 1.0, 4.0, 30.0, 0.5),
+                       (5000, 2, 2.0, 4.0, 30.0, 0.5), (5000, 2, 0.0, 4.0, 30.0, 0.3),
+                       (10_000, 2, 2.0, 4.0, 30.0, 0.5), (20_000, 3, 0.0, 4.0, 30.0, 0.5)]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         t0 = time.perf_counter()
@@ -515,19 +516,20 @@ def main() -> int:
         cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
         results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"],
                             "splitting": cheap["splitting"], "ball": cheap["ball"],
-                            "roulette": cheap["roulette"],
+                            "roulette": cheap["roulette"], "guiding": cheap["guiding"],
                             "rule": rule}
         default = AcousticsSpec()
-        for label, rays, order, splitting, ball, roulette in (
+        for label, rays, order, splitting, ball, roulette, guiding in (
                 ("default", default.rays, default.image_source_order, default.ray_splitting,
-                 default.free_air_ball_m, default.roulette_db),
+                 default.free_air_ball_m, default.roulette_db, default.horizontal_guiding),
                 ("cheap", cheap["rays"], cheap["order"], cheap["splitting"], cheap["ball"],
-                 cheap["roulette"])):
+                 cheap["roulette"], cheap["guiding"])):
             for threads, cores in ((1, "0"), (2, "0,1")):
                 reps = 1 if rays >= 20_000 else 3
                 results[f"sonicspec_{label}_{threads}"] = run_child(
                     tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
-                    str(threads), str(reps), "1", str(splitting), str(ball), str(roulette))
+                    str(threads), str(reps), "1", str(splitting), str(ball), str(roulette),
+                    str(guiding))
             print(f"sonicspec {label}: done", flush=True)
         # The same physics in both engines: every scattering coefficient 1.
         for name, reps in (("default_diffuse", 3), ("default_50k_diffuse", 1),
@@ -553,13 +555,14 @@ def main() -> int:
 def defaults_label() -> str:
     d = AcousticsSpec()
     return (f"{d.rays:,} rays, order {d.image_source_order}, splitting {d.ray_splitting:g}, "
-            f"visible-air ball {d.free_air_ball_m:g} m, roulette {d.roulette_db:g} dB")
+            f"visible-air ball {d.free_air_ball_m:g} m, roulette {d.roulette_db:g} dB, "
+            f"horizontal guiding {d.horizontal_guiding:g}")
 
 
 def cheap_label(cheap: dict) -> str:
     return (f"{cheap['rays']:,} rays, order {cheap['order']}, splitting "
             f"{cheap['splitting']:g}, visible-air ball {cheap['ball']:g} m, roulette "
-            f"{cheap['roulette']:g} dB")
+            f"{cheap['roulette']:g} dB, horizontal guiding {cheap['guiding']:g}")
 
 
 def report(results: dict) -> None:
@@ -650,14 +653,15 @@ def report(results: dict) -> None:
 
 
 def sweep_table(sweep: dict, own: dict) -> None:
-    print("| rays | order | splitting | ball (m) | roulette (dB) | CPU per RIR | T30 | EDT | C50 "
-          "| T30 spread | JND | RLR |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| rays | order | splitting | ball (m) | roulette (dB) | guiding | CPU per RIR | T30 | "
+          "EDT | C50 | T30 spread | JND | RLR |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sweep["candidates"]:
         w = r["worst"]
         marks = ["yes" if all(w[k] <= lim[k] for k in JND) else "no" for lim in (JND, own)]
         print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
-              f"{r['roulette']:g} | {np.median(r['cpu_s']):.2f} s | {100 * w['t30']:.1f} % | "
+              f"{r['roulette']:g} | {r['guiding']:g} | {np.median(r['cpu_s']):.2f} s | "
+              f"{100 * w['t30']:.1f} % | "
               f"{100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | {100 * r['t30_spread']:.1f} % | "
               f"{marks[0]} | {marks[1]} |")
 

