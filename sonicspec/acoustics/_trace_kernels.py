@@ -331,8 +331,9 @@ def bounce(
 
         pick = u[i, 0]
         table = gain
-        if split == 1 and not any_diffuse[i]:
-            # A ray that has only been reflected specularly (or transmitted) splits: it goes on
+        if split == 1 and (not any_diffuse[i] or ref[i] < 1.0):
+            # A ray that has only been reflected specularly (or transmitted), or that carries a
+            # guiding weight below 1 (a band sent it where energy lives long), splits: it goes on
             # specularly with that share, and the scattered share leaves as a child ray with
             # probability q ∝ the ray's energy (children start with about the same energy,
             # e0 × the scattered share / F_CHILD_P), its gain divided by q: unbiased.
