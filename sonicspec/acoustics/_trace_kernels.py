@@ -174,9 +174,10 @@ def bounce(
     (``c_*``). Returns ``(survivors, shadow rays queued, rays escaped, surface interactions,
     children)``; survivors occupy rows ``[0, survivors)``, children rows ``[0, children)``.
 
-    ``ref`` is each ray's importance-sampling weight of its last sampled direction (1 without
-    guiding): the termination and roulette levels scale with it, so a ray the guiding sent
-    where energy lives long, with a weight to match, is not stopped for that weight.
+    ``ref`` is the product of the guiding weights a ray's energy carries (its launch and its
+    path's first diffuse reflection, or its birth as a child; 1 without guiding): the
+    termination and roulette levels scale with it, so a ray the guiding sent where energy lives
+    long, with a weight to match, is not stopped for that weight.
     """
     n = face.shape[0]
     n_bands = energy.shape[1]
