@@ -554,9 +554,11 @@ def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     """The same flutter room, where near-horizontal rays carry the tail: sending half of the
     launched directions and of each path's first diffuse reflection to thin horizontal bands
     (weighted by plain / mixed density) keeps the early, 50–300 ms and 300–600 ms energies of
-    plain rays followed to 80 dB (8 seeds each; within 4 %, 3 % and 7 %); on top of the
-    `sonicset` preset's estimators the 300–600 ms energy's seed-to-seed spread falls by about
-    half (measured 3.4–3.6 % → 1.8 %)."""
+    plain rays followed to 80 dB (8 seeds each; within 4 %, 3 % and 7 %). On top of the
+    `sonicset` preset's estimators the 300–600 ms energy's seed-to-seed spread must not grow
+    (a weight bug that leaves the means alone shows there); measured over 32 seeds it falls
+    from 3.0–3.1 % to 2.3 % for the same CPU in this room (in the furnished apartment of
+    bench_rlr, where the tail is more horizontal, several times more)."""
     scene = rooms.flutter_scene(tau_high_band=0.02)
     src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     preset = {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0, "free_air_volume": True,
@@ -575,7 +577,7 @@ def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     np.testing.assert_allclose(guided[0], plain[0], rtol=0.04)
     np.testing.assert_allclose(guided[1], plain[1], rtol=0.03)
     np.testing.assert_allclose(guided[2], plain[2], rtol=0.07)
-    assert np.all(spread[2] < 0.7 * spread[1]), spread
+    assert np.all(spread[2] < spread[1]), spread
     for bad in (-0.1, 1.0):
         with pytest.raises(AcousticsError, match="guiding"):
             RayTraceSettings(guiding=bad)
@@ -619,6 +621,9 @@ def test_guided_directions_carry_the_plain_densities():
     assert abs(np.mean(w * dirs[:, 2] ** 2) - 1 / 3) < 0.002
     assert abs(np.mean(w * (np.abs(dirs[:, 2]) < 0.01)) - 0.01) < 0.0005
     assert np.mean(np.abs(dirs[:, 2]) < 0.01) > 0.15
+    for small in (1, 2, 3, 7):  # a batch's remainder: every ray gets a direction and a weight
+        dirs, w = raytrace._guided_launch(small, rng, 0.9, tuple(widths))
+        assert dirs.shape == (small, 3) and np.all(np.isfinite(w)) and np.all(w > 0)
 
 
 def test_the_scan_estimators_together_are_unbiased():

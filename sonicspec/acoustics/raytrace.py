@@ -287,12 +287,12 @@ def _rotated_fibonacci_sphere(n: int, rng: np.random.Generator) -> np.ndarray:
 
 def _guided_launch(n: int, rng: np.random.Generator, beta: float,
                    widths: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` launch directions and their weights: ``round(n·β/J)`` per horizontal band
+    """``n`` launch directions and their weights: ``floor(n·β/J)`` per horizontal band
     ``|z| < w_j`` (a lattice uniform in ``z`` and golden-ratio spaced in azimuth, randomly
     shifted), the rest on the rotated Fibonacci sphere. Each component is stratified and has
     a fixed count, so weighting every direction by ``p_uniform / Σ_j (n_j/n)·p_j`` (the
     balance heuristic over the components) keeps the sum unbiased."""
-    counts = [round(n * beta / len(widths))] * len(widths)
+    counts = [math.floor(n * beta / len(widths))] * len(widths)  # leaves >= 1 on the sphere
     n_sphere = n - sum(counts)
     parts = [_rotated_fibonacci_sphere(n_sphere, rng)] if n_sphere else []
     for m, w in zip(counts, widths, strict=True):
