@@ -41,6 +41,8 @@ from sonicspec.units import bands_below_nyquist
 Point2 = tuple[float, float]
 
 MIN_RAYS_WITHOUT_WARNING = 2000
+# Above this share of guided directions the plain ones are too few (bench_rlr, session 6).
+MAX_GUIDING_WITHOUT_WARNING = 0.5
 
 
 def _err(path: tuple, message: str) -> Problem:
@@ -470,6 +472,15 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
             f"roulette_db = {a.roulette_db:g} is not below energy_threshold_db = "
             f"{a.energy_threshold_db:g}: rays stop at the threshold before the roulette starts, "
             "so it has no effect; lower it (the default is 30) or set it to 0",
+        )
+    if a.horizontal_guiding > MAX_GUIDING_WITHOUT_WARNING:
+        yield _warn(
+            ("acoustics", "horizontal_guiding"),
+            f"horizontal_guiding = {a.horizontal_guiding:g} leaves too few plain directions: "
+            "rays just outside the bands then carry large weights and one RIR's decay "
+            "becomes erratic (in a furnished apartment 0.7 gave a 29 % worst-seed T30 error "
+            "where 0.5 gave 4.6 %, bench/RESULTS.md); use at most "
+            f"{MAX_GUIDING_WITHOUT_WARNING:g}",
         )
 
 
