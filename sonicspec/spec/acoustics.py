@@ -102,8 +102,9 @@ class AcousticsSpec(SpecModel):
         ge=0,
         lt=1.0,
         description="Share of launched directions (and of each path's first diffuse "
-        "reflection) sent to thin horizontal bands (|sin elevation| < 0.005, 0.02 and 0.08, "
-        "z up), weighted by the ratio of plain to mixed density (unbiased). 0: off. Where "
+        "reflection and of the splitting's children) sent to thin horizontal bands (|sin "
+        "elevation| < 0.005, 0.02 and 0.08, z up), weighted by the ratio of plain to mixed "
+        "density (unbiased). 0: off. Above 0.5 too few plain directions remain. Where "
         "floor and ceiling absorb more than the walls (furnished scans: carpet, acoustic "
         "tile) the late tail rides on near-horizontal rays, a sliver of the sphere plain "
         "sampling reaches with few rays: 0.3 cuts the T30 error of a 20,000-ray trace in "
