@@ -398,11 +398,15 @@ def test_same_seed_gives_identical_bytes():
     assert a[0].histogram.energy.tobytes() != c[0].histogram.energy.tobytes()
 
 
-def test_result_bytes_do_not_depend_on_thread_count():
+@pytest.mark.parametrize("estimators", [{}, {"splitting": 2.0, "roulette_db": 30.0,
+                                               "guiding": 0.5, "free_air_volume": True,
+                                               "max_receiver_radius_m": 2.0}])
+def test_result_bytes_do_not_depend_on_thread_count(estimators: dict):
+    """Plain rays, and with every estimator on (splitting, roulette, guiding, the ball)."""
     verts, faces = shoebox(6.0, 5.0, 3.0)
     scene = uniform_scene(verts, faces, alpha=0.3, s=0.4, n_bands=2)
     src, rcv = np.array([1.0, 1.0, 1.5]), np.array([[4.0, 3.0, 1.2], [5.0, 1.0, 2.0]])
-    settings = RayTraceSettings(n_rays=900, max_time_s=0.3, batch_size=300)
+    settings = RayTraceSettings(n_rays=901, max_time_s=0.3, batch_size=300, **estimators)
     one = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=1)
     two = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=2)
     three = trace_rays(scene, src, rcv, np.random.default_rng(9), settings, n_threads=3)
