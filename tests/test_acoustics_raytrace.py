@@ -96,6 +96,27 @@ SRC = np.array([2.1, 3.3, 1.4])
 RCV = np.array([[7.2, 4.9, 1.6]])
 
 
+# The `sonicset` preset's estimators at the flutter tests' ray count.
+PRESET_ESTIMATORS = {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0,
+                     "free_air_volume": True, "max_receiver_radius_m": 4.0}
+
+
+def flutter_windows(n_seeds: int, edges_bins: tuple[int, ...], **options):
+    """Traces of the flutter room (absorbing ceiling, hard walls, scattering 0.1, a little
+    transmission) to 0.6 s, seeds 0…n_seeds-1, with ``RayTraceSettings(**options)``: per seed,
+    the energy per band in the windows the bin ``edges_bins`` cut the histogram into
+    ``(n_seeds, windows, bands)``, and the mean reflections per ray ``(n_seeds,)``."""
+    scene = rooms.flutter_scene(tau_high_band=0.02)
+    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
+    settings = RayTraceSettings(max_time_s=0.6, specular_order_excluded=1, **options)
+    sums, hits = [], []
+    for seed in range(n_seeds):
+        (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
+        sums.append(np.add.reduceat(res.histogram.energy, (0, *edges_bins), axis=0))
+        hits.append(res.mean_reflections)
+    return np.array(sums), np.array(hits)
+
+
 @pytest.fixture(scope="module")
 def shoebox_t30():
     """T30 per band of the 10 × 7 × 3 m room (α 0.2, s 0.5, ISO air), 2,000 rays: traced once
@@ -513,18 +534,8 @@ def test_specular_splitting_is_unbiased():
     the energy before and after 50 ms, averaged over 4 seeds, agrees between one continuing
     ray per hit and specular splitting at two rates (the seed-to-seed spread of each mean is
     1–2 %); a mistake in the children's weights shows as a bias of ~10 % or more."""
-    scene = rooms.flutter_scene(tau_high_band=0.02)
-    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
-    windows = {}
-    for rate, rays in ((0.0, 20_000), (0.3, 8_000), (1.0, 4_000)):
-        settings = RayTraceSettings(n_rays=rays, max_time_s=0.6, splitting=rate,
-                                    specular_order_excluded=1)
-        sums = []
-        for seed in range(4):
-            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
-            e = res.histogram.energy
-            sums.append([e[:50].sum(axis=0), e[50:].sum(axis=0)])
-        windows[rate] = np.mean(sums, axis=0)
+    windows = {rate: flutter_windows(4, (50,), n_rays=rays, splitting=rate)[0].mean(axis=0)
+               for rate, rays in ((0.0, 20_000), (0.3, 8_000), (1.0, 4_000))}
     for rate in (0.3, 1.0):
         np.testing.assert_allclose(windows[rate], windows[0.0], rtol=0.05)
     with pytest.raises(AcousticsError, match="splitting"):
@@ -536,19 +547,11 @@ def test_russian_roulette_of_weak_rays_is_unbiased():
     raised to E_r) keeps the energy of three windows (early, 50–300 ms, 300–600 ms), averaged
     over 8 seeds, within 3 %, 3 % and 6 % of following every ray to 80 dB (standard errors of
     each mean: 0.3, 0.3 and 1.5–2 %), while the rays take fewer than half the hits."""
-    scene = rooms.flutter_scene(tau_high_band=0.02)
-    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
     windows, hits = {}, {}
     for roulette in (0.0, 20.0):
-        settings = RayTraceSettings(n_rays=8000, max_time_s=0.6, specular_order_excluded=1,
-                                    roulette_db=roulette, splitting=1.0)
-        sums, n_hits = [], []
-        for seed in range(8):
-            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
-            e = res.histogram.energy
-            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
-            n_hits.append(res.mean_reflections)
-        windows[roulette], hits[roulette] = np.mean(sums, axis=0), np.mean(n_hits)
+        sums, n_hits = flutter_windows(8, (50, 300), n_rays=8000, roulette_db=roulette,
+                                       splitting=1.0)
+        windows[roulette], hits[roulette] = sums.mean(axis=0), n_hits.mean()
     np.testing.assert_allclose(windows[20.0][:2], windows[0.0][:2], rtol=0.03)
     np.testing.assert_allclose(windows[20.0][2], windows[0.0][2], rtol=0.06)
     assert hits[20.0] < 0.5 * hits[0.0]
@@ -563,20 +566,11 @@ def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     (a weight bug that leaves the means alone shows there); measured over 32 seeds it falls
     from 3.0–3.1 % to 2.3 % for the same CPU in this room (in the furnished apartment of
     bench_rlr, where the tail is more horizontal, several times more)."""
-    scene = rooms.flutter_scene(tau_high_band=0.02)
-    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
-    preset = {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0, "free_air_volume": True,
-              "max_receiver_radius_m": 4.0}
     windows, spread = [], []
-    for options in ({"n_rays": 12_000}, preset, {**preset, "guiding": 0.5}):
-        settings = RayTraceSettings(max_time_s=0.6, specular_order_excluded=1, **options)
-        sums = []
-        for seed in range(8):
-            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
-            e = res.histogram.energy
-            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
-        windows.append(np.mean(sums, axis=0))
-        spread.append(np.std(sums, axis=0)[2] / windows[-1][2])
+    for options in ({"n_rays": 12_000}, PRESET_ESTIMATORS, {**PRESET_ESTIMATORS, "guiding": 0.5}):
+        sums = flutter_windows(8, (50, 300), **options)[0]
+        windows.append(sums.mean(axis=0))
+        spread.append(sums.std(axis=0)[2] / windows[-1][2])
     plain, _, guided = windows
     np.testing.assert_allclose(guided[0], plain[0], rtol=0.04)
     np.testing.assert_allclose(guided[1], plain[1], rtol=0.03)
@@ -636,20 +630,8 @@ def test_the_scan_estimators_together_are_unbiased():
     the same flutter room (8 seeds each): the early, 50–300 ms and 300–600 ms energies agree
     within 3 %, 3 % and 7 % (standard errors of the means, first band: 0.7–0.8, 0.5–0.6 and
     1.2–2.5 %), with a third of the rays and about a seventh of the CPU."""
-    scene = rooms.flutter_scene(tau_high_band=0.02)
-    src, rcv = np.array([2.0, 2.0, 1.5]), np.array([[7.5, 5.0, 1.5]])
-    windows = []
-    for options in ({"n_rays": 12_000},
-                    {"n_rays": 4000, "splitting": 2.0, "roulette_db": 30.0,
-                     "free_air_volume": True, "max_receiver_radius_m": 4.0}):
-        settings = RayTraceSettings(max_time_s=0.6, specular_order_excluded=1, **options)
-        sums = []
-        for seed in range(8):
-            (res,) = trace_rays(scene, src, rcv, np.random.default_rng(seed), settings)
-            e = res.histogram.energy
-            sums.append([e[:50].sum(axis=0), e[50:300].sum(axis=0), e[300:].sum(axis=0)])
-        windows.append(np.mean(sums, axis=0))
-    plain, preset = windows
+    plain, preset = (flutter_windows(8, (50, 300), **options)[0].mean(axis=0)
+                     for options in ({"n_rays": 12_000}, PRESET_ESTIMATORS))
     np.testing.assert_allclose(preset[:2], plain[:2], rtol=0.03)
     np.testing.assert_allclose(preset[2], plain[2], rtol=0.07)
     with pytest.raises(AcousticsError, match="roulette_db"):
