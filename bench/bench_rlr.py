@@ -101,6 +101,8 @@ DIFFUSE_CANDIDATES = [(500, 1, 0.0, 0.0, 30.0, 0.0), (1000, 1, 0.0, 0.0, 30.0, 0
                       (2000, 1, 0.0, 0.0, 30.0, 0.0), (2000, 2, 0.0, 0.0, 30.0, 0.0),
                       (5000, 2, 0.0, 0.0, 30.0, 0.0), (1000, 1, 0.0, 0.0, 0.0, 0.0),
                       (20_000, 3, 0.0, 0.0, 30.0, 0.0)]
+# A sonicspec setting as the sweep names it, in the order of its candidate tuples.
+SETTING_KEYS = ("rays", "order", "splitting", "ball", "roulette", "guiding")
 TIMING_ROUNDS = 3  # alternating one-thread timing rounds of every engine and setting
 RLR_LABEL = "<sonicspec-material-{:03d}>"  # unique: no label is a substring of another
 
@@ -343,8 +345,8 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
             exps.append(expected)
             devs.append(deviation(expected, ref_expected))
         t30 = np.array([f["t30_s"] for f in exps], float)
-        rows.append({"rays": rays, "order": order, "splitting": splitting, "ball": ball,
-                     "roulette": roulette, "guiding": guiding,
+        rows.append({**dict(zip(SETTING_KEYS, (rays, order, splitting, ball, roulette, guiding),
+                                strict=True)),
                      "cpu_s": cpus, "expected": exps,
                      "worst": {k: max(d[k] for d in devs) for k in JND},
                      "typical": {k: float(np.median([d[k] for d in devs])) for k in JND},
@@ -519,48 +521,40 @@ def main() -> int:
             {"ref_rays": ref_rays, "seeds": seeds, "candidates": candidates}))
         print("sonicspec sweep: done", flush=True)
         cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
-        results["cheap"] = {"rays": cheap["rays"], "order": cheap["order"],
-                            "splitting": cheap["splitting"], "ball": cheap["ball"],
-                            "roulette": cheap["roulette"], "guiding": cheap["guiding"],
-                            "rule": rule}
+        results["cheap"] = {**{k: cheap[k] for k in SETTING_KEYS}, "rule": rule}
         typical = fastest(results["sweep"]["candidates"], results["rlr_own_error"], "typical")
-        results["cheap_typical"] = typical and {k: typical[k] for k in (
-            "rays", "order", "splitting", "ball", "roulette", "guiding")}
-        default = AcousticsSpec()
+        results["cheap_typical"] = typical and {k: typical[k] for k in SETTING_KEYS}
         settings_of = {
-            "default": (default.rays, default.image_source_order, default.ray_splitting,
-                        default.free_air_ball_m, default.roulette_db,
-                        default.horizontal_guiding),
-            "cheap": tuple(cheap[k] for k in ("rays", "order", "splitting", "ball", "roulette",
-                                              "guiding"))}
+            "default": default_setting(),
+            "cheap": tuple(cheap[k] for k in SETTING_KEYS)}
         if typical and typical is not cheap:
-            settings_of["typical"] = tuple(results["cheap_typical"].values())
+            settings_of["typical"] = tuple(typical[k] for k in SETTING_KEYS)
 
-        def sonicspec_child(label: str, threads: int, cores: str) -> dict:
+        def sonicspec_args(label: str, threads: int) -> tuple[str, ...]:
+            """The child's arguments: one RIR (seed 1) of ``settings_of[label]``, timed twice
+            (once above 20,000 rays)."""
             rays, order, splitting, ball, roulette, guiding = settings_of[label]
-            return run_child(tmp, cores, threads, "--child", "sonicspec", str(rays), str(order),
-                             str(threads), "1" if rays >= 20_000 else "2", "1", str(splitting),
-                             str(ball), str(roulette), str(guiding))
+            return ("sonicspec", str(rays), str(order), str(threads),
+                    "1" if rays >= 20_000 else "2", "1", str(splitting), str(ball),
+                    str(roulette), str(guiding))
 
         # One-thread timings in alternating rounds on the core RLR runs on, so that slower
         # and faster spells of this shared machine fall on every engine alike (min per engine).
+        children = {f"rlr_{name}": ("rlr", name, "1") for name in ("default", "sonicsim")}
+        children.update({f"sonicspec_{label}_1": sonicspec_args(label, 1)
+                         for label in settings_of})
         for _ in range(TIMING_ROUNDS):
-            for key, child in (
-                    ("rlr_default", lambda: run_child(tmp, "0", 1, "--child", "rlr", "default",
-                                                      "1")),
-                    ("rlr_sonicsim", lambda: run_child(tmp, "0", 1, "--child", "rlr",
-                                                       "sonicsim", "1")),
-                    *((f"sonicspec_{label}_1", lambda label=label: sonicspec_child(label, 1, "0"))
-                      for label in settings_of)):
-                r = child()
-                if key in results:
-                    for field in ("cpu_s", "wall_s", "simulate_s", "load_average"):
-                        if field in r:
-                            results[key][field] = results[key][field] + r[field]
-                else:
+            for key, child_args in children.items():
+                r = run_child(tmp, "0", 1, "--child", *child_args)
+                if key not in results:
                     results[key] = r
+                    continue
+                for field in ("cpu_s", "wall_s", "simulate_s", "load_average"):
+                    if field in r:
+                        results[key][field] = results[key][field] + r[field]
         for label in ("default", "cheap"):
-            results[f"sonicspec_{label}_2"] = sonicspec_child(label, 2, "0,1")
+            results[f"sonicspec_{label}_2"] = run_child(tmp, "0,1", 2, "--child",
+                                                        *sonicspec_args(label, 2))
         print("timing rounds: done", flush=True)
         # The same physics in both engines: every scattering coefficient 1.
         for name, reps in (("default_diffuse", 3), ("default_50k_diffuse", 1),
@@ -583,11 +577,15 @@ def main() -> int:
     return 0
 
 
-def defaults_label() -> str:
+def default_setting() -> tuple:
+    """The spec's default tracer setting, in ``SETTING_KEYS`` order."""
     d = AcousticsSpec()
-    return (f"{d.rays:,} rays, order {d.image_source_order}, splitting {d.ray_splitting:g}, "
-            f"visible-air ball {d.free_air_ball_m:g} m, roulette {d.roulette_db:g} dB, "
-            f"horizontal guiding {d.horizontal_guiding:g}")
+    return (d.rays, d.image_source_order, d.ray_splitting, d.free_air_ball_m, d.roulette_db,
+            d.horizontal_guiding)
+
+
+def defaults_label() -> str:
+    return cheap_label(dict(zip(SETTING_KEYS, default_setting(), strict=True)))
 
 
 def cheap_label(cheap: dict) -> str:
