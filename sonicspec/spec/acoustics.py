@@ -111,6 +111,19 @@ class AcousticsSpec(SpecModel):
         "such a scan about 3x at the same CPU; in diffuse rooms it raises the (already "
         "small) seed-to-seed spread about 1.5x.",
     )
+    simplify_tolerance_m: float = Field(
+        0.001,
+        ge=0,
+        le=0.1,
+        description="Before tracing, flat areas of the mesh are re-triangulated with fewer, "
+        "larger triangles (half-edge collapses that keep creases and material boundaries "
+        "where they are); no surface moves by more than this, metres. 0: trace the mesh as "
+        "given. The tracer's cost per hit grows with the triangle count: a procedural "
+        "apartment cut into 107,000 coplanar triangles goes back to 972 and its RIRs take "
+        "1.5x less CPU. The default merges what is flat to a millimetre; on scans, raise it "
+        "towards the scan's noise (a mesh with 2 mm noise loses two thirds of its triangles "
+        "at 0.02 m, still far below the 8.6 cm wavelength at 4 kHz).",
+    )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
     )

@@ -27,6 +27,7 @@ from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.metrics import figures_from_energy
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.simplify import simplify_flat_areas
 from sonicspec.acoustics.synthesis import synthesize_rir
 from sonicspec.errors import AcousticsError
 from sonicspec.geometry.materials import custom_material, load_library
@@ -59,6 +60,7 @@ class RirSettings:
     free_air_ball_m: float = 0.0
     roulette_db: float = 0.0
     horizontal_guiding: float = 0.0
+    simplify_tolerance_m: float = 0.0
 
     @classmethod
     def from_spec(cls, acoustics: dict[str, Any], sample_rate_hz: int,
@@ -80,6 +82,7 @@ class RirSettings:
                    free_air_ball_m=acoustics["free_air_ball_m"],
                    roulette_db=acoustics["roulette_db"],
                    horizontal_guiding=acoustics["horizontal_guiding"],
+                   simplify_tolerance_m=acoustics["simplify_tolerance_m"],
                    histogram_bin_s=acoustics["histogram_bin_s"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
@@ -104,7 +107,13 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
     if not settings.transmission:
         t = np.zeros_like(t)
     index = np.asarray(mesh.face_material)
-    return AcousticScene(mesh.vertices, mesh.faces, a[index], s[index], t[index])
+    vertices, faces = mesh.vertices, mesh.faces
+    if settings.simplify_tolerance_m > 0:
+        # Materials are the classes whose boundaries stay; each face keeps its own.
+        vertices, faces, kept = simplify_flat_areas(vertices, faces, index,
+                                                    settings.simplify_tolerance_m)
+        index = index[kept]
+    return AcousticScene(vertices, faces, a[index], s[index], t[index])
 
 
 def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSettings:
