@@ -542,13 +542,11 @@ def _validate_order(
         keep = length <= max_path_length_m
         img, rcv = img[keep], rcv[keep]
     # Backtrack: x runs from the receiver to the reflection points, last to first.
-    points = np.zeros((len(img), order + 2, 3))
-    points[:, -1] = receivers[rcv]
-    points[:, 0] = src
     # Visibility is tested from reflection points lifted off their plane towards the path
     # (by twice the coplanarity tolerance), so a region's own triangles, which may lie up to
-    # that far off the mean plane, do not occlude the path.
-    lifted = points.copy()
+    # that far off the mean plane, do not occlude the path. They are kept per step for the
+    # surviving pairs only: most candidates fail the first step.
+    lifted_points: list[np.ndarray] = []  # last reflection first
     lift = max(scene.eps_m, 2.0 * regions.distance_tol_m)
     x = receivers[rcv]
     for j in range(order - 1, -1, -1):
@@ -562,11 +560,16 @@ def _validate_order(
         # The path arrives from x's side of the plane.
         x_side = np.where(np.einsum("ij,ij->i", x, normals[p]) - plane_d[p] >= 0, 1.0, -1.0)
         good &= _inside_regions(scene, regions, q, p, x_side)
-        img, rcv, x, points, lifted = img[good], rcv[good], q[good], points[good], lifted[good]
-        points[:, j + 1] = x
-        lifted[:, j + 1] = x + (lift * x_side[good])[:, None] * normals[p[good]]
+        img, rcv, x = img[good], rcv[good], q[good]
+        lifted_points = [pts[good] for pts in lifted_points]
+        lifted_points.append(x + (lift * x_side[good])[:, None] * normals[p[good]])
         if len(img) == 0:
             return
+    lifted = np.empty((len(img), order + 2, 3))
+    lifted[:, 0] = src
+    lifted[:, -1] = receivers[rcv]
+    for k, pts in enumerate(lifted_points):  # reflection order - k, counted from the source
+        lifted[:, order - k] = pts
     # Every segment must be free or transmitting: energy factor per band of all crossings.
     n_pairs = len(img)
     seg_start = lifted[:, :-1].reshape(-1, 3)
