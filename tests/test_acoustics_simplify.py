@@ -196,3 +196,23 @@ def test_the_rir_stage_traces_the_simplified_mesh_unless_told_not_to(tolerance_m
                           dataclasses.replace(settings, simplify_tolerance_m=0.0))
     np.testing.assert_allclose(scene.face_areas_m2 @ scene.absorption,
                                full.face_areas_m2 @ full.absorption, rtol=1e-9)
+
+
+def test_a_flat_double_sided_panel_keeps_its_outline_and_stays_manifold():
+    """A square panel of zero thickness: a top layer fanned around a centre vertex and a
+    bottom layer of two triangles on the other diagonal, back to back. Its rim edges are
+    folds (the two faces' planes coincide), so the corners stay; the centre may go, but not
+    onto a corner of the bottom layer's diagonal (the two layers would then share that
+    diagonal: four faces on one edge)."""
+    a, b, c, d, v = range(5)
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], dtype=float)
+    top = [(a, b, v), (b, c, v), (c, d, v), (d, a, v)]
+    bottom = [(a, d, c), (a, c, b)]
+    faces = np.array(top + bottom)
+    v2, f2, _ = simplify_flat_areas(verts, faces, np.zeros(len(faces), dtype=np.int64), 0.001)
+    assert len(f2) == 4  # the centre is gone ...
+    assert np.all(edge_use(f2) == 2)  # ... onto b or d, not a or c
+    tri = v2[f2]
+    normal_z = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]
+    np.testing.assert_allclose(0.5 * normal_z[normal_z > 0].sum(), 1.0)  # top: whole square
+    np.testing.assert_allclose(-0.5 * normal_z[normal_z < 0].sum(), 1.0)  # bottom too
