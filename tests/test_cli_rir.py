@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +84,8 @@ def test_no_line_of_sight_means_no_direct_sound(spec: Path, capsys) -> None:
                        "--mic", "1.5", "7", "1.5")
     assert code == 0 and "direct path through walls" in out
     assert "without the noise draw" in out
+    # The L-shaped room's walls are single quads: nothing to merge, traced as given.
+    assert re.search(r"mesh: (\d+) triangles, traced as \1 ", out)
     opaque = spec.with_name("opaque.yaml")
     opaque.write_text(SPEC.replace("max_rir_length_s: 1.2}", "max_rir_length_s: 1.2, "
                                    "transmission: false}"))

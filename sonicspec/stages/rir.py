@@ -299,6 +299,7 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
              "channels": int(rir.shape[0]),
              "distance_m": float(np.linalg.norm(np.subtract(source_m, mic_m))),
              "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.size),
+             "mesh_triangles": mesh.n_faces, "traced_triangles": scene.n_faces,
              "figures": figures.to_dict(), "warnings": warnings}
     return rir, facts
 
@@ -319,6 +320,8 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
         f"({facts['distance_m']:.2f} m), {facts['samples']} samples at "
         f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
         f"order {facts['image_source_order']}), direct path {facts['direct']}",
+        f"mesh: {facts['mesh_triangles']:,} triangles, traced as {facts['traced_triangles']:,} "
+        "(flat areas merged within acoustics.simplify_tolerance_m)",
         f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
         *per_band(fig),
     ]
