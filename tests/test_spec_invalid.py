@@ -109,7 +109,8 @@ def test_json_spec_gets_line_numbers_too() -> None:
 def test_suspicious_acoustics_are_warnings_that_name_the_field() -> None:
     """Valid but suspicious tracer settings load, with a warning on the field's line."""
     text = BASE.replace("  rays: 5000\n",
-                        "  rays: 200\n  roulette_db: 90\n  horizontal_guiding: 0.8\n")
+                        "  rays: 200\n  roulette_db: 90\n  horizontal_guiding: 0.8\n"
+                        "  simplify_tolerance_m: 0.05\n")
     loaded, problems = validate_text(text, "w.yaml")
     assert loaded is not None, [p.format("w.yaml") for p in problems]
     warned = {format_path(w.path): w.format("w.yaml") for w in loaded.warnings}
@@ -117,3 +118,4 @@ def test_suspicious_acoustics_are_warnings_that_name_the_field() -> None:
     assert "no effect" in warned["acoustics.roulette_db"]
     assert "w.yaml:" in warned["acoustics.roulette_db"]
     assert "too few plain directions" in warned["acoustics.horizontal_guiding"]
+    assert "quarter of the wavelength" in warned["acoustics.simplify_tolerance_m"]

@@ -122,7 +122,7 @@ class AcousticsSpec(SpecModel):
         "apartment cut into 107,000 coplanar triangles goes back to 972 and its RIRs take "
         "1.5x less CPU. The default merges what is flat to a millimetre; on scans, raise it "
         "towards the scan's noise (a mesh with 2 mm noise loses two thirds of its triangles "
-        "at 0.02 m, still far below the 8.6 cm wavelength at 4 kHz).",
+        "at 0.02 m, a quarter of the 8.6 cm wavelength at 4 kHz; validate warns above it).",
     )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."

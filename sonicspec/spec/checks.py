@@ -43,6 +43,9 @@ Point2 = tuple[float, float]
 MIN_RAYS_WITHOUT_WARNING = 2000
 # Above this share of guided directions the plain ones are too few (bench_rlr, session 6).
 MAX_GUIDING_WITHOUT_WARNING = 0.5
+# A quarter of the wavelength at 4 kHz (8.6 cm): surfaces moved further change the highest
+# bands' reflections.
+MAX_SIMPLIFY_WITHOUT_WARNING_M = 0.02
 
 
 def _err(path: tuple, message: str) -> Problem:
@@ -481,6 +484,15 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
             "becomes erratic (in a furnished apartment 0.7 gave a 29 % worst-seed T30 error "
             "where 0.5 gave 4.6 %, bench/RESULTS.md); use at most "
             f"{MAX_GUIDING_WITHOUT_WARNING:g}",
+        )
+    if a.simplify_tolerance_m > MAX_SIMPLIFY_WITHOUT_WARNING_M:
+        yield _warn(
+            ("acoustics", "simplify_tolerance_m"),
+            f"simplify_tolerance_m = {a.simplify_tolerance_m:g} m lets the traced surfaces "
+            f"move by more than {100 * MAX_SIMPLIFY_WITHOUT_WARNING_M:g} cm, a quarter of the "
+            "wavelength at 4 kHz (8.6 cm): bumps and recesses that shape the highest bands "
+            f"may be flattened; use at most {MAX_SIMPLIFY_WITHOUT_WARNING_M:g} (scan noise "
+            "is rarely larger)",
         )
 
 
