@@ -7,7 +7,7 @@ optional dependency with a non-commercial licence (CC BY-NC 4.0), never imported
 
 Without it this script prints a message and exits 0.
 
-Reproduce:  python bench/bench_rlr.py            (about 11 minutes on 2 cores)
+Reproduce:  python bench/bench_rlr.py            (about 13 minutes on 2 cores)
             python bench/bench_rlr.py --quick    (fewer seeds and rays in the accuracy sweep)
 
 What it does
