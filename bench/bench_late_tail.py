@@ -1,0 +1,177 @@
+"""Where the late tail of the bench apartment comes from, and one way to sample it better.
+
+Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
+``bench_rlr.py``), on the same furnished apartment, materials and positions as ``bench_rlr.py``:
+
+* ``--by-azimuth``: launches only near-horizontal rays (|z| < 0.02) within one azimuth
+  sector at a time, traced from the mic with the ``sonicset`` preset's splitting, ball and
+  roulette, and prints the 1 kHz energy of those launches (normalised to the whole source
+  energy: a density per solid angle) in 100–300, 300–600 and 600–1,000 ms (3 seeds per
+  sector; azimuth 0° is +x, the room's 10 m side).
+* ``--azimuth-guiding GAMMA WIDTH_DEG`` (repeatable): the preset (3,000 rays) with a share
+  GAMMA of each horizontal band's launches drawn within ±WIDTH_DEG of the four axis azimuths
+  (0°, 90°, 180°, 270°), weighted by the balance heuristic over the mixture (so unbiased);
+  prints the T30 error of seeds 1–16 against the converged reference of ``bench_rlr.py``
+  (mean of 16 runs of its ``ref_setting``, computed here) — mean, spread and worst seed per
+  band. GAMMA 0 is the preset itself.
+
+The launch sampler is patched in this process only (``raytrace._guided_launch``): this is an
+experiment, not a setting of the package.
+
+Reproduce:  python bench/bench_late_tail.py --by-azimuth                      (~2 minutes)
+            python bench/bench_late_tail.py --azimuth-guiding 0 10 --azimuth-guiding 0.5 10 \\
+                --azimuth-guiding 0.7 10 --azimuth-guiding 0.5 5 --azimuth-guiding 0.5 20 \\
+                --azimuth-guiding 0.3 10                                        (~6 minutes)
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_rlr import (
+    BANDS_HZ,
+    MIC_M,
+    REF_RUNS,
+    REF_SEED_BASE,
+    SOURCE_M,
+    apartment_mesh,
+    ref_setting,
+    sonicspec_rir,
+    sonicspec_settings,
+)
+
+import sonicspec.acoustics.raytrace as raytrace
+from sonicspec.acoustics.image_sources import planar_regions
+from sonicspec.stages.rir import acoustic_scene, ray_trace_settings
+
+PRESET = (3000, 2, 2.0, 4.0, 30.0, 0.5)  # rays, order, splitting, ball, roulette, guiding
+AXES_RAD = np.radians([0.0, 90.0, 180.0, 270.0])
+SECTOR_EDGES_DEG = (-45, -20, -10, -5, -2, 0, 2, 5, 10, 20, 45, 70, 80, 85, 88, 90, 92, 95,
+                    100, 110, 135)
+BAND_1K = BANDS_HZ.index(1000.0)
+
+
+def sector_launch(lo_deg: float, hi_deg: float):
+    """A launch sampler: |z| < 0.02 and azimuth uniform in [lo, hi] degrees, weight 1."""
+    def launch(n, rng, beta, widths):
+        z = rng.uniform(-0.02, 0.02, n)
+        phi = np.radians(rng.uniform(lo_deg, hi_deg, n))
+        r = np.sqrt(1.0 - z * z)
+        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), np.ones(n)
+    return launch
+
+
+def axis_guided_launch(gamma: float, half_width_rad: float):
+    """The preset's guided launch with a share ``gamma`` of every band's directions moved to
+    the azimuth windows around ``AXES_RAD`` (same z lattice; balance-heuristic weights)."""
+    def launch(n, rng, beta, widths):
+        counts = [math.floor(n * beta / len(widths))] * len(widths)
+        n_sphere = n - sum(counts)
+        parts = [raytrace._rotated_fibonacci_sphere(n_sphere, rng)] if n_sphere else []
+        for m, w in zip(counts, widths, strict=True):
+            shift = rng.random(3)
+            i = np.arange(m)
+            z = w * (2.0 * (i + shift[0]) / m - 1.0)
+            phi = 2.0 * math.pi * ((i * raytrace._GOLDEN + shift[1]) % 1.0)
+            m_axis = round(gamma * m)
+            u = (np.arange(m_axis) * raytrace._GOLDEN + shift[2]) % 1.0
+            k = np.floor(4.0 * u).astype(int)
+            within = (7.0 * (4.0 * u - k)) % 1.0  # uniform in [0, 1), stratified
+            phi[rng.permutation(m)[:m_axis]] = AXES_RAD[k] + half_width_rad * (2 * within - 1)
+            r = np.sqrt(1.0 - z * z)
+            parts.append(np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1))
+        dirs = np.concatenate(parts)
+        az = np.abs(dirs[:, 2])
+        angle = np.mod(np.arctan2(dirs[:, 1], dirs[:, 0]), 2.0 * math.pi)
+        off_axis = np.min(np.abs((angle[:, None] - AXES_RAD[None, :] + math.pi)
+                                 % (2.0 * math.pi) - math.pi), axis=1)
+        # Azimuth density of the band components relative to uniform.
+        q = (1.0 - gamma) + gamma * math.pi / (4.0 * half_width_rad) * (off_axis < half_width_rad)
+        density = n_sphere / n + q * sum(m / n * (az < w) / w
+                                         for m, w in zip(counts, widths, strict=True))
+        return dirs, 1.0 / density
+    return launch
+
+
+def by_azimuth(mesh) -> None:
+    settings = sonicspec_settings(*PRESET)
+    scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+    st = dataclasses.replace(ray_trace_settings(settings, 2), guiding=0.999)
+    air = settings.air()
+    print("1 kHz energy of each sector's 3,000 launches (|z| < 0.02), normalised as if they "
+          "carried the whole source energy: the late energy per solid angle, by azimuth")
+    for lo, hi in itertools.pairwise(SECTOR_EDGES_DEG):
+        raytrace._guided_launch = sector_launch(lo, hi)
+        windows = []
+        for seed in range(3):
+            (res,) = raytrace.trace_rays(scene, MIC_M, SOURCE_M[None],
+                                         np.random.default_rng(seed), st, air)
+            e = res.histogram.energy[:, BAND_1K]
+            windows.append([e[100:300].sum(), e[300:600].sum(), e[600:1000].sum()])
+        w = np.mean(windows, axis=0)
+        print(f"azimuth {lo:5d}..{hi:5d} deg: 100-300 ms {w[0]:.2e}  300-600 ms {w[1]:.2e}  "
+              f"600-1000 ms {w[2]:.2e}", flush=True)
+
+
+def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
+    original = raytrace._guided_launch
+    ref_settings = sonicspec_settings(*ref_setting(20_000, False))
+    scene = acoustic_scene(mesh, {"library": "sonicset"}, ref_settings)
+    regions = planar_regions(scene)
+    t0 = time.perf_counter()
+    runs = [sonicspec_rir(scene, regions, ref_settings, REF_SEED_BASE + k, 2)[1]["expected"]
+            for k in range(REF_RUNS)]
+    ref_t30 = np.mean([r["t30_s"] for r in runs], axis=0)
+    print(f"reference: mean of {REF_RUNS} runs of bench_rlr's ref_setting "
+          f"({time.perf_counter() - t0:.0f} s): T30 " + ", ".join(f"{t:.3f}" for t in ref_t30)
+          + " s")
+    settings = sonicspec_settings(*PRESET)
+    print("T30 error of the preset (3,000 rays) against it, seeds 1-16, per band "
+          + "/".join(f"{b:g}" for b in BANDS_HZ) + " Hz:")
+    for gamma, width_deg in variants:
+        raytrace._guided_launch = (axis_guided_launch(gamma, math.radians(width_deg))
+                                   if gamma > 0 else original)
+        errors, cpu = [], []
+        for seed in range(1, 17):
+            c0 = time.process_time()
+            t30 = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]["t30_s"]
+            cpu.append(time.process_time() - c0)
+            errors.append(100.0 * (np.asarray(t30) / ref_t30 - 1.0))
+        e = np.array(errors)
+        fmt = lambda x: " ".join(f"{v:5.1f}" for v in x)  # noqa: E731
+        print(f"gamma {gamma:g}, ±{width_deg:g} deg ({np.median(cpu):.2f} s CPU): mean "
+              f"{fmt(e.mean(0))} | sd {fmt(e.std(0))} | worst {fmt(np.abs(e).max(0))} %",
+              flush=True)
+    raytrace._guided_launch = original
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--by-azimuth", action="store_true")
+    parser.add_argument("--azimuth-guiding", nargs=2, type=float, action="append",
+                        metavar=("GAMMA", "WIDTH_DEG"), default=[])
+    args = parser.parse_args()
+    if not args.by_azimuth and not args.azimuth_guiding:
+        parser.error("give --by-azimuth and/or --azimuth-guiding GAMMA WIDTH_DEG")
+    mesh = apartment_mesh(100_000)
+    print(f"apartment: {mesh.n_faces:,} triangles; reproduce: python bench/bench_late_tail.py "
+          + " ".join(sys.argv[1:]))
+    if args.by_azimuth:
+        by_azimuth(mesh)
+    if args.azimuth_guiding:
+        azimuth_guiding(mesh, [(g, w) for g, w in args.azimuth_guiding])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
