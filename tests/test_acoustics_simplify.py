@@ -181,6 +181,17 @@ def test_a_bad_tolerance_is_named(tol):
         simplify_flat_areas(verts, faces, np.zeros(len(faces), dtype=np.int64), tol)
 
 
+def test_bad_arrays_are_named_before_the_compiled_pass():
+    verts, faces = shoebox(4.0, 3.0, 2.5)
+    classes = np.zeros(len(faces), dtype=np.int64)
+    with pytest.raises(AcousticsError, match=r"faces: expected vertex indices in \[0, 7\]"):
+        simplify_flat_areas(verts, np.where(faces == 7, 8, faces), classes, 0.001)
+    with pytest.raises(AcousticsError, match="faces: expected shape"):
+        simplify_flat_areas(verts, faces[:, :2], classes, 0.001)
+    with pytest.raises(AcousticsError, match="face_class: expected shape"):
+        simplify_flat_areas(verts, faces, classes[:-1], 0.001)
+
+
 @pytest.mark.parametrize(("tolerance_m", "simplified"), [(None, True), (0.0, False)])
 def test_the_rir_stage_traces_the_simplified_mesh_unless_told_not_to(tolerance_m, simplified):
     verts, faces, material, names = furnished_l_room(levels=2, names=True)

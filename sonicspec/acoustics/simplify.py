@@ -71,6 +71,15 @@ def simplify_flat_areas(
     face_class = np.ascontiguousarray(face_class, dtype=np.int64)
     if not np.isfinite(tolerance_m) or tolerance_m < 0:
         raise AcousticsError(f"tolerance_m: expected a distance >= 0 m, got {tolerance_m!r}")
+    # The compiled pass does not check bounds: bad indices must not reach it.
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise AcousticsError(f"vertices: expected shape (V, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise AcousticsError(f"faces: expected shape (F, 3), got {faces.shape}")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise AcousticsError(
+            f"faces: expected vertex indices in [0, {len(vertices) - 1}], "
+            f"got [{faces.min()}, {faces.max()}]")
     if face_class.shape != (len(faces),):
         raise AcousticsError(
             f"face_class: expected shape ({len(faces)},), got {face_class.shape}")
