@@ -55,12 +55,16 @@ def test_inspect_scanned_scene_reports_repair(tmp_path: Path, capsys) -> None:
     assert facts["scene_id"] == "mp3d/abc"
     assert facts["repair"]["watertight"] is True
     assert facts["leak"]["fraction"] == 0.0
+    # What the rir stage traces after merging flat areas (the spec's default tolerance).
+    assert facts["simplify_tolerance_m"] == 0.001
+    assert 0 < facts["traced_faces"] <= facts["faces"]
     assert {"wall", "floor", "ceiling", "table", "chair"} <= set(facts["labels"])
     # Faces take materials from their mpcat40 labels through the default library's table.
     assert {"upholstered_seat", "wooden_chair", "plaster_on_brick", "parquet_on_concrete",
             "plaster_on_concrete"} <= set(facts["materials_m2"])
     code, text, _ = run(capsys, "scene", "inspect", str(spec))
     assert "watertight yes" in text and "leak test: 0.0000%" in text
+    assert f"the rir stage traces {facts['traced_faces']} " in text
     # A label map in the spec wins over the library; SonicSet's library uses its own names.
     spec.write_text(spec.read_text().replace(
         "format: matterport}", "format: matterport, label_materials: {table: Glass}}")

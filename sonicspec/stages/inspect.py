@@ -45,6 +45,16 @@ def build_scene(loaded: LoadedSpec, scene_id: str):
     return mesh, report, mesh_job, nav_job, [str(w.message) for w in caught]
 
 
+def _traced_faces(mesh, tolerance_m: float) -> int:
+    """How many triangles the rir stage traces after its flat-area simplification."""
+    if tolerance_m <= 0:
+        return int(mesh.n_faces)
+    from sonicspec.acoustics.simplify import simplify_flat_areas
+
+    return len(simplify_flat_areas(mesh.vertices, mesh.faces, mesh.face_material,
+                                       tolerance_m)[1])
+
+
 def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
     """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
     spec = loaded.spec
@@ -75,6 +85,8 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         "bounds_m": [lo.tolist(), hi.tolist()],
         "vertices": int(mesh.vertices.shape[0]),
         "faces": int(mesh.faces.shape[0]),
+        "simplify_tolerance_m": spec.acoustics.simplify_tolerance_m,
+        "traced_faces": _traced_faces(mesh, spec.acoustics.simplify_tolerance_m),
         "surface_area_m2": float(areas.sum()),
         "air_volume_m3": float(mesh.air_volume()),
         "repair": report.get("repair"),
@@ -100,7 +112,8 @@ def format_facts(facts: dict[str, Any]) -> str:
     size = np.subtract(hi, lo)
     lines = [
         f"scene {facts['scene_id']} ({facts['kind']}): {facts['faces']} faces, "
-        f"{facts['vertices']} vertices",
+        f"{facts['vertices']} vertices; the rir stage traces {facts['traced_faces']} "
+        f"(acoustics.simplify_tolerance_m {facts['simplify_tolerance_m']:g} m)",
         f"bounds [{', '.join(f'{v:.2f}' for v in lo)}] .. [{', '.join(f'{v:.2f}' for v in hi)}]"
         f" m (size {' x '.join(f'{v:.2f}' for v in size)} m)",
         f"surface {facts['surface_area_m2']:.1f} m², air volume {facts['air_volume_m3']:.1f} m³",
