@@ -106,7 +106,7 @@ def simplify(vertices, faces, alive, face_class, face_err, tol_m, cos_min,
     u_faces = np.empty(MAX_DEGREE, dtype=np.int64)
     nbr = np.empty(2 * MAX_DEGREE, dtype=np.int64)
     nbr_count = np.empty(2 * MAX_DEGREE, dtype=np.int64)
-    nbr_face = np.empty((2 * MAX_DEGREE, 2), dtype=np.int64)
+    nbr_face = np.empty((2 * MAX_DEGREE, 2), dtype=np.int64)  # local j: planes[j]
     planes = np.empty((3 * MAX_DEGREE, 4))
     cand_u = np.empty(2 * MAX_DEGREE, dtype=np.int64)
     cand_dev = np.empty(2 * MAX_DEGREE)
@@ -145,7 +145,7 @@ def simplify(vertices, faces, alive, face_class, face_err, tol_m, cos_min,
                     found = n_nbr
                     n_nbr += 1
                 if nbr_count[found] < 2:
-                    nbr_face[found, nbr_count[found]] = f
+                    nbr_face[found, nbr_count[found]] = j
                 nbr_count[found] += 1
         manifold = True
         for i in range(n_nbr):
@@ -153,10 +153,10 @@ def simplify(vertices, faces, alive, face_class, face_err, tol_m, cos_min,
                 manifold = False
         if not manifold or base_err > tol_m:
             continue
-        # Constraint planes: every face at v, and, through every edge at v that separates
-        # two materials or folds by more than 90° (up to two faces back to back, whose planes
-        # coincide and so cannot pin the edge by themselves), the plane square to each of
-        # its faces.
+        # Constraint planes: every face at v (planes[j] is v_faces[j]'s, read again below),
+        # and, through every edge at v that separates two materials or folds by more than 90°
+        # (up to two faces back to back, whose planes coincide and so cannot pin the edge by
+        # themselves), the plane square to each of its faces.
         n_pl = 0
         for j in range(k):
             f = v_faces[j]
@@ -164,17 +164,16 @@ def simplify(vertices, faces, alive, face_class, face_err, tol_m, cos_min,
             planes[n_pl, 0], planes[n_pl, 1], planes[n_pl, 2], planes[n_pl, 3] = nx, ny, nz, d
             n_pl += 1
         for i in range(n_nbr):
-            f0, f1 = nbr_face[i, 0], nbr_face[i, 1]
-            if face_class[f0] == face_class[f1]:
-                ax, ay, az, _, _ = _plane(vertices, faces[f0, 0], faces[f0, 1], faces[f0, 2])
-                bx, by, bz, _, _ = _plane(vertices, faces[f1, 0], faces[f1, 1], faces[f1, 2])
-                if ax * bx + ay * by + az * bz >= 0.0:
-                    continue
+            j0, j1 = nbr_face[i, 0], nbr_face[i, 1]
+            if (face_class[v_faces[j0]] == face_class[v_faces[j1]]
+                    and planes[j0, 0] * planes[j1, 0] + planes[j0, 1] * planes[j1, 1]
+                    + planes[j0, 2] * planes[j1, 2] >= 0.0):
+                continue
             ex = vertices[nbr[i], 0] - vertices[v, 0]
             ey = vertices[nbr[i], 1] - vertices[v, 1]
             ez = vertices[nbr[i], 2] - vertices[v, 2]
-            for f in (f0, f1):
-                nx, ny, nz, _, _ = _plane(vertices, faces[f, 0], faces[f, 1], faces[f, 2])
+            for j in (j0, j1):
+                nx, ny, nz = planes[j, 0], planes[j, 1], planes[j, 2]
                 sx, sy, sz = ey * nz - ez * ny, ez * nx - ex * nz, ex * ny - ey * nx
                 length = np.sqrt(sx * sx + sy * sy + sz * sz)
                 if length == 0:
@@ -200,7 +199,7 @@ def simplify(vertices, faces, alive, face_class, face_err, tol_m, cos_min,
                 a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
                 if a == u or b == u or c == u:
                     continue
-                ox, oy, oz, _, _ = _plane(vertices, a, b, c)
+                ox, oy, oz = planes[j, 0], planes[j, 1], planes[j, 2]
                 a = u if a == v else a
                 b = u if b == v else b
                 c = u if c == v else c
