@@ -45,18 +45,10 @@ def build_scene(loaded: LoadedSpec, scene_id: str):
     return mesh, report, mesh_job, nav_job, [str(w.message) for w in caught]
 
 
-def _traced_faces(mesh, tolerance_m: float) -> int:
-    """How many triangles the rir stage traces after its flat-area simplification."""
-    if tolerance_m <= 0:
-        return int(mesh.n_faces)
-    from sonicspec.acoustics.simplify import simplify_flat_areas
-
-    return len(simplify_flat_areas(mesh.vertices, mesh.faces, mesh.face_material,
-                                       tolerance_m)[1])
-
-
 def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
     """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
+    from sonicspec.stages.rir import traced_geometry  # the acoustics stack: only when asked
+
     spec = loaded.spec
     mesh, report, _, nav_job, caught = build_scene(loaded, scene_id)
     nav = build_navigation(mesh, nav_settings(dict(nav_job.params)))
@@ -86,7 +78,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         "vertices": int(mesh.vertices.shape[0]),
         "faces": int(mesh.faces.shape[0]),
         "simplify_tolerance_m": spec.acoustics.simplify_tolerance_m,
-        "traced_faces": _traced_faces(mesh, spec.acoustics.simplify_tolerance_m),
+        "traced_faces": len(traced_geometry(mesh, spec.acoustics.simplify_tolerance_m)[1]),
         "surface_area_m2": float(areas.sum()),
         "air_volume_m3": float(mesh.air_volume()),
         "repair": report.get("repair"),

@@ -106,14 +106,19 @@ def acoustic_scene(mesh: SceneMesh, materials: dict[str, Any], settings: RirSett
     a, s, t = lib.coefficients(mesh.materials, settings.bands_hz)
     if not settings.transmission:
         t = np.zeros_like(t)
-    index = np.asarray(mesh.face_material)
-    vertices, faces = mesh.vertices, mesh.faces
-    if settings.simplify_tolerance_m > 0:
-        # Materials are the classes whose boundaries stay; each face keeps its own.
-        vertices, faces, kept = simplify_flat_areas(vertices, faces, index,
-                                                    settings.simplify_tolerance_m)
-        index = index[kept]
+    vertices, faces, kept = traced_geometry(mesh, settings.simplify_tolerance_m)
+    index = np.asarray(mesh.face_material)[kept]
     return AcousticScene(vertices, faces, a[index], s[index], t[index])
+
+
+def traced_geometry(mesh: SceneMesh, tolerance_m: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The vertices and faces the rir stage traces, and for each face its index in ``mesh``:
+    flat areas merged within ``tolerance_m`` (0: the mesh as given), the materials being the
+    classes whose boundaries stay."""
+    if tolerance_m <= 0:
+        return mesh.vertices, mesh.faces, np.arange(mesh.n_faces)
+    return simplify_flat_areas(mesh.vertices, mesh.faces, mesh.face_material, tolerance_m)
 
 
 def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSettings:
