@@ -108,6 +108,8 @@ def ref_setting(ref_rays: int, diffuse: bool) -> tuple:
     if diffuse:
         return (ref_rays, REF_ORDER, 0.0, 0.0, 0.0, 0.0)
     return (ref_rays, REF_ORDER, 2.0, 4.0, 0.0, 0.5)
+
+
 # Settings tried when both engines get every scattering coefficient 1 (rays, order, splitting,
 # ball, roulette, guiding): a diffuse late field, where plain rays with diffuse rain converge
 # fast (and horizontal guiding has nothing to find).
@@ -756,16 +758,15 @@ def reference_label(sweep: dict) -> str:
     standard error of the mean over its runs, worst band)."""
     runs = sweep["ref_expected_runs"]
     n = len(runs)
-    spread = {k: np.std(np.array([r[k] for r in runs], float), axis=0, ddof=1)
-              for k in ("t30_s", "edt_s", "c50_db")}
-    mean = sweep["ref_expected"]
-    sem_t30 = np.max(spread["t30_s"] / np.asarray(mean["t30_s"])) / np.sqrt(n)
-    sem_edt = np.max(spread["edt_s"] / np.asarray(mean["edt_s"])) / np.sqrt(n)
-    sem_c50 = np.max(spread["c50_db"]) / np.sqrt(n)
+    # Relative for the times, in dB for C50.
+    scale = {"t30_s": np.asarray(sweep["ref_expected"]["t30_s"]),
+             "edt_s": np.asarray(sweep["ref_expected"]["edt_s"]), "c50_db": 1.0}
+    sem = {k: np.max(np.std([r[k] for r in runs], axis=0, ddof=1) / s) / np.sqrt(n)
+           for k, s in scale.items()}
     setting = cheap_label(dict(zip(SETTING_KEYS, sweep["ref_setting"], strict=True)))
     return (f"the mean of sonicspec's {n} converged runs ({setting}; standard error of that "
-            "mean: "
-            f"T30 {100 * sem_t30:.1f} %, EDT {100 * sem_edt:.1f} %, C50 {sem_c50:.2f} dB)")
+            f"mean: T30 {100 * sem['t30_s']:.1f} %, EDT {100 * sem['edt_s']:.1f} %, "
+            f"C50 {sem['c50_db']:.2f} dB)")
 
 
 def report_same_physics(results: dict) -> None:

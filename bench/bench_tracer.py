@@ -37,6 +37,7 @@ from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplified_scene
 from sonicspec.acoustics.theory import kuttruff_t60, shoebox_free_paths
+from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.stages import rir as rir_stage
 
 BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
@@ -502,9 +503,9 @@ def main() -> None:
         t = time.perf_counter()
         (res,) = trace_rays(sc, SRC, RCV, np.random.default_rng(1), settings, air)
         t_rt = time.perf_counter() - t
-        # What the rir stage traces instead (acoustics.simplify_tolerance_m, default 1 mm).
+        # What the rir stage traces instead (at the spec's default simplify_tolerance_m).
         t = time.perf_counter()
-        n_simple = simplified_scene(sc, 0.001).n_faces
+        n_simple = simplified_scene(sc, AcousticsSpec().simplify_tolerance_m).n_faces
         t_simplify = time.perf_counter() - t
         print(
             f"{n:8d} triangles: scene {t_build:5.2f} s  ISM(3) {t_ism:5.2f} s "

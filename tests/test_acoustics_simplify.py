@@ -9,6 +9,7 @@ import pytest
 import trimesh
 
 from sonicspec.acoustics.image_sources import image_sources
+from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplified_scene, simplify_flat_areas
 from sonicspec.errors import AcousticsError
 from sonicspec.geometry.mesh import SceneMesh
@@ -152,8 +153,7 @@ def test_holes_keep_their_outline():
 def test_image_sources_are_unchanged_and_the_output_is_deterministic():
     verts, faces, material = furnished_l_room(levels=2)
     alpha = np.array([0.1, 0.3, 0.5, 0.2])[material][:, None]
-    fine = uniform_scene(verts, faces).__class__(
-        verts, faces, alpha, np.zeros_like(alpha), np.zeros_like(alpha))
+    fine = AcousticScene(verts, faces, alpha, np.zeros_like(alpha), np.zeros_like(alpha))
     coarse = simplified_scene(fine, 0.001)
     assert coarse.n_faces < fine.n_faces / 10
     again = simplified_scene(fine, 0.001)
