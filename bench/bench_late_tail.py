@@ -72,34 +72,29 @@ def sector_launch(lo_deg: float, hi_deg: float):
 
 
 def axis_guided_launch(gamma: float, half_width_rad: float):
-    """The preset's guided launch with a share ``gamma`` of every band's directions moved to
-    the azimuth windows around ``AXES_RAD`` (same z lattice; balance-heuristic weights)."""
+    """The package's guided launch with a share ``gamma`` of every band's directions moved to
+    the azimuth windows around ``AXES_RAD`` (their z kept; balance-heuristic weights)."""
+    plain = raytrace._guided_launch
+
     def launch(n, rng, beta, widths):
-        counts = [math.floor(n * beta / len(widths))] * len(widths)
-        n_sphere = n - sum(counts)
-        parts = [raytrace._rotated_fibonacci_sphere(n_sphere, rng)] if n_sphere else []
-        for m, w in zip(counts, widths, strict=True):
-            shift = rng.random(3)
-            i = np.arange(m)
-            z = w * (2.0 * (i + shift[0]) / m - 1.0)
-            phi = 2.0 * math.pi * ((i * raytrace._GOLDEN + shift[1]) % 1.0)
-            m_axis = round(gamma * m)
-            u = (np.arange(m_axis) * raytrace._GOLDEN + shift[2]) % 1.0
+        dirs, weight = plain(n, rng, beta, widths)
+        m = math.floor(n * beta / len(widths))  # directions per band, after the sphere's
+        n_sphere = n - m * len(widths)
+        for start in range(n_sphere, n, m):
+            rows = start + rng.permutation(m)[:round(gamma * m)]
+            u = (np.arange(len(rows)) * raytrace._GOLDEN + rng.random()) % 1.0
             k = np.floor(4.0 * u).astype(int)
             within = (7.0 * (4.0 * u - k)) % 1.0  # uniform in [0, 1), stratified
-            phi[rng.permutation(m)[:m_axis]] = AXES_RAD[k] + half_width_rad * (2 * within - 1)
-            r = np.sqrt(1.0 - z * z)
-            parts.append(np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1))
-        dirs = np.concatenate(parts)
-        az = np.abs(dirs[:, 2])
+            phi = AXES_RAD[k] + half_width_rad * (2.0 * within - 1.0)
+            r = np.hypot(dirs[rows, 0], dirs[rows, 1])
+            dirs[rows, 0], dirs[rows, 1] = r * np.cos(phi), r * np.sin(phi)
         angle = np.mod(np.arctan2(dirs[:, 1], dirs[:, 0]), 2.0 * math.pi)
         off_axis = np.min(np.abs((angle[:, None] - AXES_RAD[None, :] + math.pi)
                                  % (2.0 * math.pi) - math.pi), axis=1)
-        # Azimuth density of the band components relative to uniform.
+        # Azimuth density of the band components relative to uniform; the band terms of the
+        # plain sampler's density (1 / weight - sphere share) depend on z alone.
         q = (1.0 - gamma) + gamma * math.pi / (4.0 * half_width_rad) * (off_axis < half_width_rad)
-        density = n_sphere / n + q * sum(m / n * (az < w) / w
-                                         for m, w in zip(counts, widths, strict=True))
-        return dirs, 1.0 / density
+        return dirs, 1.0 / (n_sphere / n + q * (1.0 / weight - n_sphere / n))
     return launch
 
 
