@@ -8,6 +8,11 @@
   lengths between reflections (Kuttruff, *Room Acoustics*, §5.5); for a shoebox γ² is found
   here by sampling diffusely reflected paths between its walls (:func:`shoebox_free_paths`,
   no ray tracer involved).
+* The geometric-acoustics T30 of a shoebox whose walls reflect specularly or, with
+  probability ``s``, in a Lambert direction (:func:`shoebox_decay_t60`): the total sound
+  energy in the room, followed by an analytic walk between the six planes (no ray tracer, no
+  receiver). Eyring and Kuttruff assume a diffuse field; with ``s < 1`` the field keeps
+  specular memory and this walk is the reference.
 * Mean free path ``4V/S``; critical distance ``√(A / 16π)`` (directivity 1).
 * Barron & Lee (1988) revised theory: relative to the direct energy ``100/r²``, the reflected
   energy arriving after time ``t`` (after the direct sound at distance r) is
@@ -68,6 +73,20 @@ def kuttruff_t60(volume_m3: float, surface_m2: float, mean_absorption, path_vari
     return 4 * SIXTY_DB * v / (speed_of_sound_m_s * (a + 4 * m * v))
 
 
+def _lambert_directions(axis: np.ndarray, toward_plus: np.ndarray, rng: np.random.Generator
+                        ) -> np.ndarray:
+    """Cosine-weighted unit vectors leaving an axis-aligned wall: ``axis`` the wall's normal
+    axis per path, ``toward_plus`` whether they point into +axis."""
+    n = len(axis)
+    rows = np.arange(n)
+    u1, u2 = rng.random(n), rng.random(n)
+    direction = np.empty((n, 3))
+    direction[rows, (axis + 1) % 3] = np.sqrt(u1) * np.cos(2 * math.pi * u2)
+    direction[rows, (axis + 2) % 3] = np.sqrt(u1) * np.sin(2 * math.pi * u2)
+    direction[rows, axis] = np.sqrt(1.0 - u1) * np.where(toward_plus, 1.0, -1.0)
+    return direction
+
+
 def shoebox_free_paths(size_m, n_paths: int = 1_000_000, seed: int = 0) -> np.ndarray:
     """Lengths of straight paths in a shoebox that leave a wall point (uniform over the
     surface) in a Lambert direction and end on the next wall, metres. Their mean is ``4V/S``
@@ -82,16 +101,86 @@ def shoebox_free_paths(size_m, n_paths: int = 1_000_000, seed: int = 0) -> np.nd
     rows = np.arange(n_paths)
     start = rng.random((n_paths, 3)) * size
     start[rows, axis] = far_side * size[axis]
-    u1, u2 = rng.random(n_paths), rng.random(n_paths)
-    direction = np.empty((n_paths, 3))
-    direction[rows, (axis + 1) % 3] = np.sqrt(u1) * np.cos(2 * math.pi * u2)
-    direction[rows, (axis + 2) % 3] = np.sqrt(u1) * np.sin(2 * math.pi * u2)
-    direction[rows, axis] = np.sqrt(1.0 - u1) * np.where(far_side == 1, -1.0, 1.0)
+    direction = _lambert_directions(axis, far_side == 0, rng)
     with np.errstate(divide="ignore", invalid="ignore"):
         to_wall = np.where(direction > 0, (size - start) / direction,
                            np.where(direction < 0, -start / direction, np.inf))
     to_wall[rows, axis] = np.where(direction[rows, axis] != 0, to_wall[rows, axis], np.inf)
     return to_wall.min(axis=1)
+
+
+def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per_m=0.0,
+                      speed_of_sound_m_s: float = 343.0, n_paths: int = 40_000,
+                      seed: int = 0) -> np.ndarray:
+    """ISO 3382-1 T30 of the total sound energy in a shoebox, seconds (per band if
+    ``absorption``/``air_m_per_m`` are arrays): Schroeder's backward integral of the energy
+    still in the room, regression from −5 to −35 dB — what a receiver's T30 converges to.
+
+    Energy particles leave ``source_m`` uniformly over the sphere; at each wall they keep
+    ``1 − α`` of their energy and leave in a Lambert direction with probability
+    ``scattering``, specularly otherwise — the reflection law of a stochastic ray tracer,
+    walked here analytically between the six planes. Each particle makes as many reflections
+    as bring it below 10⁻⁶ in every band; air absorption multiplies the energy by
+    ``exp(−m c t)``. With ``scattering < 1`` the decay is a blend of exponentials (the field
+    keeps specular memory), which the backward integral weights towards the slow ones, as it
+    does for a measured or traced RIR."""
+    size = np.array([_positive(f"size_m[{i}]", x) for i, x in enumerate(size_m)])
+    if size.shape != (3,):
+        raise AcousticsError(f"size_m: expected 3 lengths, got {size.shape}")
+    source = np.asarray(source_m, dtype=np.float64)
+    if source.shape != (3,) or not np.all((source > 0) & (source < size)):
+        raise AcousticsError(f"source_m: expected a point inside the room, got {source_m!r}")
+    alpha = np.atleast_1d(np.asarray(absorption, dtype=np.float64))
+    if alpha.ndim != 1 or np.any((alpha <= 0) | (alpha >= 1)):
+        raise AcousticsError(f"absorption: expected values in (0, 1), got {absorption!r}")
+    if not 0 <= scattering <= 1:
+        raise AcousticsError(f"scattering: expected a value in [0, 1], got {scattering!r}")
+    try:
+        air = np.broadcast_to(np.asarray(air_m_per_m, dtype=np.float64), alpha.shape)
+    except ValueError:
+        raise AcousticsError(f"air_m_per_m: expected one value per band of absorption "
+                             f"({len(alpha)}), got {air_m_per_m!r}") from None
+    c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
+    rng = np.random.default_rng(seed)
+    rows = np.arange(n_paths)
+    position = np.tile(source, (n_paths, 1))
+    direction = rng.normal(size=(n_paths, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    n_reflections = math.ceil(6 / -math.log10(1 - alpha.min()))
+    surface = 2 * float(size[0] * size[1] + size[0] * size[2] + size[1] * size[2])
+    bin_s = float(eyring_t60(float(np.prod(size)), surface, alpha.min())) / 2000
+    elapsed = np.zeros(n_paths)
+    reflection_bins = []  # per reflection, the time bin each particle reaches its wall in
+    for _ in range(n_reflections):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            to_wall = np.where(direction > 0, (size - position) / direction,
+                               np.where(direction < 0, -position / direction, np.inf))
+        axis = to_wall.argmin(axis=1)
+        length = to_wall[rows, axis]
+        position += direction * length[:, None]
+        elapsed += length / c
+        reflection_bins.append((elapsed / bin_s).astype(np.int64))
+        specular = direction.copy()
+        specular[rows, axis] *= -1
+        scattered = _lambert_directions(axis, specular[rows, axis] > 0, rng)
+        direction = np.where((rng.random(n_paths) < scattering)[:, None], scattered, specular)
+    n_bins = int(reflection_bins[-1].max()) + 1
+    times = np.arange(n_bins) * bin_s
+    t30 = np.empty(alpha.shape)
+    for b, a in enumerate(alpha):
+        lost = np.zeros(n_bins)
+        for k, time_bin in enumerate(reflection_bins):
+            # the energy lost at reflection k; the last one takes all that is left
+            share = a * (1 - a) ** k if k < n_reflections - 1 else (1 - a) ** k
+            lost += np.bincount(time_bin, minlength=n_bins) * share
+        remaining = np.maximum(1.0 - np.cumsum(lost) / n_paths, 0.0)
+        energy = remaining * np.exp(-air[b] * c * times)
+        decay = np.cumsum(energy[::-1])[::-1]
+        with np.errstate(divide="ignore"):
+            level = 10 * np.log10(decay / decay[0])
+        fit = (level <= -5.0) & (level >= -35.0)
+        t30[b] = -60.0 / np.polyfit(times[fit], level[fit], 1)[0]
+    return t30 if np.ndim(absorption) or np.ndim(air_m_per_m) else t30[0]
 
 
 def mean_free_path_m(volume_m3: float, surface_m2: float) -> float:
