@@ -185,17 +185,18 @@ def test_candidate_limit_warns_and_reports_completed_order():
     assert res.arrivals[0].order.max() == 2
 
 
-@pytest.mark.parametrize("limit", [40, 100, 149, 150, 200])
+@pytest.mark.parametrize("limit", [40, 100, 140, 149, 150, 200])
 def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, limit: int):
     """The count that stops an order before its images are built gives the same decision and
     arrivals as building them (limits around the 150 order-3 candidates of this shoebox, with
-    a path-length limit that keeps every one of them, and one that keeps only some)."""
+    a path-length limit that keeps every one of them, and ones that keep only some: at 12 m,
+    135 of them, so a limit of 140 must let order 3 be built)."""
     from sonicspec.acoustics import image_sources as ism
 
     verts, faces = shoebox(5.0, 4.0, 3.0)
     scene = uniform_scene(verts, faces)
     src, mic = np.array([1.2, 1.5, 1.1]), np.array([[3.3, 2.2, 1.7]])
-    for max_path in (1000.0, 20.0):
+    for max_path in (1000.0, 20.0, 12.0):
         runs = []
         for early in (True, False):
             if not early:
@@ -318,3 +319,51 @@ def test_coefficient_classes_partition_faces_by_identical_rows():
     # Same partition: a one-to-one map between the two labelings.
     pairs = set(zip(got.tolist(), exact.tolist(), strict=True))
     assert len(pairs) == len(set(got.tolist())) == len(set(exact.tolist())) == 5
+
+
+@pytest.mark.parametrize("levels", [0, 3])
+def test_compiled_prefilter_keeps_every_valid_path_and_drops_most_pairs(monkeypatch, levels):
+    """The compiled prefilter of each order's (image, receiver) pairs only narrows what the
+    exact tests see: in a furnished L room (two boxes, one rotated; subdivided 3 times, its
+    walls become regions of more than 64 triangles, tested by probe rays) the arrivals to
+    order 3 are the same bytes as with every pair passed through, from several positions;
+    unsubdivided, it passes on under a third of the pairs (the probe-tested regions of the
+    subdivided room are left to the exact pass)."""
+    from sonicspec.acoustics import _image_source_kernels as KI
+    from sonicspec.geometry.procedural import add_obstacles, box_obstacle, l_shape
+
+    room = l_shape([6.0, 5.0, 2.7], [2.5, 2.0])
+    room = add_obstacles(room, [box_obstacle([1.5, 1.5, 0.4], [1.0, 0.6, 0.8]),
+                                box_obstacle([3.0, 3.5, 0.5], [0.8, 0.8, 1.0], yaw_deg=30.0)])
+    verts, faces = room.vertices, room.faces
+    for _ in range(levels):
+        verts, faces = trimesh.remesh.subdivide(verts, faces)
+    scene = uniform_scene(verts, faces, alpha=0.3, s=0.1)
+    regions = planar_regions(scene)
+    rng = np.random.default_rng(levels)
+    srcs = np.c_[rng.uniform(0.3, 3.2, 4), rng.uniform(0.3, 2.7, 4), rng.uniform(1.2, 2.4, 4)]
+    rcvs = np.c_[rng.uniform(0.3, 3.2, (4, 2)).ravel()[:4], rng.uniform(0.3, 2.7, 4),
+                 rng.uniform(0.3, 2.4, 4)]
+    real = KI.last_reflection_prefilter
+    kept = []
+
+    def counting(*args):
+        real(*args)
+        kept.append(args[-1].mean())
+
+    def everything(*args):
+        args[-1][:] = True
+
+    for src, rcv in zip(srcs, rcvs, strict=True):
+        runs = []
+        for prefilter in (counting, everything):
+            monkeypatch.setattr(KI, "last_reflection_prefilter", prefilter)
+            res = image_sources(scene, src, rcv[None], max_order=3, regions=regions,
+                                max_path_length_m=60.0)
+            a = res.arrivals[0]
+            runs.append((res.max_order, a.times_s.tobytes(), a.amplitudes.tobytes(),
+                         a.directions.tobytes()))
+        assert runs[0] == runs[1]
+        assert runs[0][0] == 3 and len(runs[0][1]) > 8 * 8
+    if levels == 0:
+        assert np.mean(kept) < 1 / 3, kept

@@ -38,6 +38,7 @@ __all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_region
 
 # (candidate images × regions) signed distances computed per step of the image-tree growth.
 _CANDIDATE_CHUNK = 4_000_000
+_NO_REACH = np.zeros((2, 0, 0), dtype=bool)
 # Regions above this count skip the P×P "can one region be reached from another" table.
 _MAX_REGIONS_FOR_REACH_TABLE = 3000
 
@@ -482,9 +483,9 @@ def _provably_too_many(
     """Whether the next order has more than ``limit`` candidates, decided without building
     the images (in a scan, order 3 overflows after ~0.5 s of building them otherwise).
 
-    Candidates are counted by the same masks as :func:`image_sources`; the path-length filter
-    is accounted for only where it provably keeps a candidate (``|image − r| <= |parent − r|
-    + 2|d|``). False whenever that cannot be shown: the exact count then decides.
+    Candidates are counted by the same tests as :func:`image_sources`; under a path-length
+    limit only those it provably keeps count (``|image − r| <= |parent − r| + 2|d|``), so
+    True is always right; False leaves the decision to the exact count.
     """
     n_regions = len(candidates.plane_d)
     if last_plane is not None and candidates.reach is not None:
@@ -493,23 +494,17 @@ def _provably_too_many(
         bound = len(last_pos) * n_regions
     if bound <= limit:
         return False
-    nearest = None
+    nearest = np.zeros(len(last_pos))
     if max_path_length_m is not None:
         nearest = np.min(np.linalg.norm(last_pos[:, None, :] - receivers[None, :, :], axis=2),
                          axis=1)
-    rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
-    count = 0
-    for r0 in range(0, len(last_pos), rows):
-        sl = slice(r0, r0 + rows)
-        dist, ok = candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
-                              side[sl])
-        if nearest is not None and np.any(
-                ok & (nearest[sl, None] + 2.0 * np.abs(dist) > max_path_length_m)):
-            return False
-        count += int(np.count_nonzero(ok))
-        if count > limit:
-            return True
-    return False
+    own = (np.full(len(last_pos), -1, dtype=np.int64) if last_plane is None
+           else last_plane.astype(np.int64))
+    reach = candidates.reach if candidates.reach is not None else _NO_REACH
+    return bool(KI.more_candidates_than(
+        np.ascontiguousarray(last_pos, dtype=np.float64), own, side.astype(np.int64),
+        candidates.normals, candidates.plane_d, candidates.tol, reach, nearest,
+        -1.0 if max_path_length_m is None else float(max_path_length_m), limit))
 
 
 def _validate_order(
@@ -528,8 +523,17 @@ def _validate_order(
     """Backtrack every (image, receiver) pair of one order; append the valid arrivals."""
     n_img, order = planes.shape
     normals, plane_d = regions.normals, regions.plane_d
-    img = np.repeat(np.arange(n_img), len(receivers))
-    rcv = np.tile(np.arange(len(receivers)), n_img)
+    # A compiled prefilter drops most pairs (a superset of the valid ones is kept); the exact
+    # tests below then decide on the rest, as they would on all of them.
+    keep = np.empty(n_img * len(receivers), dtype=bool)
+    KI.last_reflection_prefilter(
+        receivers, np.ascontiguousarray(chain[:, -1]), np.ascontiguousarray(planes[:, -1]),
+        side.astype(np.int64), normals, plane_d, scene.eps_m,
+        -1.0 if max_path_length_m is None else float(max_path_length_m),
+        _region_boxes(scene, regions), regions.region_start, regions.region_faces,
+        scene.faces, scene.vertices, _MAX_TRIANGLES_FOR_BARYCENTRIC, keep)
+    pairs = np.flatnonzero(keep)
+    img, rcv = pairs // len(receivers), pairs % len(receivers)
     # The receiver must be on the side the last reflection sends sound to.
     dist_r = (
         np.einsum("ij,ij->i", receivers[rcv], normals[planes[img, -1]]) - plane_d[planes[img, -1]]
