@@ -576,17 +576,17 @@ def main() -> int:
     # (rays, image-source order, splitting rate, visible-air ball m, roulette dB, guiding)
     candidates = [(2000, 1, 0.0, 0.0, 0.0, 0.0), (20_000, 3, 0.0, 0.0, 30.0, 0.0),
                   (20_000, 3, 0.0, 0.0, 30.0, 0.3), (5000, 2, 2.0, 4.0, 30.0, 0.0),
-                  (3000, 2, 2.0, 4.0, 30.0, 0.5)]
+                  preset_setting()]
     if not args.quick:
-        candidates += [(10_000, 2, 1.0, 4.0, 0.0, 0.0), (2000, 2, 2.0, 4.0, 30.0, 0.5),
+        candidates += [(10_000, 2, 1.0, 4.0, 0.0, 0.0), (3000, 2, 2.0, 4.0, 30.0, 0.5),
                        (2500, 2, 2.0, 4.0, 30.0, 0.5), (5000, 2, 2.0, 4.0, 30.0, 0.5),
                        (10_000, 2, 2.0, 4.0, 30.0, 0.5), (20_000, 3, 0.0, 4.0, 30.0, 0.5),
                        # image sources to order 1 only: the tracer takes the second order
-                       (2500, 1, 2.0, 4.0, 30.0, 0.5), (3000, 1, 2.0, 4.0, 30.0, 0.5),
-                       (4000, 1, 2.0, 4.0, 30.0, 0.5),
+                       (3000, 1, 2.0, 4.0, 30.0, 0.5), (4000, 1, 2.0, 4.0, 30.0, 0.5),
                        # roulette from 20 dB down: a third less CPU per ray, no more spread
                        (3000, 1, 2.0, 4.0, 20.0, 0.5), (4000, 1, 2.0, 4.0, 20.0, 0.5),
-                       (5000, 1, 2.0, 4.0, 20.0, 0.5), (5000, 2, 2.0, 4.0, 20.0, 0.5)]
+                       (5000, 1, 2.0, 4.0, 20.0, 0.5), (4000, 2, 2.0, 4.0, 20.0, 0.5)]
+    candidates = list(dict.fromkeys(candidates))  # the preset may be one of them
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         t0 = time.perf_counter()
@@ -701,7 +701,18 @@ def main() -> int:
 
 def default_setting() -> tuple:
     """The spec's default tracer setting, in ``SETTING_KEYS`` order."""
-    d = AcousticsSpec()
+    return setting_of(AcousticsSpec())
+
+
+def preset_setting() -> tuple:
+    """The tracer setting of the `sonicset` preset (its template's acoustics section)."""
+    import yaml
+
+    text = resources.files("sonicspec.spec").joinpath("templates/sonicset.yaml").read_text()
+    return setting_of(AcousticsSpec(**yaml.safe_load(text)["acoustics"]))
+
+
+def setting_of(d: AcousticsSpec) -> tuple:
     return (d.rays, d.image_source_order, d.ray_splitting, d.free_air_ball_m, d.roulette_db,
             d.horizontal_guiding)
 
@@ -883,7 +894,9 @@ def sweep_table(sweep: dict, own: dict, draws: dict) -> None:
         marks.append("—" if not other else
                      f"{'yes' if matches_draws(other, draws) else 'no'} "
                      f"({100 * other['worst']['t30']:.1f} %)")
-        print(f"| {r['rays']:,} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
+        preset = " (`sonicset` preset)" if tuple(r[k] for k in SETTING_KEYS) == preset_setting() \
+            else ""
+        print(f"| {r['rays']:,}{preset} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
               f"{r['roulette']:g} | {r['guiding']:g} | {np.median(r['cpu_s']):.2f} s | "
               f"{100 * w['t30']:.1f} % | "
               f"{100 * w['edt']:.1f} % | {w['c50_db']:.2f} dB | {100 * t['t30']:.1f} % / "
