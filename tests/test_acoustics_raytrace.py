@@ -582,8 +582,8 @@ def test_horizontal_guiding_is_unbiased_and_steadies_the_tail():
     plain rays followed to 80 dB (8 seeds each; within 4 %, 3 % and 7 %). On top of the
     `sonicset` preset's estimators the 300–600 ms energy's seed-to-seed spread must not grow
     (a weight bug that leaves the means alone shows there); measured over 32 seeds it falls
-    from 3.8–3.9 % to 2.8–2.9 % in this room (0.066 s per trace against 0.050 s) (in the furnished apartment of
-    bench_rlr, where the tail is more horizontal, several times more)."""
+    from 3.8–3.9 % to 2.8–2.9 % in this room (0.066 s per trace against 0.050 s; in the
+    furnished apartment of bench_rlr, where the tail is more horizontal, several times more)."""
     windows, spread = [], []
     for options in ({"n_rays": 12_000}, PRESET_ESTIMATORS, {**PRESET_ESTIMATORS, "guiding": 0.5}):
         sums = flutter_windows(8, (50, 300), **options)[0]
