@@ -8,7 +8,7 @@ Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
   roulette, and prints the 1 kHz energy of those launches (normalised to the whole source
   energy: a density per solid angle) in 100–300, 300–600 and 600–1,000 ms (3 seeds per
   sector; azimuth 0° is +x, the room's 10 m side).
-* ``--azimuth-guiding GAMMA WIDTH_DEG`` (repeatable): the preset (3,000 rays) with a share
+* ``--azimuth-guiding GAMMA WIDTH_DEG`` (repeatable): session 7's preset (3,000 rays, roulette 30 dB) with a share
   GAMMA of each horizontal band's launches drawn within ±WIDTH_DEG of the four axis azimuths
   (0°, 90°, 180°, 270°), weighted by the balance heuristic over the mixture (so unbiased);
   prints the T30 error of seeds 1–16 against the converged reference of ``bench_rlr.py``
@@ -54,7 +54,9 @@ import sonicspec.acoustics.raytrace as raytrace
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.stages.rir import acoustic_scene, ray_trace_settings
 
-PRESET = (3000, 2, 2.0, 4.0, 30.0, 0.5)  # rays, order, splitting, ball, roulette, guiding
+# Session 7's `sonicset` preset, the baseline of these experiments (the preset now traces
+# 4,000 rays with roulette from 20 dB down): rays, order, splitting, ball, roulette, guiding.
+PRESET = (3000, 2, 2.0, 4.0, 30.0, 0.5)
 AXES_RAD = np.radians([0.0, 90.0, 180.0, 270.0])
 SECTOR_EDGES_DEG = (-45, -20, -10, -5, -2, 0, 2, 5, 10, 20, 45, 70, 80, 85, 88, 90, 92, 95,
                     100, 110, 135)
