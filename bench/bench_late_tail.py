@@ -10,7 +10,8 @@ Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
   sector; azimuth 0° is +x, the room's 10 m side).
 * ``--azimuth-guiding GAMMA WIDTH_DEG`` (repeatable): session 7's preset (3,000 rays,
   roulette 30 dB) with a share GAMMA of each horizontal band's launches drawn within
-  ±WIDTH_DEG of the four axis azimuths (0°, 90°, 180°, 270°), weighted by the balance heuristic over the mixture (so unbiased);
+  ±WIDTH_DEG of the four axis azimuths (0°, 90°, 180°, 270°), weighted by the balance
+  heuristic over the mixture (so unbiased);
   prints the T30 error of seeds 1–16 against the converged reference of ``bench_rlr.py``
   (mean of 16 runs of its ``ref_setting``, computed here) — mean, spread and worst seed per
   band. GAMMA 0 is the preset itself.
