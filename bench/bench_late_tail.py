@@ -19,7 +19,11 @@ Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
 The launch sampler is patched in this process only (``raytrace._guided_launch``): this is an
 experiment, not a setting of the package.
 
+* ``--tail-roughness``: how bursty the late envelope of the (current) preset is, raw and as
+  the rir stage smooths it (``EnergyHistogram.smoothed``), with roulette from 30 and 20 dB.
+
 Reproduce:  python bench/bench_late_tail.py --by-azimuth                      (~2 minutes)
+            python bench/bench_late_tail.py --tail-roughness                  (~10 seconds)
             python bench/bench_late_tail.py --azimuth-guiding 0 10 --azimuth-guiding 0.5 10 \\
                 --azimuth-guiding 0.7 10 --azimuth-guiding 0.5 5 --azimuth-guiding 0.5 20 \\
                 --azimuth-guiding 0.3 10                                        (~6 minutes)
@@ -153,14 +157,47 @@ def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
     raytrace._guided_launch = original
 
 
+def tail_roughness(mesh) -> None:
+    """How bursty the late envelope is: the 1 kHz histogram of 8 traces of the preset with
+    roulette from 30 and 20 dB down, raw and as the rir stage smooths it, summed in 10 ms
+    windows from 0.3 to 1.5 s: the scatter of their levels around a fitted decay, the empty
+    windows (after the last ray, or between bursts) and how far T30 moves."""
+    from sonicspec.acoustics.metrics import figures_from_energy
+    from sonicspec.stages.rir import LATE_ENVELOPE_RELATIVE_WIDTH
+
+    for roulette in (30.0, 20.0):
+        settings = sonicspec_settings(4000, 3, 2.0, 4.0, roulette, 0.5)
+        scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+        st, air = ray_trace_settings(settings, 2), settings.air()
+        hists = [raytrace.trace_rays(scene, MIC_M, SOURCE_M[None], np.random.default_rng(seed),
+                                     st, air)[0].histogram for seed in range(1, 9)]
+        for width in (0.0, LATE_ENVELOPE_RELATIVE_WIDTH):
+            scatter, empty, moved = [], [], []
+            for raw in hists:
+                h = raw.smoothed(width)
+                w = h.energy[:1500, BAND_1K].reshape(-1, 10).sum(axis=1)[30:]
+                t = 0.305 + 0.01 * np.arange(len(w))
+                level = 10 * np.log10(w[w > 0])
+                fit = np.polyval(np.polyfit(t[w > 0], level, 1), t[w > 0])
+                scatter.append(np.std(level - fit))
+                empty.append(np.sum(w == 0))
+                t30 = [np.array(figures_from_energy(x.energy, x.bin_s)["t30_s"]) for x in (raw, h)]
+                moved.append(np.max(np.abs(t30[1] / t30[0] - 1)))
+            print(f"roulette {roulette:g} dB, envelope window ±{50 * width:g} % of t: scatter "
+                  f"{np.mean(scatter):.1f} dB, empty 10 ms windows {np.mean(empty):.1f} of "
+                  f"{len(w)}, T30 moved by up to {100 * max(moved):.2f} %", flush=True)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--by-azimuth", action="store_true")
+    parser.add_argument("--tail-roughness", action="store_true")
     parser.add_argument("--azimuth-guiding", nargs=2, type=float, action="append",
                         metavar=("GAMMA", "WIDTH_DEG"), default=[])
     args = parser.parse_args()
-    if not args.by_azimuth and not args.azimuth_guiding:
-        parser.error("give --by-azimuth and/or --azimuth-guiding GAMMA WIDTH_DEG")
+    if not (args.by_azimuth or args.azimuth_guiding or args.tail_roughness):
+        parser.error("give --by-azimuth, --tail-roughness and/or --azimuth-guiding GAMMA "
+                     "WIDTH_DEG")
     mesh = apartment_mesh(100_000)
     print(f"apartment: {mesh.n_faces:,} triangles; reproduce: python bench/bench_late_tail.py "
           + " ".join(sys.argv[1:]))
@@ -168,6 +205,8 @@ def main() -> int:
         by_azimuth(mesh)
     if args.azimuth_guiding:
         azimuth_guiding(mesh, [(g, w) for g, w in args.azimuth_guiding])
+    if args.tail_roughness:
+        tail_roughness(mesh)
     return 0
 
 

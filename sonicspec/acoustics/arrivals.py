@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sonicspec.errors import AcousticsError
+
 __all__ = ["KIND_DIRECT", "KIND_SPECULAR", "Arrivals", "EnergyHistogram", "TraceResult"]
 
 #: ``Arrivals.kind`` code of the direct sound (possibly through transmitting surfaces).
@@ -153,6 +155,41 @@ class EnergyHistogram:
     def times_s(self) -> np.ndarray:
         """Start time of every bin, seconds."""
         return np.arange(self.n_bins) * self.bin_s
+
+    def smoothed(self, relative_width: float) -> EnergyHistogram:
+        """The histogram averaged over a window that grows with time: bin ``k`` (centre
+        ``t``) becomes the mean of the bins within ``± relative_width · t / 2`` (clipped to
+        the histogram), in every band and in both direction sums.
+
+        Why: late in the decay few rays remain (Russian roulette keeps their number in step
+        with the energy), so 1 ms bins are often empty and the envelope the RIR is shaped by
+        comes in bursts — Monte-Carlo noise, not reflections. A window proportional to ``t``
+        leaves the early bins alone (none below ``2/relative_width`` bins) and turns a pure
+        exponential decay into the same decay times ``sinh(x)/x``, ``x = k·relative_width·t/2``
+        (``k`` its rate): 0.03 dB at 0.5 s and 0.1 dB at 1 s for a 0.87 s T60 with width 0.05,
+        so T30 moves by about 0.1 %.
+        """
+        if not (np.isfinite(relative_width) and 0 <= relative_width <= 1):
+            raise AcousticsError(f"relative_width: expected a value in [0, 1], got "
+                                 f"{relative_width!r}")
+        n = self.n_bins
+        half = np.floor(relative_width * (np.arange(n) + 0.5) / 2).astype(np.int64)
+        if n == 0 or not half.any():
+            return self
+        lo = np.maximum(np.arange(n) - half, 0)
+        hi = np.minimum(np.arange(n) + half, n - 1)
+
+        def mean(x: np.ndarray) -> np.ndarray:
+            # Window sums from running sums: a window of empty bins subtracts two equal sums,
+            # so it stays exactly 0 (the RIR ends at the last bin with energy), and running
+            # sums of energies never decrease, so no energy goes below 0.
+            cs = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+            out = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)[:, None]
+            out[half == 0] = x[half == 0]  # no window: the bin as it is, to the bit
+            return out
+
+        return EnergyHistogram(self.bin_s, mean(self.energy), mean(self.direction_sum),
+                               mean(self.departure_sum))
 
     def mean_direction(self) -> np.ndarray:
         """Energy-weighted mean direction of arrival per bin, ``(n_bins, 3)`` (0 where empty)."""
