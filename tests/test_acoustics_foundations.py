@@ -262,6 +262,7 @@ def test_shoebox_decay_follows_kuttruff_when_diffuse_and_outlasts_it_when_specul
                        ((size, src, 1.2, 0.5), "absorption"),
                        ((size, src, 0.2, 1.5), "scattering"),
                        ((size, src, [0.2, 0.3], 0.5, [0.0, 0.1, 0.2]), "air_m_per_m"),
-                       (((10.0, 0.0, 3.0), src, 0.2, 0.5), "size_m")):
+                       (((10.0, 0.0, 3.0), src, 0.2, 0.5), "size_m"),
+                       ((size, src, 0.2, 0.5, 0.0, 343.0, 10), "n_paths")):
         with pytest.raises(AcousticsError, match=match):
             shoebox_decay_t60(*bad)

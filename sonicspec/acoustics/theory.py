@@ -141,6 +141,8 @@ def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per
         raise AcousticsError(f"air_m_per_m: expected one value per band of absorption "
                              f"({len(alpha)}), got {air_m_per_m!r}") from None
     c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
+    if not (isinstance(n_paths, int | np.integer) and n_paths >= 100):
+        raise AcousticsError(f"n_paths: expected an integer >= 100, got {n_paths!r}")
     rng = np.random.default_rng(seed)
     rows = np.arange(n_paths)
     position = np.tile(source, (n_paths, 1))
@@ -150,7 +152,7 @@ def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per
     surface = 2 * float(size[0] * size[1] + size[0] * size[2] + size[1] * size[2])
     bin_s = float(eyring_t60(float(np.prod(size)), surface, alpha.min())) / 2000
     elapsed = np.zeros(n_paths)
-    reflection_bins = []  # per reflection, the time bin each particle reaches its wall in
+    reflection_counts = []  # per reflection, how many particles reach their wall in each bin
     for _ in range(n_reflections):
         with np.errstate(divide="ignore", invalid="ignore"):
             to_wall = np.where(direction > 0, (size - position) / direction,
@@ -159,20 +161,20 @@ def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per
         length = to_wall[rows, axis]
         position += direction * length[:, None]
         elapsed += length / c
-        reflection_bins.append((elapsed / bin_s).astype(np.int64))
+        reflection_counts.append(np.bincount((elapsed / bin_s).astype(np.int64)))
         specular = direction.copy()
         specular[rows, axis] *= -1
         scattered = _lambert_directions(axis, specular[rows, axis] > 0, rng)
         direction = np.where((rng.random(n_paths) < scattering)[:, None], scattered, specular)
-    n_bins = int(reflection_bins[-1].max()) + 1
+    n_bins = max(len(c) for c in reflection_counts)
     times = np.arange(n_bins) * bin_s
     t30 = np.empty(alpha.shape)
     for b, a in enumerate(alpha):
         lost = np.zeros(n_bins)
-        for k, time_bin in enumerate(reflection_bins):
+        for k, counts in enumerate(reflection_counts):
             # the energy lost at reflection k; the last one takes all that is left
             share = a * (1 - a) ** k if k < n_reflections - 1 else (1 - a) ** k
-            lost += np.bincount(time_bin, minlength=n_bins) * share
+            lost[:len(counts)] += counts * share
         remaining = np.maximum(1.0 - np.cumsum(lost) / n_paths, 0.0)
         energy = remaining * np.exp(-air[b] * c * times)
         decay = np.cumsum(energy[::-1])[::-1]
