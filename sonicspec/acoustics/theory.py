@@ -166,7 +166,7 @@ def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per
         specular[rows, axis] *= -1
         scattered = _lambert_directions(axis, specular[rows, axis] > 0, rng)
         direction = np.where((rng.random(n_paths) < scattering)[:, None], scattered, specular)
-    n_bins = max(len(c) for c in reflection_counts)
+    n_bins = max(len(counts) for counts in reflection_counts)
     times = np.arange(n_bins) * bin_s
     t30 = np.empty(alpha.shape)
     for b, a in enumerate(alpha):
