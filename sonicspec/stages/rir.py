@@ -142,7 +142,7 @@ def ray_trace_settings(settings: RirSettings, specular_order: int) -> RayTraceSe
 # The late envelope a RIR is synthesised from is the tracer's histogram averaged over ±2.5 %
 # of the time (``EnergyHistogram.smoothed``): late in the decay few rays remain and 1 ms bins
 # come in bursts of Monte-Carlo noise. In the bench apartment with the `sonicset` preset a
-# third of the 10 ms windows between 0.3 and 1.5 s were empty at 1 kHz; T30 moves by ~0.1 %.
+# third of the 10 ms windows between 0.3 and 1.5 s were empty at 1 kHz; T30 moves by <= 0.3 %.
 LATE_ENVELOPE_RELATIVE_WIDTH = 0.05
 
 
