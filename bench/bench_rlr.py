@@ -925,7 +925,7 @@ def print_fastest(sweep: dict, own: dict, t_def: float, t_sim: float, draws: dic
                                (f"no worse than RLR's {RLR_DRAWS} draws (median seed vs median "
                                 "draw, worst seed vs worst draw)", draws, "draws"),
                                (f"with |mean error| and spread no worse than RLR's over its "
-                                f"{RLR_DRAWS} draws, on seeds 1-8 and on the other 8",
+                                f"{RLR_DRAWS} draws, on both seed sets",
                                 draws, "stats")):
         best = (fastest_matching_draws(sweep["candidates"], draws) if stat == "draws"
                 else fastest_equal_accuracy(sweep["candidates"], draws) if stat == "stats"
