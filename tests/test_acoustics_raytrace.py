@@ -154,16 +154,20 @@ def test_t30_follows_kuttruffs_path_length_correction(shoebox_t30):
 @pytest.mark.slow
 def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     """Whole RIRs of both tools (16 kHz, image sources to order 3 + rays; air absorption off in
-    both, as their air models differ), T30 per octave band by our ISO 3382-1 routine,
-    pyroomacoustics averaged over 8 seeds — it is not reproducible even with numpy's seed (its
-    C++ side draws from its own generator).
+    both, as their air models differ), T30 per octave band by our ISO 3382-1 routine, ours
+    averaged over 4 RIRs and pyroomacoustics over 32 runs — it is not reproducible even with
+    numpy's seed (its C++ side draws from its own generator).
 
     pyroomacoustics stops each ray when its energy falls below ``energy_thres`` (default 10⁻⁷,
     −70 dB): in this room its RIR then ends at 0.85 s and its T30 comes out ~5 % below Eyring
     in every band — a truncated decay, like RLR's 200-reflection cap. With the threshold at
-    10⁻¹² its RIR runs to 1.4 s and its T30 lands −1…+4 % from Eyring per band, ours within
+    10⁻¹² its RIR runs to 1.4 s and the mean T30 of 32 runs lands −2…+2 % from Eyring per
+    band (one run's moves by up to ~10 % in the low bands; asserted within 8 %, a check that
+    its run is sound), ours within
     3 % of the exact shoebox decay (:func:`shoebox_decay_t60`, +5 % on Eyring: the spread of
-    path lengths, Kuttruff); the two tools agree within 10 % in every band (measured −2…+6 %).
+    path lengths, Kuttruff); the two tools agree within 10 % in every band: +1…+8 % over 20
+    runs of this test (with the mean of only 8 pyroomacoustics runs, 125 Hz went to +11.5 %
+    in 2 of 30).
     Asserted too: the default threshold does truncate (its T30 the shorter over the bands)."""
     pra = pytest.importorskip("pyroomacoustics")
     from sonicspec.acoustics.bands import default_bands
@@ -175,14 +179,18 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     scene = AcousticScene(*shoebox(*size), np.full((n_faces, len(bands)), 0.2),
                           np.full((n_faces, len(bands)), 0.5), np.zeros((n_faces, len(bands))))
     settings = rir_stage.RirSettings(
-        rays=20_000, sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
+        rays=5_000, sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=False,
         temperature_c=20.0, relative_humidity_pct=50.0, transmission=False,
         diffuse_rain=True, receiver_radius_m=0.1, histogram_bin_s=0.001,
         speed_of_sound_m_s=343.0)  # fmt: skip
-    (rir,), _ = rir_stage.simulate_rirs(scene, RCV[0], SRC[None], settings,
-                                        np.random.default_rng(0))
-    ours = np.array(room_acoustic_figures(rir[0].astype(np.float64), fs, bands).t30_s)
+    # Four RIRs (their mean): one RIR's band-noise draw moves its T30 by 2–3 % per band,
+    # which next to pyroomacoustics' own run-to-run spread left the 10 % with a thin margin
+    # (one run in ~20 failed at 500 Hz with a single 20,000-ray RIR).
+    ours = np.mean([room_acoustic_figures(
+        rir_stage.simulate_rirs(scene, RCV[0], SRC[None], settings,
+                                np.random.default_rng(seed))[0][0][0].astype(np.float64),
+        fs, bands).t30_s for seed in range(4)], axis=0)
 
     def pyroomacoustics_t30(seed: int, **ray_tracing) -> np.ndarray:
         np.random.seed(seed)  # noqa: NPY002 (pyroomacoustics has no generator argument)
@@ -195,10 +203,12 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
         rir_pra = np.asarray(room.rir[0][0], dtype=np.float64)
         return np.array(room_acoustic_figures(rir_pra, fs, bands).t30_s)
 
-    theirs = np.mean([pyroomacoustics_t30(seed, energy_thres=1e-12) for seed in range(8)],
+    # 32 of its runs: the mean of 8 still moved by ±5 % at 125 Hz (sd 2.3 %), enough to
+    # take the 5 % the two reflection laws differ by past 10 % about one run in 15.
+    theirs = np.mean([pyroomacoustics_t30(seed, energy_thres=1e-12) for seed in range(32)],
                      axis=0)
     eyring = eyring_t60(210.0, 242.0, 0.2, 0.0)
-    assert np.all(np.abs(theirs / eyring - 1) < 0.05), (theirs, eyring)
+    assert np.all(np.abs(theirs / eyring - 1) < 0.08), (theirs, eyring)
     assert np.all(np.abs(ours / theirs - 1) < 0.10), (ours, theirs)
     # Its 125 Hz band alone varies by ~5 % over 8 of its runs: compared over the bands.
     truncated = np.mean([pyroomacoustics_t30(seed) for seed in range(8)], axis=0)
