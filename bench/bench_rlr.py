@@ -7,7 +7,7 @@ optional dependency with a non-commercial licence (CC BY-NC 4.0), never imported
 
 Without it this script prints a message and exits 0.
 
-Reproduce:  python bench/bench_rlr.py            (about 13 minutes on 2 cores)
+Reproduce:  python bench/bench_rlr.py            (about 10 minutes on 2 cores)
             python bench/bench_rlr.py --quick    (fewer seeds and rays in the accuracy sweep)
 
 What it does
@@ -28,7 +28,7 @@ What it does
   (c) sonicspec at the spec's defaults (``AcousticsSpec()``: 20 000 rays, roulette 30 dB
   down, horizontal guiding 0.3, image sources to order 3, 16 kHz) and at the cheapest setting
   of a small sweep (rays × image-source order × specular splitting × visible-air ball ×
-  roulette × horizontal guiding, 8 seeds) that stays, in every band and for
+  roulette × horizontal guiding, 8 seeds, and 8 more to confirm) that stays, in every band and for
   every seed, near sonicspec's converged answer (the mean of 16 runs of ``--ref-rays`` rays
   of its lowest-variance estimator, see ``ref_setting``): within the ISO 3382-1
   just-noticeable differences (T30, EDT 5 %, C50 1 dB) if any setting does, else no farther
