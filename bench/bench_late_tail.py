@@ -19,11 +19,15 @@ Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
 The launch sampler is patched in this process only (``raytrace._guided_launch``): this is an
 experiment, not a setting of the package.
 
+* ``--roulette DB ...``: CPU and T30 spread over 32 seeds of 4,000 rays with the preset's
+  estimators (image sources to order 1) for each roulette level — how the preset's 20 dB was
+  chosen.
 * ``--tail-roughness``: how bursty the late envelope of the (current) preset is, raw and as
   the rir stage smooths it (``EnergyHistogram.smoothed``), with roulette from 30 and 20 dB.
 
 Reproduce:  python bench/bench_late_tail.py --by-azimuth                      (~2 minutes)
             python bench/bench_late_tail.py --tail-roughness                  (~10 seconds)
+            python bench/bench_late_tail.py --roulette 30 25 20 15 10         (~2 minutes)
             python bench/bench_late_tail.py --azimuth-guiding 0 10 --azimuth-guiding 0.5 10 \\
                 --azimuth-guiding 0.7 10 --azimuth-guiding 0.5 5 --azimuth-guiding 0.5 20 \\
                 --azimuth-guiding 0.3 10                                        (~6 minutes)
@@ -125,8 +129,8 @@ def by_azimuth(mesh) -> None:
               f"600-1000 ms {w[2]:.2e}", flush=True)
 
 
-def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
-    original = raytrace._guided_launch
+def reference(mesh):
+    """The apartment's scene and regions, and bench_rlr's converged T30 (mean of its 16 runs)."""
     ref_settings = sonicspec_settings(*ref_setting(20_000, False))
     scene = acoustic_scene(mesh, {"library": "sonicset"}, ref_settings)
     regions = planar_regions(scene)
@@ -137,6 +141,34 @@ def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
     print(f"reference: mean of {REF_RUNS} runs of bench_rlr's ref_setting "
           f"({time.perf_counter() - t0:.0f} s): T30 " + ", ".join(f"{t:.3f}" for t in ref_t30)
           + " s")
+    return scene, regions, ref_t30
+
+
+def roulette_spread(mesh, levels_db: list[float], seeds: int = 32) -> None:
+    """CPU and T30 spread of 4,000 rays with the preset's estimators (image sources to order 1)
+    for each roulette level, over ``seeds`` seeds: what the preset's roulette was chosen by."""
+    scene, regions, ref_t30 = reference(mesh)
+    fmt = lambda x: " ".join(f"{v:5.1f}" for v in x)  # noqa: E731
+    print(f"T30 error against it, seeds 1-{seeds}, per band "
+          + "/".join(f"{b:g}" for b in BANDS_HZ) + " Hz:")
+    for level in levels_db:
+        settings = sonicspec_settings(4000, 1, 2.0, 4.0, level, 0.5)
+        errors, cpu = [], []
+        for seed in range(1, seeds + 1):
+            c0 = time.process_time()
+            t30 = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]["t30_s"]
+            cpu.append(time.process_time() - c0)
+            errors.append(100.0 * (np.asarray(t30) / ref_t30 - 1.0))
+        e = np.abs(np.array(errors))
+        worst_of_8 = np.mean([e[k:k + 8].max() for k in range(0, len(e) - 7, 8)])
+        print(f"roulette {level:g} dB ({np.median(cpu):.3f} s CPU): sd "
+              f"{fmt(np.array(errors).std(0))} | worst {fmt(e.max(0))} % | worst of 8 seeds, "
+              f"mean over groups {worst_of_8:.1f} %", flush=True)
+
+
+def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
+    original = raytrace._guided_launch
+    scene, regions, ref_t30 = reference(mesh)
     settings = sonicspec_settings(*PRESET)
     print("T30 error of the preset (3,000 rays) against it, seeds 1-16, per band "
           + "/".join(f"{b:g}" for b in BANDS_HZ) + " Hz:")
@@ -192,12 +224,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--by-azimuth", action="store_true")
     parser.add_argument("--tail-roughness", action="store_true")
+    parser.add_argument("--roulette", nargs="+", type=float, metavar="DB",
+                        help="roulette levels to compare (4,000 rays, the preset's estimators)")
     parser.add_argument("--azimuth-guiding", nargs=2, type=float, action="append",
                         metavar=("GAMMA", "WIDTH_DEG"), default=[])
     args = parser.parse_args()
-    if not (args.by_azimuth or args.azimuth_guiding or args.tail_roughness):
-        parser.error("give --by-azimuth, --tail-roughness and/or --azimuth-guiding GAMMA "
-                     "WIDTH_DEG")
+    if not (args.by_azimuth or args.azimuth_guiding or args.tail_roughness or args.roulette):
+        parser.error("give --by-azimuth, --tail-roughness, --roulette DB... and/or "
+                     "--azimuth-guiding GAMMA WIDTH_DEG")
     mesh = apartment_mesh(100_000)
     print(f"apartment: {mesh.n_faces:,} triangles; reproduce: python bench/bench_late_tail.py "
           + " ".join(sys.argv[1:]))
@@ -207,6 +241,8 @@ def main() -> int:
         azimuth_guiding(mesh, [(g, w) for g, w in args.azimuth_guiding])
     if args.tail_roughness:
         tail_roughness(mesh)
+    if args.roulette:
+        roulette_spread(mesh, args.roulette)
     return 0
 
 
