@@ -163,12 +163,10 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     in every band — a truncated decay, like RLR's 200-reflection cap. With the threshold at
     10⁻¹² its RIR runs to 1.4 s and the mean T30 of 32 runs lands −2…+2 % from Eyring per
     band (one run's moves by up to ~10 % in the low bands; asserted within 8 %, a check that
-    its run is sound), ours within
-    3 % of the exact shoebox decay (:func:`shoebox_decay_t60`, +5 % on Eyring: the spread of
-    path lengths, Kuttruff); the two tools agree within 10 % in every band: +1…+8 % over 20
-    runs of this test (with the mean of only 8 pyroomacoustics runs, 125 Hz went to +11.5 %
-    in 2 of 30).
-    Asserted too: the default threshold does truncate (its T30 the shorter over the bands)."""
+    its run is sound), ours within 3 % of the exact shoebox decay (:func:`shoebox_decay_t60`,
+    +5 % on Eyring: the spread of path lengths, Kuttruff); the two tools agree within 10 % in
+    every band: +1…+8 % over 20 runs of this test (with the mean of only 8 pyroomacoustics
+    runs, 125 Hz went to +11.5 % in 2 of 30). Asserted too: the default threshold does truncate (its T30 the shorter over the bands)."""
     pra = pytest.importorskip("pyroomacoustics")
     from sonicspec.acoustics.bands import default_bands
     from sonicspec.stages import rir as rir_stage

@@ -157,14 +157,11 @@ def test_rir_stage_shapes_the_tail_by_the_smoothed_envelope(monkeypatch) -> None
     0.3 s are silent far less often than when it is shaped by the raw histogram (2 against 7
     of ~33 here), and its expected figures are those of the smoothed energy."""
     from sonicspec.acoustics.bands import default_bands
-    from sonicspec.acoustics.scene import AcousticScene
     from sonicspec.stages import rir as rir_stage
-    from sonicspec.testing.rooms import shoebox
+    from sonicspec.testing.rooms import shoebox, uniform_scene
 
     bands = default_bands(FS)
-    v, f = shoebox(10.0, 7.0, 3.0)
-    n, b = len(f), len(bands)
-    scene = AcousticScene(v, f, np.full((n, b), 0.2), np.full((n, b), 0.5), np.zeros((n, b)))
+    scene = uniform_scene(*shoebox(10.0, 7.0, 3.0), alpha=0.2, s=0.5, n_bands=len(bands))
     settings = rir_stage.RirSettings(
         rays=200, sample_rate_hz=FS, bands_hz=bands, image_source_order=2,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True,
