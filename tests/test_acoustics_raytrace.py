@@ -166,7 +166,8 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     its run is sound), ours within 3 % of the exact shoebox decay (:func:`shoebox_decay_t60`,
     +5 % on Eyring: the spread of path lengths, Kuttruff); the two tools agree within 10 % in
     every band: +1…+8 % over 20 runs of this test (with the mean of only 8 pyroomacoustics
-    runs, 125 Hz went to +11.5 % in 2 of 30). Asserted too: the default threshold does truncate (its T30 the shorter over the bands)."""
+    runs, 125 Hz went to +11.5 % in 2 of 30). Asserted too: the default threshold does
+    truncate (its T30 the shorter over the bands)."""
     pra = pytest.importorskip("pyroomacoustics")
     from sonicspec.acoustics.bands import default_bands
     from sonicspec.stages import rir as rir_stage
