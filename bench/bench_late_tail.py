@@ -1,6 +1,6 @@
 """Where the late tail of the bench apartment comes from, and one way to sample it better.
 
-Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
+Experiments behind the "Session 7" and "Session 8" notes of ``bench/RESULTS.md`` (section of
 ``bench_rlr.py``), on the same furnished apartment, materials and positions as ``bench_rlr.py``:
 
 * ``--by-azimuth``: launches only near-horizontal rays (|z| < 0.02) within one azimuth
@@ -14,11 +14,8 @@ Two experiments behind the "Session 7" notes of ``bench/RESULTS.md`` (section of
   heuristic over the mixture (so unbiased);
   prints the T30 error of seeds 1–16 against the converged reference of ``bench_rlr.py``
   (mean of 16 runs of its ``ref_setting``, computed here) — mean, spread and worst seed per
-  band. GAMMA 0 is the preset itself.
-
-The launch sampler is patched in this process only (``raytrace._guided_launch``): this is an
-experiment, not a setting of the package.
-
+  band. GAMMA 0 is the preset itself. The launch sampler is patched in this process only
+  (``raytrace._guided_launch``): an experiment, not a setting of the package.
 * ``--roulette DB ...``: CPU and T30 spread over 32 seeds of 4,000 rays with the preset's
   estimators (image sources to order 1) for each roulette level — how the preset's 20 dB was
   chosen.
@@ -144,26 +141,37 @@ def reference(mesh):
     return scene, regions, ref_t30
 
 
+def t30_errors(scene, regions, settings, ref_t30: np.ndarray, seeds: int
+               ) -> tuple[np.ndarray, float]:
+    """T30 error per band (%) of seeds 1…``seeds`` of ``settings`` against ``ref_t30``, and
+    the median CPU per RIR."""
+    errors, cpu = [], []
+    for seed in range(1, seeds + 1):
+        c0 = time.process_time()
+        t30 = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]["t30_s"]
+        cpu.append(time.process_time() - c0)
+        errors.append(100.0 * (np.asarray(t30) / ref_t30 - 1.0))
+    return np.array(errors), float(np.median(cpu))
+
+
+def per_band(values) -> str:
+    return " ".join(f"{v:5.1f}" for v in values)
+
+
 def roulette_spread(mesh, levels_db: list[float], seeds: int = 32) -> None:
     """CPU and T30 spread of 4,000 rays with the preset's estimators (image sources to order 1)
     for each roulette level, over ``seeds`` seeds: what the preset's roulette was chosen by."""
     scene, regions, ref_t30 = reference(mesh)
-    fmt = lambda x: " ".join(f"{v:5.1f}" for v in x)  # noqa: E731
     print(f"T30 error against it, seeds 1-{seeds}, per band "
           + "/".join(f"{b:g}" for b in BANDS_HZ) + " Hz:")
     for level in levels_db:
         settings = sonicspec_settings(4000, 1, 2.0, 4.0, level, 0.5)
-        errors, cpu = [], []
-        for seed in range(1, seeds + 1):
-            c0 = time.process_time()
-            t30 = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]["t30_s"]
-            cpu.append(time.process_time() - c0)
-            errors.append(100.0 * (np.asarray(t30) / ref_t30 - 1.0))
-        e = np.abs(np.array(errors))
+        errors, cpu = t30_errors(scene, regions, settings, ref_t30, seeds)
+        e = np.abs(errors)
         worst_of_8 = np.mean([e[k:k + 8].max() for k in range(0, len(e) - 7, 8)])
-        print(f"roulette {level:g} dB ({np.median(cpu):.3f} s CPU): sd "
-              f"{fmt(np.array(errors).std(0))} | worst {fmt(e.max(0))} % | worst of 8 seeds, "
-              f"mean over groups {worst_of_8:.1f} %", flush=True)
+        print(f"roulette {level:g} dB ({cpu:.3f} s CPU): sd {per_band(errors.std(0))} | worst "
+              f"{per_band(e.max(0))} % | worst of 8 seeds, mean over groups {worst_of_8:.1f} %",
+              flush=True)
 
 
 def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
@@ -175,17 +183,10 @@ def azimuth_guiding(mesh, variants: list[tuple[float, float]]) -> None:
     for gamma, width_deg in variants:
         raytrace._guided_launch = (axis_guided_launch(gamma, math.radians(width_deg))
                                    if gamma > 0 else original)
-        errors, cpu = [], []
-        for seed in range(1, 17):
-            c0 = time.process_time()
-            t30 = sonicspec_rir(scene, regions, settings, seed, 1)[1]["expected"]["t30_s"]
-            cpu.append(time.process_time() - c0)
-            errors.append(100.0 * (np.asarray(t30) / ref_t30 - 1.0))
-        e = np.array(errors)
-        fmt = lambda x: " ".join(f"{v:5.1f}" for v in x)  # noqa: E731
-        print(f"gamma {gamma:g}, ±{width_deg:g} deg ({np.median(cpu):.2f} s CPU): mean "
-              f"{fmt(e.mean(0))} | sd {fmt(e.std(0))} | worst {fmt(np.abs(e).max(0))} %",
-              flush=True)
+        e, cpu = t30_errors(scene, regions, settings, ref_t30, 16)
+        print(f"gamma {gamma:g}, ±{width_deg:g} deg ({cpu:.2f} s CPU): mean "
+              f"{per_band(e.mean(0))} | sd {per_band(e.std(0))} | worst "
+              f"{per_band(np.abs(e).max(0))} %", flush=True)
     raytrace._guided_launch = original
 
 

@@ -73,6 +73,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -287,22 +288,33 @@ def child_rlr(tmp: Path, name: str, repeats: int) -> dict:
 
 
 def child_rlr_draws(tmp: Path, diffuse: bool) -> dict:
-    """RLR defaults' error against its own 50,000 rays at each of the RLR_DRAWS positions."""
+    """RLR defaults' and RLR's 50,000-ray figures at the RLR_DRAWS − 1 moved positions (draw 0,
+    the bench position, is the pair of runs the bench makes anyway)."""
     import rlr_audio_propagation as rlr  # benchmark-only optional dependency
 
     mesh = load_mesh(tmp)
     materials = tmp / ("rlr_materials_diffuse.json" if diffuse else "rlr_materials.json")
     draws = []
-    for k in range(RLR_DRAWS):
+    for k in range(1, RLR_DRAWS):
         source = rlr_source(k)
         fig = {}
         for name in ("default", "default_50k"):
             cfg = rlr_config(name, rlr)
             fig[name] = figures(rlr_rir(rlr, cfg, mesh, materials, source)[0], cfg.sample_rate)
-        draws.append({"source_m": source.tolist(), "t30_s": fig["default"]["t30_s"],
-                      "t30_50k_s": fig["default_50k"]["t30_s"],
-                      "figures": fig["default"], "figures_50k": fig["default_50k"],
-                      "error": deviation(fig["default"], fig["default_50k"])})
+        draws.append({"source_m": source.tolist(), "figures": fig["default"],
+                      "figures_50k": fig["default_50k"]})
+    return {"draws": draws}
+
+
+def summarize_draws(default: dict, default_50k: dict, moved: dict) -> dict:
+    """RLR's error over its draws: draw 0 from the bench position's runs (``default`` and
+    ``default_50k``, results of :func:`child_rlr`), then the moved ones (``moved``, the result
+    of :func:`child_rlr_draws`); each draw's
+    worst-band error, their median and worst, and the issue's measures (:func:`error_stats`)."""
+    draws = [{"source_m": SOURCE_M.tolist(), "figures": default["figures"],
+              "figures_50k": default_50k["figures"]}, *moved["draws"]]
+    for d in draws:
+        d["error"] = deviation(d["figures"], d["figures_50k"])
     return {"draws": draws,
             "typical": {k: float(np.median([d["error"][k] for d in draws])) for k in JND},
             "worst": {k: max(d["error"][k] for d in draws) for k in JND},
@@ -527,7 +539,7 @@ def print_figures(rows: list[tuple[str, dict]]) -> None:
 def choose_cheap(candidates: list[dict], rlr_own: dict) -> tuple[dict, str]:
     """Fastest candidate within the JND of the reference; else within RLR's own error."""
     for label, limit in (("jnd", JND), ("rlr", rlr_own)):
-        best = fastest(candidates, limit, "worst")
+        best = fastest(candidates, lambda r, limit=limit: passes(r, limit, "worst"))
         if best is not None:
             return best, label
     return min(candidates, key=lambda r: max(r["worst"][k] / rlr_own[k] for k in JND)), "none"
@@ -620,7 +632,9 @@ def main() -> int:
         results["rlr_bands_capped_at_12"] = bool(cap)
         results["rlr_own_error"] = deviation(results["rlr_default"]["figures"],
                                              results["rlr_default_50k"]["figures"])
-        results["rlr_draws"] = run_child(tmp, "0", 1, "--child", "rlr_draws", "table")
+        results["rlr_draws"] = summarize_draws(
+            results["rlr_default"], results["rlr_default_50k"],
+            run_child(tmp, "0", 1, "--child", "rlr_draws", "table"))
         print("RLR draws: done", flush=True)
 
         # Pinned to the core RLR ran on: the speed ratios compare like with like.
@@ -628,13 +642,15 @@ def main() -> int:
             {"ref_rays": ref_rays, "seeds": seeds, "candidates": candidates,
              "confirm_seeds": confirm_seeds}))
         print("sonicspec sweep: done", flush=True)
-        cheap, rule = choose_cheap(results["sweep"]["candidates"], results["rlr_own_error"])
+        rows, draws = results["sweep"]["candidates"], results["rlr_draws"]
+        cheap, rule = choose_cheap(rows, results["rlr_own_error"])
         results["cheap"] = {**{k: cheap[k] for k in SETTING_KEYS}, "rule": rule}
-        typical = fastest(results["sweep"]["candidates"], results["rlr_own_error"], "typical")
+        typical = fastest(rows,
+                          lambda r: passes(r, results["rlr_own_error"], "typical"))
         results["cheap_typical"] = typical and {k: typical[k] for k in SETTING_KEYS}
-        matched = fastest_matching_draws(results["sweep"]["candidates"], results["rlr_draws"])
+        matched = fastest(rows, lambda r: matches_draws(r, draws))
         results["cheap_matched"] = matched and {k: matched[k] for k in SETTING_KEYS}
-        equal = fastest_equal_accuracy(results["sweep"]["candidates"], results["rlr_draws"])
+        equal = fastest(rows, lambda r: matches_stats(r, draws))
         results["cheap_equal"] = equal and {k: equal[k] for k in SETTING_KEYS}
         settings_of = {
             "default": default_setting(),
@@ -683,8 +699,9 @@ def main() -> int:
         results["rlr_own_error_diffuse"] = deviation(
             results["rlr_default_diffuse"]["figures"],
             results["rlr_default_50k_diffuse"]["figures"])
-        results["rlr_draws_diffuse"] = run_child(tmp, "0", 1, "--child", "rlr_draws",
-                                                 "diffuse")
+        results["rlr_draws_diffuse"] = summarize_draws(
+            results["rlr_default_diffuse"], results["rlr_default_50k_diffuse"],
+            run_child(tmp, "0", 1, "--child", "rlr_draws", "diffuse"))
         results["sweep_diffuse"] = run_child(tmp, "0", 1, "--child", "sweep", json.dumps(
             {"ref_rays": ref_rays, "seeds": seeds, "candidates": DIFFUSE_CANDIDATES,
              "diffuse": True, "confirm_seeds": confirm_seeds}))
@@ -851,16 +868,6 @@ def matches_stats(row: dict, draws: dict) -> bool:
                for k in JND)
 
 
-def fastest_equal_accuracy(candidates: list[dict], draws: dict) -> dict | None:
-    ok = [r for r in candidates if matches_stats(r, draws)]
-    return min(ok, key=lambda r: np.median(r["cpu_s"])) if ok else None
-
-
-def fastest_matching_draws(candidates: list[dict], draws: dict) -> dict | None:
-    ok = [r for r in candidates if matches_draws(r, draws)]
-    return min(ok, key=lambda r: np.median(r["cpu_s"])) if ok else None
-
-
 def print_draws(draws: dict) -> None:
     print(f"RLR defaults' own error over {len(draws['draws'])} draws (source moved by "
           f"{100 * RLR_JITTER_M:g} cm; each against RLR's 50 000 rays there), worst band:")
@@ -868,7 +875,7 @@ def print_draws(draws: dict) -> None:
         e = d["error"]
         print(f"  draw {k}: T30 {100 * e['t30']:.1f} %, EDT {100 * e['edt']:.1f} %, C50 "
               f"{e['c50_db']:.2f} dB; 50 000-ray T30 " +
-              ", ".join(fmt(v, ".2f") for v in d["t30_50k_s"]) + " s")
+              ", ".join(fmt(v, ".2f") for v in d["figures_50k"]["t30_s"]) + " s")
     for stat in ("typical", "worst"):
         e = draws[stat]
         print(f"  {'median' if stat == 'typical' else 'worst'} draw: T30 {100 * e['t30']:.1f} %, "
@@ -885,6 +892,7 @@ def sweep_table(sweep: dict, own: dict, draws: dict) -> None:
           "RLR draws | RLR draws, other seeds (worst T30) | bias / spread T30, EDT, C50 | "
           "error and spread no worse than RLR's, both seed sets |")
     print("|---" * 19 + "|")
+    preset_row = preset_setting()
     for r in sweep["candidates"]:
         w, t = r["worst"], r["typical"]
         marks = ["yes" if passes(r, lim, stat) else "no"
@@ -894,8 +902,7 @@ def sweep_table(sweep: dict, own: dict, draws: dict) -> None:
         marks.append("—" if not other else
                      f"{'yes' if matches_draws(other, draws) else 'no'} "
                      f"({100 * other['worst']['t30']:.1f} %)")
-        preset = " (`sonicset` preset)" if tuple(r[k] for k in SETTING_KEYS) == preset_setting() \
-            else ""
+        preset = " (`sonicset` preset)" if tuple(r[k] for k in SETTING_KEYS) == preset_row else ""
         print(f"| {r['rays']:,}{preset} | {r['order']} | {r['splitting']:g} | {r['ball']:g} | "
               f"{r['roulette']:g} | {r['guiding']:g} | {np.median(r['cpu_s']):.2f} s | "
               f"{100 * w['t30']:.1f} % | "
@@ -911,30 +918,30 @@ def stats_cell(st: dict) -> str:
             f"{100 * sp['edt']:.1f} %, {b['c50_db']:.2f} / {sp['c50_db']:.2f} dB")
 
 
-def fastest(candidates: list[dict], limit: dict, stat: str) -> dict | None:
-    """The candidate with the least median sweep CPU that passes ``limit`` by ``stat``."""
-    ok = [r for r in candidates if passes(r, limit, stat)]
+def fastest(candidates: list[dict], rule: Callable[[dict], bool]) -> dict | None:
+    """The candidate with the least median sweep CPU that passes ``rule``."""
+    ok = [r for r in candidates if rule(r)]
     return min(ok, key=lambda r: np.median(r["cpu_s"])) if ok else None
 
 
 def print_fastest(sweep: dict, own: dict, t_def: float, t_sim: float, draws: dict) -> None:
     """The fastest candidate (sweep CPU) by each rule, as speed ratios to RLR."""
-    for label, limit, stat in (("within the JND, every seed", JND, "worst"),
-                               ("within RLR's own error, every seed", own, "worst"),
-                               ("within RLR's own error, median seed", own, "typical"),
-                               (f"no worse than RLR's {RLR_DRAWS} draws (median seed vs median "
-                                "draw, worst seed vs worst draw)", draws, "draws"),
-                               (f"with |mean error| and spread no worse than RLR's over its "
-                                f"{RLR_DRAWS} draws, on both seed sets",
-                                draws, "stats")):
-        best = (fastest_matching_draws(sweep["candidates"], draws) if stat == "draws"
-                else fastest_equal_accuracy(sweep["candidates"], draws) if stat == "stats"
-                else fastest(sweep["candidates"], limit, stat))
+    matching = f"no worse than RLR's {RLR_DRAWS} draws (median seed vs median draw, worst " \
+        "seed vs worst draw)"
+    for label, rule in (("within the JND, every seed", lambda r: passes(r, JND, "worst")),
+                        ("within RLR's own error, every seed", lambda r: passes(r, own, "worst")),
+                        ("within RLR's own error, median seed",
+                         lambda r: passes(r, own, "typical")),
+                        (matching, lambda r: matches_draws(r, draws)),
+                        (f"with |mean error| and spread no worse than RLR's over its "
+                         f"{RLR_DRAWS} draws, on both seed sets",
+                         lambda r: matches_stats(r, draws))):
+        best = fastest(sweep["candidates"], rule)
         if best is None:
             print(f"\nno setting {label}")
             continue
         t = float(np.median(best["cpu_s"]))
-        if stat == "draws" and best.get("confirm"):
+        if label == matching and best.get("confirm"):
             held = matches_draws(best["confirm"], draws)
             label += (f"; on the other {len(best['cpu_s'])} seeds it "
                       f"{'passes too' if held else 'does NOT pass'} (worst T30 "
