@@ -173,11 +173,11 @@ class EnergyHistogram:
             raise AcousticsError(f"relative_width: expected a value in [0, 1], got "
                                  f"{relative_width!r}")
         n = self.n_bins
-        half = np.floor(relative_width * (np.arange(n) + 0.5) / 2).astype(np.int64)
+        k = np.arange(n)
+        half = np.floor(relative_width * (k + 0.5) / 2).astype(np.int64)
         if n == 0 or not half.any():
             return self
-        lo = np.maximum(np.arange(n) - half, 0)
-        hi = np.minimum(np.arange(n) + half, n - 1)
+        lo, hi = np.maximum(k - half, 0), np.minimum(k + half, n - 1)
 
         def mean(x: np.ndarray) -> np.ndarray:
             # Window sums from running sums: a window of empty bins subtracts two equal sums,
