@@ -1,6 +1,8 @@
 # One rule per step of sonicspec.plan.model.STEPS. They differ only in name and resources:
 # each runs `sonicspec job`, which reads the job's input artifacts, calls the libraries and
-# writes the output artifact atomically. The content key is a param, so it decides reruns.
+# writes the output artifact atomically. The content key is in the output path and is the only
+# param, so a job reruns exactly when its key is new. The plan file's path changes with every
+# edit of the spec: it is written into the shell command (not a param), so it triggers nothing.
 
 for step in PLAN.steps():
 
@@ -13,7 +15,6 @@ for step in PLAN.steps():
             PLAN.output_pattern(step.name),
         params:
             key="{key}",
-            plan=PLAN.path,
         log:
             PLAN.log_pattern(step.name),
         benchmark:
@@ -23,4 +24,4 @@ for step in PLAN.steps():
             mem_mb=step.mem_mb,
             runtime=step.runtime_min,
         shell:
-            "sonicspec job --plan {params.plan} {params.key} > {log} 2>&1"
+            PLAN.job_command()
