@@ -108,8 +108,14 @@ def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path,
         wav = tmp_path / "m.wav"
         code, out, _ = run(capsys, "rir", str(other), "--scene", "box", "--source", "2", "2",
                            "1.5", "--mic", "7", "4.5", "1.6", "-o", str(wav), "--json")
-        assert code == 0 and json.loads(out)["channels"] == channels
+        facts = json.loads(out)
+        assert code == 0 and facts["channels"] == channels
         assert sf.info(str(wav)).channels == channels
+        # Samples per channel, not in all channels together (a bug: 4 x 12,803 read 51,212).
+        assert facts["samples"] == sf.info(str(wav)).frames
+        code, out, _ = run(capsys, "rir", str(other), "--scene", "box", "--source", "2", "2",
+                           "1.5", "--mic", "7", "4.5", "1.6")
+        assert f"{channels} channels x {facts['samples']} samples at" in out
     # A SOFA HRTF: a missing file is named; a real one renders two ears through its HRIRs.
     binaural = tmp_path / "b.yaml"
     binaural.write_text(SPEC.replace(

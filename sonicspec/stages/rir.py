@@ -150,7 +150,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                   settings: RirSettings, rng: np.random.Generator,
                   regions=None, microphone: dict[str, Any] | None = None,
                   hrirs: HrirSet | None = None, n_threads: int = 1,
-                  expected_figures: bool = False
+                  expected_figures: bool = False, progress=None,
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs ``(channels, samples)`` from every source position to the microphone, and facts.
 
@@ -160,7 +160,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     HRTF needs its measured set in ``hrirs`` (see :func:`load_hrirs`). ``n_threads`` only
     changes how fast the rays are traced, never the bytes. ``expected_figures`` adds each
     RIR's figures without the late noise's draw (``metrics.figures_from_energy``) to its
-    facts as ``"expected"``.
+    facts as ``"expected"``. ``progress(rays_done, rays_total)`` is called as the trace goes.
     """
     microphone = microphone or {"kind": "mono", "trajectory": {"kind": "static"}}
     check_receiver(microphone, hrirs)
@@ -173,7 +173,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
                         max_path_length_m=c * settings.max_rir_length_s)
     traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
-                        air, n_threads=n_threads)
+                        air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
     render = _renderer(microphone, settings, hrirs)
     rirs, facts = [], []
@@ -310,7 +310,7 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
              "channels": int(rir.shape[0]),
              "distance_m": float(np.linalg.norm(np.subtract(source_m, mic_m))),
-             "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.size),
+             "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.shape[-1]),
              "mesh_triangles": mesh.n_faces, "traced_triangles": scene.n_faces,
              "figures": figures.to_dict(), "warnings": warnings}
     return rir, facts
@@ -329,7 +329,8 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
 
     lines = [
         f"RIR in {facts['scene_id']}: source {facts['source_m']} -> mic {facts['mic_m']} "
-        f"({facts['distance_m']:.2f} m), {facts['samples']} samples at "
+        f"({facts['distance_m']:.2f} m), {facts['channels']} channel"
+        f"{'s' * (facts['channels'] != 1)} x {facts['samples']} samples at "
         f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
         f"order {facts['image_source_order']}), direct path {facts['direct']}",
         f"mesh: {facts['mesh_triangles']:,} triangles, traced as {facts['traced_triangles']:,} "
@@ -385,8 +386,14 @@ def run(ctx) -> None:
         sources = _source_points(placement)
         points = np.concatenate([p for _, p in sources])
         rng = ctx.rng("rir", ctx.job.key, placement["group"])
+
+        def progress(done: int, total: int, g: int = g, n: int = len(points)) -> None:
+            ctx.progress(f"group {g + 1}/{len(placements)}: {n} points, "
+                         f"{done:,}/{total:,} rays")
+
         rirs, facts = simulate_rirs(scene, np.asarray(placement["mic_m"]), points, settings,
-                                    rng, regions, params["microphone"], hrirs)
+                                    rng, regions, params["microphone"], hrirs,
+                                    progress=progress)
         entries, start = [], 0
         for s, (name, pts) in enumerate(sources):
             block = rirs[start:start + len(pts)]
