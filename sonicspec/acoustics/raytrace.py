@@ -318,6 +318,7 @@ def trace_rays(
     settings: RayTraceSettings | None = None,
     air_m_per_band: np.ndarray | None = None,
     n_threads: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[TraceResult]:
     """Late-field energy histograms at every receiver from one stochastic ray trace.
 
@@ -339,6 +340,8 @@ def trace_rays(
         Batches traced concurrently (Embree and large numpy operations release the GIL).
         Batches are fixed by ``settings.batch_size`` and their histograms are summed in batch
         order, so the result bytes do not depend on ``n_threads``.
+    progress : callable, optional
+        Called as ``progress(rays_done, rays_total)`` after every batch (for long traces).
 
     Returns
     -------
@@ -398,6 +401,7 @@ def trace_rays(
     total: _Histograms | None = None
     escaped = 0
     interactions = 0
+    folded = [0]
 
     def fold(result: tuple[_Histograms, int, int]) -> None:
         nonlocal total, escaped, interactions
@@ -409,6 +413,9 @@ def trace_rays(
         else:
             total.energy += acc.energy
             total.directions += acc.directions
+        folded[0] += 1
+        if progress is not None:
+            progress(sum(sizes[: folded[0]]), settings.n_rays)
 
     if n_threads == 1 or len(sizes) == 1:
         for i in range(len(sizes)):

@@ -13,7 +13,7 @@ import traceback
 
 from sonicspec.errors import SonicspecError, StageError
 from sonicspec.plan.model import Plan
-from sonicspec.stages.context import JobContext
+from sonicspec.stages.context import JobContext, progress_path
 from sonicspec.store import ArtifactStore
 
 STAGES: dict[str, str] = {
@@ -73,6 +73,8 @@ def run_job(plan: Plan, key: str) -> bool:
     except Exception as exc:
         log.error("%s", traceback.format_exc())
         raise StageError(f"{job.label}: internal error {type(exc).__name__}: {exc}", key) from exc
+    finally:
+        progress_path(plan.store_dir, key).unlink(missing_ok=True)
     if not store.exists(job.step, key):
         raise StageError(f"{job.label}: the stage finished without writing its artifact", key)
     log.info("%s: done in %.2f s", job.label, time.perf_counter() - start)

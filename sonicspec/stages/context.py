@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sonicspec.errors import StageError
+from sonicspec.export.files import write_text
 from sonicspec.plan.hashing import rng_for
 from sonicspec.plan.model import STEP_BY_NAME, Job, Plan
 from sonicspec.store import Artifact, ArtifactStore
@@ -20,6 +23,7 @@ class JobContext:
     job: Job
     plan: Plan
     store: ArtifactStore
+    _last_progress: list[float] = field(default_factory=lambda: [0.0], repr=False)
 
     @property
     def params(self) -> dict[str, Any]:
@@ -47,6 +51,14 @@ class JobContext:
         """A generator seeded by the spec seed and ``names`` (e.g. the step and a group id)."""
         return rng_for(self.plan.seed, *names)
 
+    def progress(self, text: str, *, every_s: float = 1.0) -> None:
+        """Tell the build how far this job is (shown on its progress line); at most once per
+        ``every_s`` seconds."""
+        now = time.monotonic()
+        if now - self._last_progress[0] >= every_s:
+            self._last_progress[0] = now
+            write_text(progress_path(self.plan.store_dir, self.job.key), text)
+
     def write(self, arrays: dict[str, np.ndarray], data: Any = None) -> None:
         self.store.write(
             self.job.step,
@@ -57,3 +69,8 @@ class JobContext:
             input_keys=self.job.inputs,
             stage_version=STEP_BY_NAME[self.job.step].version,
         )
+
+
+def progress_path(store_dir: str | Path, key: str) -> Path:
+    """Where a running job says how far it is (see :meth:`JobContext.progress`)."""
+    return Path(store_dir) / "logs" / "progress" / f"{key}.txt"

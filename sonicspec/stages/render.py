@@ -103,7 +103,8 @@ def run(ctx: JobContext) -> None:
         rir_by_name = {s["name"]: s for s in rir_group["sources"]}
         mic = np.asarray(placement["mic_m"], dtype=np.float64)
         tracks = []
-        for track in arr["tracks"]:
+        for n, track in enumerate(arr["tracks"]):
+            ctx.progress(f"group {g + 1}/{len(arrange)}, track {n + 1}/{len(arr['tracks'])}")
             name = track["name"]
             if name not in rir_by_name:
                 raise StageError(f"{ctx.job.label}: group {arr['group']} has no RIRs for "
