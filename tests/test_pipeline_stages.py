@@ -182,6 +182,13 @@ def test_rirs_and_manifests_point_at_real_files(built: Plan) -> None:
     # recordings of the task, and on every mixture containing it (1 separation + 1 enhancement).
     assert len(supervisions) == 3 * spoken
     assert all(s["recording_id"] in by_id for s in supervisions)
+    # IDs are unique (Lhotse's validate_recordings_and_supervisions refused the duplicates a
+    # mixture's sources made), and every supervision lies inside its recording.
+    assert len({s["id"] for s in supervisions}) == len(supervisions)
+    assert len(by_id) == len(recordings)
+    for s in supervisions:
+        assert 0 <= s["start"] and s["start"] + s["duration"] <= by_id[s["recording_id"]][
+            "duration"] + 1e-6
     summary = json.loads((out / "dataset.json").read_text())
     assert summary["splits"]["train"]["groups"] == 1 and summary["spec"]["name"] == "tiny"
     assert (out / "manifests" / "train.csv").read_text().count("\n") == 1 + len(

@@ -6,7 +6,8 @@ Per group, under ``<output dir>/<split>/<index>/``: each reverberant source (``s
 ``metadata.json`` in the SonicSet form — ``source1..N: {audio, start_end_points, words}``,
 ``noise``, ``music`` — extended with the speaker, trajectory, RIR points, microphone, gains,
 acoustic figures and the content keys. Every file is written atomically. The artifact records
-the files, the manifest entries and the metadata for the ``dataset`` stage.
+the files (each with the SHA-256 of the bytes written, which ``checksums.sha256``, ``verify`` and
+the next build check), the manifest entries and the metadata for the ``dataset`` stage.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.stages.context import JobContext
@@ -39,8 +41,9 @@ class _GroupWriter:
                     subtype="FLOAT" if float_wav else self.outputs["subtype"])
         rel = path.relative_to(self.out).as_posix()
         x2 = np.atleast_2d(x)
-        entry = {"kind": kind, "name": name, "path": rel, "channels": int(x2.shape[0]),
-                 "num_samples": int(x2.shape[1]), "sample_rate_hz": self.rate}
+        entry = {"kind": kind, "name": name, **file_record(self.out, path),
+                 "channels": int(x2.shape[0]), "num_samples": int(x2.shape[1]),
+                 "sample_rate_hz": self.rate}
         self.files.append(entry)
         if not float_wav:
             rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
@@ -119,7 +122,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
     if outputs["metadata"]:
         write_json(w.folder / "metadata.json", metadata)
         w.files.append({"kind": "metadata", "name": "metadata",
-                        "path": (w.folder / "metadata.json").relative_to(out).as_posix()})
+                        **file_record(out, w.folder / "metadata.json")})
     # A supervision per utterance on every recording it is heard in: its source's own file
     # and each mixture that contains the source.
     rows = []
@@ -130,7 +133,9 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             if rec_name not in w.rec_ids:
                 continue
             rec = w.rec_ids[rec_name]
-            rows.extend(SupervisionEntry(f"{rec}_{k}", rec, seg["start"], seg["end"], w.rate,
+            # Unique across the split: a mixture holds several sources' utterances.
+            stem = rec if rec_name == name else f"{rec}_{name}"
+            rows.extend(SupervisionEntry(f"{stem}_{k}", rec, seg["start"], seg["end"], w.rate,
                                          seg["text"], speaker).to_lhotse()
                         for k, seg in enumerate(segs))
     return {"group": group, "split": split, "scene_id": params["scene_id"],
