@@ -104,12 +104,27 @@ def cmd_init(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _load_or_exit(spec: str):
+def _load_or_exit(spec: str, args: argparse.Namespace | None = None):
     from sonicspec.spec import validate_file
 
-    loaded, problems = validate_file(spec)
+    loaded, problems = validate_file(spec, cli_outputs=_cli_outputs(args))
     _print_problems(problems, spec)
     return loaded
+
+
+def _cli_outputs(args: argparse.Namespace | None) -> tuple[str, ...]:
+    """The output folders given on the command line (``--output-dir``, ``--store-dir``)."""
+    if args is None:
+        return ()
+    return tuple(name for name, opt in (("dir", "output_dir"), ("store_dir", "store_dir"))
+                 if getattr(args, opt, None))
+
+
+def _compile(loaded, args: argparse.Namespace):
+    from sonicspec.plan.compile import compile_spec
+
+    return compile_spec(loaded, output_dir=getattr(args, "output_dir", None),
+                        store_dir=getattr(args, "store_dir", None))
 
 
 def _last_plan_path(plan) -> Path:
@@ -117,19 +132,19 @@ def _last_plan_path(plan) -> Path:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from sonicspec.plan.compile import compile_spec, plan_changes, recorded_keys
+    from sonicspec.plan.compile import plan_changes, recorded_keys
     from sonicspec.plan.summary import format_summary, summarize
     from sonicspec.stages.workflow import progress
     from sonicspec.store import ArtifactStore
 
-    loaded = _load_or_exit(args.spec)
+    loaded = _load_or_exit(args.spec, args)
     if loaded is None:
         return EXIT_INVALID
     summary = summarize(loaded.spec)
     if args.summary:
         print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
         return EXIT_OK
-    plan = compile_spec(loaded)
+    plan = _compile(loaded, args)
     last = _last_plan_path(plan)
     old = recorded_keys(last)
     changes = plan_changes(old, plan)
@@ -167,23 +182,31 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from sonicspec.plan.compile import compile_spec
-    from sonicspec.stages.workflow import run_build
+    from sonicspec.stages.repair import missing_outputs
+    from sonicspec.stages.workflow import build
+    from sonicspec.store import ArtifactStore
 
-    loaded = _load_or_exit(args.spec)
+    loaded = _load_or_exit(args.spec, args)
     if loaded is None:
         return EXIT_INVALID
-    plan = compile_spec(loaded)
+    plan = _compile(loaded, args)
     if args.until:
         plan = plan.until(args.until)
     profile = Path(args.profile) if args.profile else None
-    code = run_build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run)
-    if code == 0 and not args.dry_run and not args.until:
-        plan.write(_last_plan_path(plan))
-        print(f"dataset written to {plan.output_dir}", file=sys.stderr)
-    elif code == 0 and args.until and not args.dry_run:
+    result = build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run)
+    if result.code != 0 or args.dry_run:
+        return EXIT_OK if result.code == 0 else EXIT_FAILURE
+    if args.until:
         print(f"built up to {args.until}; artifacts in {plan.store_dir}", file=sys.stderr)
-    return EXIT_OK if code == 0 else EXIT_FAILURE
+        return EXIT_OK
+    missing = missing_outputs(plan, ArtifactStore(plan.store_dir))
+    if missing:
+        print(f"sonicspec: error: the build finished but {len(missing)} dataset file(s) are "
+              f"missing (first: {missing[0]}); run the build again", file=sys.stderr)
+        return EXIT_FAILURE
+    plan.write(_last_plan_path(plan))
+    print(f"dataset written to {plan.output_dir}", file=sys.stderr)
+    return EXIT_OK
 
 
 def cmd_job(args: argparse.Namespace) -> int:
@@ -200,26 +223,40 @@ def cmd_job(args: argparse.Namespace) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    from sonicspec.export.checksums import folder_kind
     from sonicspec.store import ArtifactStore
 
-    store = ArtifactStore(args.store)
-    if not store.root.is_dir():
-        print(f"sonicspec: error: {args.store}: no such store folder", file=sys.stderr)
-        return EXIT_FAILURE
-    expected = None
-    if args.spec:
-        from sonicspec.plan.compile import compile_spec
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        print(f"sonicspec: error: {folder}: no such folder", file=sys.stderr)
+        return EXIT_INVALID
+    kind = folder_kind(folder)
+    if kind is None:
+        print(f"sonicspec: error: {folder}: not a sonicspec store or dataset (it has neither "
+              "sonicspec-store.json nor .sonicspec-dataset.json)", file=sys.stderr)
+        return EXIT_INVALID
+    if kind == "dataset":
+        from sonicspec.stages.repair import verify_dataset_folder
 
-        loaded = _load_or_exit(args.spec)
-        if loaded is None:
-            return EXIT_INVALID
-        expected = {j.key: j.step for j in compile_spec(loaded).jobs}
-    problems = store.verify(expected)
-    count = sum(1 for _ in store.artifacts())
+        count, problems = verify_dataset_folder(folder)
+        what = "dataset files"
+    else:
+        store = ArtifactStore(folder)
+        expected = None
+        if args.spec:
+            from sonicspec.plan.compile import compile_spec
+
+            loaded = _load_or_exit(args.spec)
+            if loaded is None:
+                return EXIT_INVALID
+            expected = {j.key: j.step for j in compile_spec(loaded).jobs}
+        problems = [p.format() for p in store.verify(expected)]
+        count = sum(1 for _ in store.artifacts())
+        what = "artifacts"
     for p in problems:
-        print(p.format(), file=sys.stderr)
+        print(p, file=sys.stderr)
     print(
-        f"{args.store}: {count} artifacts checked, {len(problems)} problem"
+        f"{folder}: {kind}, {count} {what} checked, {len(problems)} problem"
         f"{'s' * (len(problems) != 1)}",
         file=sys.stderr if problems else sys.stdout,
     )
@@ -281,6 +318,14 @@ def _write_atomic(path: Path, text: str) -> None:
     write_text(path, text)
 
 
+def _output_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--output-dir", metavar="DIR",
+                   help="write the dataset here instead of the spec's outputs.dir (may be "
+                   "outside the spec's folder; content keys do not change)")
+    p.add_argument("--store-dir", metavar="DIR",
+                   help="use this artifact store instead of the spec's outputs.store_dir")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sonicspec",
@@ -328,6 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="only the counts the spec fixes (no data needed: nothing is read)",
     )
     p.add_argument("--keys", action="store_true", help="also list every job's key and label")
+    _output_options(p)
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("build", help="build the dataset through Snakemake")
@@ -343,6 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--dry-run", action="store_true", help="show the jobs that would run")
     p.add_argument("--until", metavar="STEP", help="stop after this step (e.g. placement)")
+    _output_options(p)
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("scene", help="look at the scenes of a spec")
@@ -374,8 +421,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("key", metavar="KEY", help="the job's content key")
     p.set_defaults(func=cmd_job)
 
-    p = sub.add_parser("verify", help="re-check every artifact in a store")
-    p.add_argument("store", metavar="DIR", help="the store folder (outputs.store_dir)")
+    p = sub.add_parser("verify", help="re-check every artifact of a store, or every file of a "
+                       "dataset folder against its checksums and the store")
+    p.add_argument("folder", metavar="DIR",
+                   help="a store (outputs.store_dir) or a dataset folder (outputs.dir)")
     p.add_argument(
         "--spec", metavar="SPEC", help="also report artifacts this spec needs but the store lacks"
     )

@@ -262,12 +262,17 @@ def _shards(groups: list[str], size: int) -> list[list[str]]:
     return [groups[i : i + size] for i in range(0, len(groups), size)]
 
 
-def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
-    """The plan of ``loaded``; :class:`CompileError` when the data it needs is not there."""
+def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Path | None = None,
+                 store_dir: str | Path | None = None) -> Plan:
+    """The plan of ``loaded``; :class:`CompileError` when the data it needs is not there.
+
+    ``output_dir`` and ``store_dir`` replace the spec's folders (``sonicspec build
+    --output-dir``); no content key depends on where the folders are.
+    """
     spec: DatasetSpec = loaded.spec
     base = loaded.base_dir.resolve()
-    store_dir = (base / spec.outputs.store_dir).resolve()
-    output_dir = (base / spec.outputs.dir).resolve()
+    store_dir = Path(store_dir or base / spec.outputs.store_dir).resolve()
+    output_dir = Path(output_dir or base / spec.outputs.dir).resolve()
     digests = FileDigests(store_dir / "cache" / "file-digests.json" if cache else None)
 
     jobs: list[Job] = []
@@ -309,8 +314,8 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True) -> Plan:
     scene_materials = {e.id: getattr(spec.scenes[e.index], "label_materials", {}) for e in entries}
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
-    for k in ("dir", "store_dir", "groups_per_shard"):
-        outputs.pop(k)
+    for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard"):
+        outputs.pop(k)  # where and how finely: no export writes other bytes for them
 
     for split, scenes in split_scenes.items():
         per_group = group_scenes(spec, split, scenes)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import fnmatch
 import glob
 import math
-from collections.abc import Iterator
+import posixpath
+from collections.abc import Collection, Iterator
 from pathlib import Path
 
 from sonicspec.spec.corpora import (
@@ -151,9 +152,13 @@ def _box_corners(ob: BoxObstacleSpec) -> list[tuple[float, float, float]]:
 # --- the checks --------------------------------------------------------------------------
 
 
-def check_spec(spec: DatasetSpec) -> list[Problem]:
-    """Every semantic error and warning in ``spec``."""
-    problems: list[Problem] = []
+def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = ()) -> list[Problem]:
+    """Every semantic error and warning in ``spec``.
+
+    ``cli_outputs`` names the ``outputs`` folders (``dir``, ``store_dir``) that the command
+    line chooses instead of the spec: they may lie outside the spec's folder.
+    """
+    problems: list[Problem] = list(_check_output_folders(spec, cli_outputs))
     for check in (
         _check_scenes,
         _check_materials,
@@ -494,6 +499,32 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
             f"may be flattened; use at most {MAX_SIMPLIFY_WITHOUT_WARNING_M:g} (scan noise "
             "is rarely larger)",
         )
+
+
+def _outside(path: str) -> bool:
+    """Whether a spec-relative path leaves the spec's folder (absolute, or up through '..')."""
+    norm = posixpath.normpath(path.replace("\\", "/"))
+    return posixpath.isabs(norm) or norm == ".." or norm.startswith("../") or (
+        len(norm) > 1 and norm[1] == ":")  # a Windows drive
+
+
+def _check_output_folders(spec: DatasetSpec, cli_outputs: Collection[str]) -> Iterator[Problem]:
+    o = spec.outputs
+    for name in ("dir", "store_dir"):
+        value = getattr(o, name)
+        if name not in cli_outputs and not o.allow_outside_spec_folder and _outside(value):
+            flag = "--output-dir" if name == "dir" else "--store-dir"
+            yield _err(("outputs", name),
+                       f"expected a folder inside the spec's folder, got {value!r}; a spec "
+                       f"chooses where it writes only inside its own folder: pass {flag} DIR "
+                       "to `sonicspec build`, or set outputs.allow_outside_spec_folder: true")
+    if not cli_outputs:
+        a = posixpath.normpath(o.dir.replace("\\", "/"))
+        b = posixpath.normpath(o.store_dir.replace("\\", "/"))
+        if a != b and (b.startswith(a + "/") or a.startswith(b + "/")):
+            yield _err(("outputs", "store_dir"),
+                       f"the store ({o.store_dir!r}) and the dataset folder ({o.dir!r}) must "
+                       "not lie inside one another")
 
 
 def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:

@@ -19,6 +19,13 @@ class OutputsSpec(SpecModel):
         description="Content-hashed artifact store, relative to the spec file; may be shared "
         "between specs.",
     )
+    allow_outside_spec_folder: bool = Field(
+        False,
+        description="Let dir and store_dir lie outside the spec file's folder (an absolute "
+        "path or one through '..'). Off by default: a spec may come from someone else, and "
+        "should not choose where on your disk it writes; `sonicspec build --output-dir DIR` "
+        "(--store-dir DIR) choose a folder from the command line instead.",
+    )
     audio_format: Literal["flac", "wav"] = Field("flac", description="Audio container.")
     subtype: Literal["PCM_16", "PCM_24", "FLOAT"] = Field(
         "PCM_16", description="Sample format (FLOAT only with wav)."

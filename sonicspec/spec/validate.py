@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -32,12 +33,14 @@ def _locate(problems: list[Problem], smap: SourceMap) -> list[Problem]:
 
 
 def validate_text(
-    text: str, source: str, base_dir: Path | None = None, *, files: bool = False
+    text: str, source: str, base_dir: Path | None = None, *, files: bool = False,
+    cli_outputs: Collection[str] = (),
 ) -> tuple[LoadedSpec | None, list[Problem]]:
     """Validate spec text; returns the loaded spec (None if invalid) and every problem found.
 
     ``source`` names the text in messages (usually the file path); ``base_dir`` anchors the
-    relative paths inside the spec (default: the folder of ``source``).
+    relative paths inside the spec (default: the folder of ``source``). ``cli_outputs``: the
+    output folders the command line chooses (see :func:`~sonicspec.spec.checks.check_spec`).
     """
     base = Path(base_dir) if base_dir is not None else Path(source).parent
     try:
@@ -62,7 +65,7 @@ def validate_text(
         spec = DatasetSpec.model_validate(data)
     except ValidationError as exc:
         return None, sort_problems(problems_from_validation(exc, DatasetSpec, data, smap))
-    problems = check_spec(spec)
+    problems = check_spec(spec, cli_outputs=cli_outputs)
     if files:
         problems += check_files(spec, base)
     problems = sort_problems(_locate(problems, smap))
@@ -74,7 +77,7 @@ def validate_text(
 
 
 def validate_file(
-    path: str | Path, *, files: bool = False
+    path: str | Path, *, files: bool = False, cli_outputs: Collection[str] = ()
 ) -> tuple[LoadedSpec | None, list[Problem]]:
     """Validate the spec file at ``path`` (see :func:`validate_text`)."""
     path = Path(path)
@@ -89,7 +92,7 @@ def validate_file(
         return None, [Problem((), f"not UTF-8 text (byte {exc.start}); save the spec as UTF-8")]
     except OSError as exc:
         return None, [Problem((), f"cannot be read: {exc.strerror}")]
-    return validate_text(text, source, path.parent, files=files)
+    return validate_text(text, source, path.parent, files=files, cli_outputs=cli_outputs)
 
 
 def load_spec(path: str | Path, *, files: bool = False) -> LoadedSpec:

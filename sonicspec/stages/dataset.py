@@ -1,4 +1,5 @@
-"""Stage ``dataset``: ``dataset.json`` and the manifests, from every export job's record."""
+"""Stage ``dataset``: ``dataset.json``, the manifests and ``checksums.sha256``, from every export
+job's record."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import __version__
+from sonicspec.export.checksums import CHECKSUMS_NAME, file_record, write_checksums
 from sonicspec.export.files import write_json, write_text
 from sonicspec.export.manifests import csv_text, jsonl
 from sonicspec.stages.context import JobContext
@@ -54,6 +56,8 @@ def run(ctx: JobContext) -> None:
         "manifests": files_written,
     }
     write_json(out / "dataset.json", summary)
+    own = [file_record(out, out / rel) for rel in [*files_written, "dataset.json"]]
+    write_checksums(out, [f for g in groups for f in g["files"]] + own)
     ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
               {"dataset_json": "dataset.json", "manifests": files_written,
-               "splits": counts})
+               "splits": counts, "files": [*own, file_record(out, out / CHECKSUMS_NAME)]})

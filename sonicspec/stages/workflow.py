@@ -21,8 +21,13 @@ from typing import Any, TextIO
 
 import sonicspec
 from sonicspec.errors import SonicspecError
-from sonicspec.plan.model import STEPS, Plan, Step
+from sonicspec.export.checksums import claim_folder
+from sonicspec.plan.model import STEPS, Job, Plan, Step
+from sonicspec.stages.checked import CheckCache
+from sonicspec.stages.context import progress_path
+from sonicspec.stages.repair import CheckReport, check_existing, record_written
 from sonicspec.store import ArtifactStore
+from sonicspec.store.lock import StoreLock
 
 
 def workflow_dir() -> Path:
@@ -67,6 +72,12 @@ class WorkflowPlan:
 
     def log_pattern(self, step: str) -> str:
         return f"{self.store_dir}/logs/{step}/{{pre}}/{{key}}.log"
+
+    def job_command(self) -> str:
+        """The shell command of every rule: the plan's path written in (Snakemake formats
+        ``{params.key}`` and ``{log}``; braces of the path are escaped)."""
+        plan = shlex.quote(self.path).replace("{", "{{").replace("}", "}}")
+        return f"sonicspec job --plan {plan} {{params.key}} > {{log}} 2>&1"
 
     def benchmark_pattern(self, step: str) -> str:
         return f"{self.store_dir}/benchmarks/{step}/{{pre}}/{{key}}.tsv"
@@ -177,7 +188,99 @@ def failed_job_messages(snakemake_log: str, plan: Plan) -> list[str]:
     return out
 
 
-def run_build(
+@dataclass
+class BuildResult:
+    """What a build did: Snakemake's exit code, the jobs it ran and what it repaired."""
+
+    code: int
+    ran: dict[str, int]
+    """Jobs run, per step (from Snakemake's own log: what it executed)."""
+    reused: int
+    check: CheckReport
+    elapsed_s: float
+    warnings: list[str]
+    summary: str = ""
+
+    @property
+    def jobs_run(self) -> int:
+        return sum(self.ran.values())
+
+
+_EXECUTED_KEY = re.compile(r"^\s*wildcards: pre=[0-9a-f]{2}, key=([0-9a-f]{64})\s*$", re.M)
+_WARNING_LINE = re.compile(r"\bWARNING\b|Warning: ")
+
+
+def executed_keys(snakemake_log: str) -> set[str]:
+    """Keys of the jobs Snakemake started (each job block names its wildcards)."""
+    return set(_EXECUTED_KEY.findall(snakemake_log))
+
+
+def job_warnings(plan: Plan, keys: set[str]) -> list[str]:
+    """Warning lines in the logs of the jobs that ran, each with its job's label."""
+    jobs = plan.by_key()
+    out = []
+    for key in sorted(keys, key=lambda k: jobs[k].label if k in jobs else k):
+        if key not in jobs:
+            continue
+        log_path = Path(plan.store_dir) / "logs" / jobs[key].step / key[:2] / f"{key}.log"
+        try:
+            lines = log_path.read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        out += [f"{jobs[key].label}: {line.strip()}" for line in lines
+                if _WARNING_LINE.search(line)]
+    return out
+
+
+def _job_progress(plan: Plan, waiting: list[Job]) -> str:
+    """What the running jobs say of themselves (``JobContext.progress``), briefly."""
+    parts = []
+    for job in waiting:
+        try:
+            text = progress_path(plan.store_dir, job.key).read_text().strip()
+        except OSError:
+            continue
+        parts.append(f"{job.label}: {text}")
+    if not parts:
+        return ""
+    more = f" (+{len(parts) - 2} more)" if len(parts) > 2 else ""
+    return " | " + "; ".join(parts[:2]) + more
+
+
+def _hours(plan: Plan) -> tuple[int, float]:
+    """Groups in the plan and the hours of audio they last (one track's length each)."""
+    arranged = [j for j in plan.jobs if j.step == "arrange"]
+    groups = sum(len(j.params["groups"]) for j in arranged)
+    seconds = sum(len(j.params["groups"]) * float(j.params["mixture"]["duration_s"])
+                  for j in arranged)
+    return groups, seconds / 3600.0
+
+
+def format_summary(plan: Plan, result: BuildResult) -> str:
+    ran = ", ".join(f"{s} {n}" for s, n in result.ran.items() if n) or "none"
+    groups, hours = _hours(plan)
+    lines = [
+        f"build {'finished' if result.code == 0 else 'FAILED'} in {_clock(result.elapsed_s)}: "
+        f"{result.jobs_run} job{'s' * (result.jobs_run != 1)} run ({ran}), {result.reused} "
+        f"reused from the store, {len(result.check.findings)} repaired",
+        f"checked {result.check.artifacts_checked} artifacts ({result.check.artifacts_verified}"
+        f" re-read) and {result.check.files_checked} dataset files "
+        f"({result.check.files_hashed} re-hashed)",
+        f"dataset: {groups} groups, {hours:.3f} h of audio per track",
+    ]
+    if result.warnings:
+        lines.append(f"{len(result.warnings)} warning{'s' * (len(result.warnings) != 1)} in "
+                     "the jobs' logs:")
+        lines += [f"  {w}" for w in result.warnings[:10]]
+        if len(result.warnings) > 10:
+            lines.append(f"  ... and {len(result.warnings) - 10} more (the logs are in "
+                         f"{Path(plan.store_dir) / 'logs'})")
+    else:
+        lines.append("no warnings")
+    return "\n".join(lines)
+
+
+def build(
     plan: Plan,
     *,
     cores: int = 1,
@@ -187,13 +290,72 @@ def run_build(
     poll_s: float = 1.0,
     on_start: Callable[[subprocess.Popen], None] | None = None,
     snakemake_args: list[str] | None = None,
-) -> int:
-    """Run the plan through Snakemake, printing progress; returns Snakemake's exit code."""
+) -> BuildResult:
+    """Run the plan through Snakemake: check and repair what exists, run exactly the jobs
+    whose artifacts are missing, print progress and a summary.
+
+    One build at a time per store (:class:`~sonicspec.store.lock.StoreLock`); the store and
+    the dataset folder are claimed with their marker files first, so a build never writes into
+    a folder that is not its own.
+    """
     store = ArtifactStore(plan.store_dir)
-    Path(plan.store_dir).mkdir(parents=True, exist_ok=True)
-    removed = store.clean_stale_temp()
-    if removed:
-        print(f"removed {removed} unfinished artifact(s) left by an interrupted build", file=stream)
+    out = Path(plan.output_dir)
+    dataset_key = next((j.key for j in plan.jobs if j.step == "dataset"), None)
+    claims = ((Path(plan.store_dir), "store", "outputs.store_dir", {}),
+              (out, "dataset", "outputs.dir",
+               {"store": os.path.relpath(plan.store_dir, out), "dataset_key": dataset_key}))
+    for claim in claims:  # both checked before either is written
+        claim_folder(*claim, write=False)
+    claim_folder(*claims[0], write=not dry_run)
+    with StoreLock(plan.store_dir):
+        claim_folder(*claims[1], write=not dry_run)
+        start = time.monotonic()
+        removed = store.clean_stale_temp()
+        if removed:
+            print(f"removed {removed} unfinished artifact(s) left by an interrupted build",
+                  file=stream)
+        cache = CheckCache.of_store(plan.store_dir)
+        check = check_existing(plan, store, cache, repair=not dry_run,
+                               tick=lambda s: print(s, file=stream, flush=True)
+                               if len(plan.jobs) > 2000 else None)
+        for finding in check.findings:
+            print(f"{'would repair' if dry_run else 'repairing'}: {finding.format()}",
+                  file=stream)
+        if check.removed and not dry_run:
+            print(f"removed {len(check.removed)} artifact(s) to remake them (the damaged ones "
+                  "and the jobs that follow from them)", file=stream)
+        cache.save()
+        present = {j.key for j in plan.jobs if store.exists(j.step, j.key)}
+        code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
+                                        dry_run=dry_run, stream=stream, poll_s=poll_s,
+                                        on_start=on_start, snakemake_args=snakemake_args,
+                                        start=start)
+        ran_keys = executed_keys(log_text) & {j.key for j in plan.jobs}
+        jobs = plan.by_key()
+        ran = {s.name: 0 for s in STEPS}
+        for key in ran_keys:
+            ran[jobs[key].step] += 1
+        if not dry_run:
+            record_written(plan, store, cache, ran_keys)
+            cache.save()
+        result = BuildResult(code=code, ran=ran, reused=len(present - ran_keys), check=check,
+                             elapsed_s=time.monotonic() - start,
+                             warnings=job_warnings(plan, ran_keys))
+        if not dry_run:
+            result.summary = format_summary(plan, result)
+            print(result.summary, file=stream)
+        return result
+
+
+def run_build(plan: Plan, **kwargs: Any) -> int:
+    """:func:`build`, returning Snakemake's exit code."""
+    return build(plan, **kwargs).code
+
+
+def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores: int,
+                   profile: Path | None, dry_run: bool, stream: TextIO, poll_s: float,
+                   on_start: Callable[[subprocess.Popen], None] | None,
+                   snakemake_args: list[str] | None, start: float) -> tuple[int, str]:
     plan_path = plan.write(Path(plan.store_dir) / "plans" / f"{plan.digest}.json")
     cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run,
                             extra=snakemake_args)
@@ -202,8 +364,8 @@ def run_build(
     log_path = log_dir / f"snakemake-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
     env = dict(os.environ)
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
-    start = time.monotonic()
-    start_done = sum(p.done for p in progress(plan, store))
+    start_done = len(present)
+    waiting = [j for j in plan.jobs if j.key not in present]
     with open(log_path, "w") as log:
         log.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
         log.flush()
@@ -216,25 +378,23 @@ def run_build(
         while proc.poll() is None:
             time.sleep(poll_s)
             if not dry_run:
+                # Every job still to run started without its artifact (the check removed the
+                # ones to remake), so these counts only ever grow.
+                waiting = [j for j in waiting if not store.exists(j.step, j.key)]
                 steps = progress(plan, store)
-                counts = repr([(p.step, p.done) for p in steps])
-                if counts != last:
-                    print(
-                        format_progress(steps, time.monotonic() - start, start_done),
-                        file=stream,
-                        flush=True,
-                    )
-                    last = counts
+                line = format_progress(steps, time.monotonic() - start, start_done)
+                line += _job_progress(plan, waiting)
+                if line.split("] ", 1)[-1] != last:
+                    print(line, file=stream, flush=True)
+                    last = line.split("] ", 1)[-1]
     text = log_path.read_text(errors="replace")
     if dry_run:
         print(text.split("\n", 1)[1] if "\n" in text else text, file=stream)
     elif proc.returncode == 0:
-        print(
-            format_progress(progress(plan, store), time.monotonic() - start, start_done),
-            file=stream,
-        )
+        print(format_progress(progress(plan, store), time.monotonic() - start, start_done),
+              file=stream)
     else:
         for message in failed_job_messages(text, plan):
             print(message, file=stream)
         print(f"build failed; Snakemake's log: {log_path}", file=stream)
-    return proc.returncode
+    return proc.returncode, text

@@ -84,6 +84,32 @@ class ArtifactStore:
     def exists(self, stage: str, key: str) -> bool:
         return (self.path(stage, key) / "zarr.json").is_file()
 
+    def fingerprint(self, stage: str, key: str) -> str:
+        """Names, sizes and modification times of an artifact's files, hashed.
+
+        It changes whenever a file of the artifact is written, truncated, added or removed,
+        and costs one ``stat`` per file, so a build can re-verify (read and digest) only the
+        artifacts whose fingerprint moved since they were last found sound.
+        """
+        root = self.path(stage, key)
+        entries = []
+        for dirpath, dirs, files in os.walk(root):
+            dirs.sort()
+            for name in sorted(files):
+                full = os.path.join(dirpath, name)
+                st = os.stat(full)
+                entries.append(f"{os.path.relpath(full, root)}|{st.st_size}|{st.st_mtime_ns}")
+        return hashlib.sha256("\n".join(entries).encode()).hexdigest()
+
+    def remove(self, stage: str, key: str) -> None:
+        """Delete an artifact (a damaged one, so that the build makes it again)."""
+        path = self.path(stage, key)
+        if path.exists():
+            # Renamed aside first: readers never see a half-deleted group.
+            doomed = path.parent / f"{TEMP_PREFIX}{key}-removed-{uuid.uuid4().hex[:8]}.zarr"
+            os.rename(path, doomed)
+            shutil.rmtree(doomed, ignore_errors=True)
+
     def write(
         self,
         stage: str,

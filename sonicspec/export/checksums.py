@@ -1,0 +1,172 @@
+"""Checksums of the dataset folder, and the markers that say what a folder is.
+
+Every file a build writes into the dataset folder has its SHA-256 recorded when it is written
+(in the export and dataset artifacts) and listed in ``checksums.sha256`` at the folder's top, in
+the format of coreutils' ``sha256sum`` (``sha256sum -c checksums.sha256`` checks a copy without
+sonicspec). ``sonicspec verify DATASET`` checks every listed file.
+
+Marker files tell what a folder is, so that a build never writes into a folder that is not its
+own and ``verify`` knows what it is pointed at: ``.sonicspec-dataset.json`` in a dataset folder
+(with the store's location relative to it) and ``sonicspec-store.json`` in a store.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sonicspec.errors import SpecError, StoreError
+from sonicspec.export.files import write_json, write_text
+
+CHECKSUMS_NAME = "checksums.sha256"
+DATASET_MARKER = ".sonicspec-dataset.json"
+STORE_MARKER = "sonicspec-store.json"
+STORE_STEP_FOLDERS = ("plans", "corpus", "mesh")  # what a store made before markers has
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def file_record(out: Path, path: Path) -> dict[str, Any]:
+    """``{"path", "sha256", "bytes"}`` of a file just written under the dataset folder."""
+    return {"path": path.relative_to(out).as_posix(), "sha256": file_sha256(path),
+            "bytes": path.stat().st_size}
+
+
+def checksums_text(records: list[dict[str, Any]]) -> str:
+    lines = [f"{r['sha256']}  {r['path']}" for r in sorted(records, key=lambda r: r["path"])]
+    return "".join(line + "\n" for line in lines)
+
+
+def write_checksums(out: Path, records: list[dict[str, Any]]) -> Path:
+    return write_text(out / CHECKSUMS_NAME, checksums_text(records))
+
+
+def read_checksums(out: Path) -> dict[str, str]:
+    """``path -> sha256`` from the folder's checksum file."""
+    path = out / CHECKSUMS_NAME
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise StoreError(f"{path}: missing; the dataset folder's checksums were never "
+                         "written (an unfinished build?)") from None
+    out_map = {}
+    for n, line in enumerate(text.splitlines(), 1):
+        digest, sep, rel = line.partition("  ")
+        if not sep or len(digest) != 64:
+            raise StoreError(f"{path}:{n}: expected '<sha256>  <path>', got {line[:80]!r}")
+        out_map[rel] = digest
+    return out_map
+
+
+@dataclass(frozen=True)
+class FileProblem:
+    path: str
+    problem: str
+
+    def format(self) -> str:
+        return f"{self.path}: {self.problem}"
+
+
+def verify_dataset(out: Path) -> tuple[int, list[FileProblem]]:
+    """Check every file listed in ``checksums.sha256``; (files checked, problems).
+
+    Files in the folder that the list does not name are reported too (left by hand, or by
+    another tool): they are not part of what the build made.
+    """
+    try:
+        listed = read_checksums(out)
+    except StoreError as exc:
+        return 0, [FileProblem(CHECKSUMS_NAME, str(exc).split(": ", 1)[-1])]
+    problems = []
+    for rel, digest in sorted(listed.items()):
+        full = out / rel
+        if not full.is_file():
+            problems.append(FileProblem(rel, "missing"))
+        elif file_sha256(full) != digest:
+            problems.append(FileProblem(rel, "contents differ from the checksum recorded "
+                                             "when it was written"))
+    known = set(listed) | {CHECKSUMS_NAME, DATASET_MARKER}
+    for dirpath, dirs, files in os.walk(out):
+        dirs.sort()
+        for name in sorted(files):
+            rel = Path(dirpath, name).relative_to(out).as_posix()
+            if rel not in known:
+                what = ("unfinished temporary file (a writer died); safe to delete"
+                        if ".tmp-" in name else "not written by the build")
+                problems.append(FileProblem(rel, what))
+    return len(listed), problems
+
+
+class UnsafeOutputError(SpecError):
+    """An output folder that a build must not write into (exit code 2, like a bad spec)."""
+
+
+# --- markers ----------------------------------------------------------------------------------
+
+
+def folder_kind(path: Path) -> str | None:
+    """``"dataset"``, ``"store"`` or None: what a folder is, by its marker.
+
+    Folders made before markers existed are recognised by their contents (a dataset by its
+    ``dataset.json`` from sonicspec, a store by its ``plans`` and step folders).
+    """
+    if (path / DATASET_MARKER).is_file():
+        return "dataset"
+    if (path / STORE_MARKER).is_file():
+        return "store"
+    try:
+        legacy = json.loads((path / "dataset.json").read_text())
+        if isinstance(legacy, dict) and "sonicspec_version" in legacy:
+            return "dataset"
+    except (OSError, ValueError):
+        pass
+    if (path / "plans").is_dir() and any((path / s).is_dir() for s in STORE_STEP_FOLDERS[1:]):
+        return "store"
+    return None
+
+
+def claim_folder(path: Path, kind: str, where: str, info: dict[str, Any] | None = None, *,
+                 write: bool = True) -> None:
+    """Make ``path`` a ``kind`` folder, refusing a non-empty folder that is something else.
+
+    ``where`` names the setting in messages (``outputs.dir``); ``write=False`` only checks.
+    """
+    marker = path / (DATASET_MARKER if kind == "dataset" else STORE_MARKER)
+    if path.exists() and not path.is_dir():
+        raise UnsafeOutputError(f"{where}: {path} is a file, not a folder")
+    found = folder_kind(path) if path.is_dir() else None
+    if found is None and path.is_dir() and any(path.iterdir()):
+        raise UnsafeOutputError(
+            f"{where}: {path} is not empty and is not a sonicspec {kind} (no {marker.name}); "
+            "sonicspec writes only into empty folders or its own: choose another folder")
+    if found is not None and found != kind:
+        raise UnsafeOutputError(f"{where}: {path} is a sonicspec {found}, not a {kind}; "
+                                "the dataset folder and the store must be different folders")
+    if not write:
+        return
+    content = {"format": f"sonicspec-{kind}", "version": 1, **(info or {})}
+    try:
+        current = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        current = None
+    if current != content:
+        write_json(marker, content)
+
+
+def read_marker(path: Path) -> dict[str, Any]:
+    """The dataset marker's content (empty for a folder made before markers)."""
+    try:
+        data = json.loads((path / DATASET_MARKER).read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}

@@ -1,0 +1,198 @@
+"""Before a build runs: find what is damaged or missing, and clear the way to remake it.
+
+A build trusts nothing it has not checked. For every job of the plan whose artifact is in the
+store it checks the artifact (digest of its arrays, re-read only when its files moved since the
+last check, see :mod:`sonicspec.stages.checked`), and for the ``export`` and ``dataset`` jobs
+every file they wrote into the dataset folder (SHA-256 recorded when written; re-hashed only when
+its size or time moved). A damaged artifact, a missing or changed dataset file, or a deleted
+artifact whose consumers are still there, sends that job and every job downstream of it back to
+the queue: their artifacts are removed, so Snakemake (which reruns exactly the jobs whose
+output is missing) makes them again, with the same bytes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sonicspec.errors import StoreError
+from sonicspec.export.checksums import (
+    CHECKSUMS_NAME,
+    DATASET_MARKER,
+    file_sha256,
+    read_checksums,
+    read_marker,
+    verify_dataset,
+)
+from sonicspec.plan.model import Job, Plan
+from sonicspec.stages.checked import CheckCache
+from sonicspec.store import ArtifactStore
+
+FILE_STEPS = ("export", "dataset")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """Something a build found damaged or missing (and will remake)."""
+
+    job: Job
+    problem: str
+
+    def format(self) -> str:
+        return f"{self.job.label} ({self.job.key[:12]}): {self.problem}"
+
+
+@dataclass
+class CheckReport:
+    findings: list[Finding] = field(default_factory=list)
+    removed: list[Job] = field(default_factory=list)
+    """Artifacts removed so the build remakes them (the damaged ones and what follows)."""
+    artifacts_checked: int = 0
+    artifacts_verified: int = 0
+    files_checked: int = 0
+    files_hashed: int = 0
+
+
+def written_files(job: Job, data: Any) -> Iterator[dict[str, Any]]:
+    """The dataset-folder files an ``export`` or ``dataset`` artifact records."""
+    if job.step == "export":
+        for group in data.get("groups", []):
+            yield from group.get("files", [])
+    elif job.step == "dataset":
+        yield from data.get("files", [])
+
+
+def _file_problem(out: Path, record: dict[str, Any], cache: CheckCache,
+                  report: CheckReport) -> str | None:
+    if "sha256" not in record:
+        return None
+    path = out / record["path"]
+    report.files_checked += 1
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return f"dataset file {record['path']} is missing"
+    if cache.file_ok(path, st, record["sha256"]):
+        return None
+    report.files_hashed += 1
+    if st.st_size != record.get("bytes", st.st_size) or file_sha256(path) != record["sha256"]:
+        cache.forget_file(path)
+        return f"dataset file {record['path']} differs from what the build wrote"
+    cache.mark_file(path, st, record["sha256"])
+    return None
+
+
+def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repair: bool = True,
+                   tick: Callable[[str], None] | None = None) -> CheckReport:
+    """Check what the plan already has; with ``repair``, remove what must be made again."""
+    report = CheckReport()
+    present = {j.key for j in plan.jobs if store.exists(j.step, j.key)}
+    bad: dict[str, str] = {}
+    out = Path(plan.output_dir)
+    for n, job in enumerate(plan.jobs):
+        if tick is not None and n % 200 == 0:
+            tick(f"checking the store and the dataset folder: {n}/{len(plan.jobs)} jobs")
+        if job.key not in present:
+            continue
+        report.artifacts_checked += 1
+        fingerprint = store.fingerprint(job.step, job.key)
+        if not cache.artifact_ok(job.key, fingerprint):
+            report.artifacts_verified += 1
+            problem = store.verify_one(job.step, job.key)
+            if problem is not None:
+                bad[job.key] = f"store artifact damaged: {problem.problem}"
+                continue
+            cache.mark_artifact(job.key, fingerprint)
+        if job.step in FILE_STEPS:
+            for record in written_files(job, store.read_data(job.step, job.key)):
+                problem = _file_problem(out, record, cache, report)
+                if problem is not None:
+                    bad[job.key] = problem
+                    break
+    # A missing artifact whose consumers exist (deleted by hand) and every damaged one send
+    # themselves and everything downstream back to the queue.
+    consumers: dict[str, list[str]] = {}
+    for job in plan.jobs:
+        for k in job.inputs:
+            consumers.setdefault(k, []).append(job.key)
+    jobs = plan.by_key()
+    for job in plan.jobs:
+        if job.key not in present and any(c in present for c in consumers.get(job.key, ())):
+            bad.setdefault(job.key, "store artifact missing (deleted?) while the jobs that "
+                                    "use it are there")
+    rerun: set[str] = set()
+    stack = list(bad)
+    while stack:
+        key = stack.pop()
+        if key not in rerun:
+            rerun.add(key)
+            stack.extend(consumers.get(key, ()))
+    order = {k: i for i, k in enumerate(jobs)}
+    report.findings = [Finding(jobs[k], bad[k]) for k in sorted(bad, key=order.__getitem__)]
+    report.removed = [j for j in plan.jobs if j.key in rerun and j.key in present]
+    if repair:
+        for job in report.removed:
+            store.remove(job.step, job.key)
+    return report
+
+
+def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
+                   keys: set[str]) -> None:
+    """After a build: remember the artifacts and files its jobs (``keys``) just wrote as sound,
+    so the next build does not re-read them."""
+    out = Path(plan.output_dir)
+    for job in plan.jobs:
+        if job.key not in keys or not store.exists(job.step, job.key):
+            continue
+        cache.mark_artifact(job.key, store.fingerprint(job.step, job.key))
+        if job.step in FILE_STEPS:
+            for record in written_files(job, store.read_data(job.step, job.key)):
+                path = out / record["path"]
+                if "sha256" in record and path.is_file():
+                    cache.mark_file(path, path.stat(), record["sha256"])
+
+
+def missing_outputs(plan: Plan, store: ArtifactStore) -> list[str]:
+    """Dataset files the plan's export and dataset jobs recorded that are not there."""
+    out = Path(plan.output_dir)
+    missing = []
+    for job in plan.jobs:
+        if job.step in FILE_STEPS and store.exists(job.step, job.key):
+            missing += [r["path"] for r in written_files(job, store.read_data(job.step, job.key))
+                        if not (out / r["path"]).is_file()]
+    return missing
+
+
+def verify_dataset_folder(out: Path) -> tuple[int, list[str]]:
+    """Every file of a dataset folder against ``checksums.sha256``, and that list against the
+    records in the store that built it (the dataset artifact the marker names and its export
+    inputs); (files checked, problems)."""
+    count, problems = verify_dataset(out)
+    lines = [p.format() for p in problems]
+    marker = read_marker(out)
+    if "store" not in marker or "dataset_key" not in marker:
+        return count, lines  # made before markers named their store: the checksums only
+    store = ArtifactStore(out / marker["store"])
+    key = marker["dataset_key"]
+    if not store.exists("dataset", key):
+        lines.append(f"{DATASET_MARKER}: names dataset {key[:12]} in store {store.root}, which "
+                     "does not have it (an unfinished build, or the store was moved)")
+        return count, lines
+    try:
+        listed = read_checksums(out)
+    except StoreError:
+        return count, lines
+    dataset_job = Job("dataset", {}, ())  # only its step is read by written_files
+    recorded = list(written_files(dataset_job, store.read_data("dataset", key)))
+    export_job = Job("export", {}, ())
+    for k in store.read("dataset", key).provenance["input_keys"]:
+        recorded += written_files(export_job, store.read_data("export", k))
+    for r in recorded:
+        if r["path"] == CHECKSUMS_NAME:
+            continue
+        if listed.get(r["path"]) != r["sha256"]:
+            lines.append(f"{r['path']}: {CHECKSUMS_NAME} disagrees with the store's record of "
+                         "what the build wrote")
+    return count, lines
