@@ -1,0 +1,56 @@
+"""The cut-down demo build the pipeline tests share: its spec, its plan and its digests."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from sonicspec.plan.compile import compile_spec
+from sonicspec.plan.model import Plan
+from sonicspec.spec import load_spec
+from sonicspec.stages import STAGES
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write_spec(tmp: Path) -> Path:
+    """The demo spec, smaller and with a cheaper tracer (the machinery, not the physics, is
+    under test)."""
+    text = (ROOT / "specs" / "demo.yaml").read_text()
+    for old, new in (("rays: 4000", "rays: 600"), ("max_rir_length_s: 1.0",
+                                                   "max_rir_length_s: 0.4"),
+                     ("train: {groups: 4,", "train: {groups: 2,"),
+                     ("speakers_per_split: 3, utterances_per_speaker: 4",
+                      "speakers_per_split: 2, utterances_per_speaker: 2")):
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp / "demo.yaml"
+    path.write_text(text)
+    return path
+
+
+def plan_for(spec: Path) -> Plan:
+    plan = compile_spec(load_spec(spec))
+    assert {j.step for j in plan.jobs} <= set(STAGES)
+    return plan
+
+
+def store_digest(store: Path) -> dict[str, str]:
+    """SHA-256 of every artifact file (logs, benchmarks, plans and Snakemake state excluded)."""
+    out = {}
+    for p in sorted(store.rglob("*")):
+        rel = p.relative_to(store)
+        if p.is_file() and rel.parts[0] not in ("logs", "benchmarks", "plans", ".snakemake",
+                                                "cache"):
+            out[str(rel)] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def build_digest(plan: Plan) -> dict[str, str]:
+    """Digests of the store's artifacts and of every file of the dataset folder."""
+    out = {f"store/{k}": v for k, v in store_digest(Path(plan.store_dir)).items()}
+    folder = Path(plan.output_dir)
+    for p in sorted(folder.rglob("*")):
+        if p.is_file():
+            out[f"out/{p.relative_to(folder)}"] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
