@@ -45,7 +45,8 @@ from typing import Any
 import numpy as np
 import soundfile as sf
 
-from sonicspec.errors import AudioError, CorpusError
+from sonicspec.errors import AudioError, CorpusError, SonicspecError
+from sonicspec.shares import split_shares
 
 INDEX_FORMAT = 1
 """Version of the JSON an index is stored as; a cache in another format is rebuilt."""
@@ -226,16 +227,11 @@ def _probe(path: Path) -> tuple[int, int] | str:
 
 
 def _check_ratios(ratios: Mapping[str, float], where: str) -> dict[str, float]:
-    """The positive shares, by split name; they must sum to 1."""
-    if not ratios:
-        raise CorpusError(f"{where}: expected at least one split with a share, got none")
-    for name, share in ratios.items():
-        if not math.isfinite(share) or share < 0:
-            raise CorpusError(f"{where}: expected shares >= 0, got {name}: {share}")
-    total = math.fsum(ratios.values())
-    if abs(total - 1.0) > 1e-6:
-        raise CorpusError(f"{where}: expected shares summing to 1, got {total:g}")
-    return {name: float(share) for name, share in sorted(ratios.items()) if share > 0}
+    """The positive shares, by split name; they must sum to 1 (:func:`split_shares`)."""
+    try:
+        return split_shares(ratios, list(ratios))
+    except SonicspecError as err:
+        raise CorpusError(f"{where}: {err}") from None
 
 
 def _ratio_counts(n: int, ratios: Mapping[str, float]) -> dict[str, int]:

@@ -28,7 +28,9 @@ from sonicspec.audio.corpora import (
     index_librispeech,
     index_split_folders,
 )
+from sonicspec.errors import CorpusError, SonicspecError
 from sonicspec.plan.model import Job
+from sonicspec.shares import split_shares
 from sonicspec.stages.context import JobContext
 
 log = logging.getLogger("sonicspec.stages.corpus")
@@ -49,6 +51,15 @@ def _generated(params: dict[str, Any], cache: Path, key: str) -> CorpusIndex:
     return index_split_folders(root, splits)
 
 
+def corpus_shares(ratios: dict[str, float] | None, splits: list[str], role: str
+                  ) -> dict[str, float]:
+    """The shares a ratio-split corpus gives the spec's splits (:func:`split_shares`)."""
+    try:
+        return split_shares(ratios, splits)
+    except SonicspecError as err:
+        raise CorpusError(f"corpora.{role}.split_ratios: {err}") from None
+
+
 def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
                 rng: np.random.Generator) -> CorpusIndex:
     """The index a corpus job describes (its folder from ``paths``, ratio splits from ``rng``)."""
@@ -58,10 +69,10 @@ def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
         return _generated(params, Path(paths["cache"]), key)
     root = Path(paths["root"])
     splits = params["splits"]
-    ratios = {s: r for s, r in corpus.get("split_ratios", {}).items() if s in splits}
     if kind == "librispeech":
         return index_librispeech(root, {s: v for s, v in corpus["subsets"].items()
                                         if s in splits})
+    ratios = corpus_shares(corpus.get("split_ratios"), splits, role)
     if kind == "fsd50k":
         return index_fsd50k(root, ratios, corpus["exclude_labels"], rng)
     if kind == "fma":
