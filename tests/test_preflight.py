@@ -3,14 +3,22 @@ and corpora that cannot be read (issue 16, part 3)."""
 
 from __future__ import annotations
 
-import pytest
-from spec_cases import BASE
+from pathlib import Path
 
+import numpy as np
+import pytest
+import soundfile as sf
+from spec_cases import BASE
+from test_cli_spec import run_cli
+
+from sonicspec.cli import main
 from sonicspec.errors import CorpusError, SonicspecError
 from sonicspec.shares import split_shares
-from sonicspec.spec import validate_text
+from sonicspec.spec import validate_file, validate_text
 from sonicspec.spec.load import format_path
+from sonicspec.stages import preflight as preflight_module
 from sonicspec.stages.corpus import corpus_shares
+from sonicspec.stages.preflight import preflight
 
 # --- split shares: one rule for validate and the corpus stage ----------------------------
 
@@ -94,3 +102,198 @@ def test_unused_share_warns_with_did_you_mean() -> None:
             "expected a share for every split (train, test), got none for 'test'") in found
     assert any(f[0] == "corpora.noise.split_ratios.tset" and f[2] == "warning"
                and f[3].endswith("did you mean 'test'?") for f in found), found
+
+
+# --- preflight: files, corpora, packages and programs ------------------------------------
+
+SPEC = """\
+sonicspec: 1
+name: pre
+seed: 1
+sample_rate_hz: 16000
+scenes:
+  - {kind: shoebox, id: room, size_m: [6, 5, 3]}
+  - {kind: shoebox, id: hall, size_m: [8, 6, 3]}
+microphone: {kind: mono}
+corpora:
+  speech: {kind: folder, root: data/speech}
+  noise: {kind: folder, root: data/noise}
+mixture: {duration_s: 20, speakers: 2}
+splits:
+  train: {groups: 2, scenes: [room]}
+  test: {groups: 1, scenes: [hall]}
+"""
+
+
+def _wav(path: Path, seconds: float = 1.0) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(len(str(path)))
+    sf.write(str(path), 0.1 * rng.standard_normal(int(16000 * seconds)), 16000)
+
+
+def _corpora(tmp_path: Path) -> None:
+    for s in range(4):
+        for u in range(2):
+            _wav(tmp_path / "data" / "speech" / f"spk{s}" / f"u{u}.wav")
+    for n in range(4):
+        _wav(tmp_path / "data" / "noise" / f"n{n}.wav")
+
+
+def _spec(tmp_path: Path, text: str = SPEC, corpora: bool = True) -> Path:
+    if corpora:
+        _corpora(tmp_path)
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    return path
+
+
+def _preflight(path: Path) -> list[str]:
+    loaded, problems = validate_file(path)
+    assert loaded is not None, [p.format(str(path)) for p in problems]
+    return [p.format("s.yaml") for p in preflight(loaded)]
+
+
+def test_tiny_spec_with_default_shares_passes_check_files(tmp_path: Path) -> None:
+    """A folder noise corpus, train and test splits, no split_ratios: the issue's user spec."""
+    path = _spec(tmp_path)
+    assert _preflight(path) == []
+    assert main(["validate", "--check-files", "-q", str(path)]) == 0
+
+
+@pytest.mark.parametrize("ext,data", [
+    (".obj", b"this is not a mesh\n\x00\x01"),
+    (".ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n"),
+    (".glb", b"glTF\x02\x00\x00\x00garbage"),
+])
+def test_corrupt_mesh_is_a_located_error(tmp_path: Path, ext: str, data: bytes) -> None:
+    (tmp_path / f"scan{ext}").write_bytes(data)
+    text = SPEC.replace("  - {kind: shoebox, id: hall, size_m: [8, 6, 3]}",
+                        f"  - {{kind: mesh, id: hall, path: scan{ext}}}")
+    found = _preflight(_spec(tmp_path, text))
+    assert len(found) == 1, found
+    assert found[0].startswith(f"s.yaml:7:34: scenes[1].path: {tmp_path}/scan{ext}: expected a ")
+    assert "mesh" in found[0]
+
+
+def test_corrupt_mesh_of_a_glob_and_an_obstacle_are_named(tmp_path: Path) -> None:
+    from sonicspec.testing.meshes import write_plain_meshes
+
+    write_plain_meshes(tmp_path / "scans", "good")
+    (tmp_path / "scans" / "zbad.obj").write_bytes(b"not a mesh")
+    (tmp_path / "chair.ply").write_bytes(b"ply\ngarbage")
+    text = SPEC.replace(
+        "  - {kind: shoebox, id: hall, size_m: [8, 6, 3]}",
+        "  - {kind: mesh, id: hall, path: 'scans/*.obj'}\n"
+        "  - {kind: shoebox, id: den, size_m: [5, 4, 3], obstacles: [{kind: mesh, path: "
+        "chair.ply, position_m: [2, 2, 0]}]}")
+    found = _preflight(_spec(tmp_path, text))
+    assert len(found) == 2, found
+    assert found[0].startswith(f"s.yaml:7:34: scenes[1].path: {tmp_path}/scans/zbad.obj: "
+                               "expected a mesh with triangles")
+    assert found[1].startswith("s.yaml:8:80: scenes[2].obstacles[0].path: "
+                               f"{tmp_path}/chair.ply: expected a readable ply mesh")
+
+
+def test_good_meshes_pass(tmp_path: Path) -> None:
+    from sonicspec.testing.meshes import write_plain_meshes
+
+    write_plain_meshes(tmp_path / "scans", "good")
+    text = SPEC.replace("  - {kind: shoebox, id: hall, size_m: [8, 6, 3]}",
+                        "  - {kind: mesh, id: hall, path: 'scans/good.*'}")
+    assert _preflight(_spec(tmp_path, text)) == []
+
+
+def test_folder_of_corrupt_audio_is_an_error_naming_it(tmp_path: Path) -> None:
+    path = _spec(tmp_path)
+    for f in (tmp_path / "data" / "noise").iterdir():
+        f.write_bytes(b"RIFF....not audio")
+    found = _preflight(path)
+    noise = tmp_path / "data" / "noise"
+    assert found == [
+        f"s.yaml:11:31: corpora.noise.root: expected readable audio files in '{noise}', got "
+        f"none readable among the first 4, e.g. {noise}/n0.wav: unreadable audio "
+        + found[0].split("unreadable audio ", 1)[1]]
+    assert found[0].endswith("; the corpus stage would skip them all")
+
+
+def test_folder_of_non_audio_files_is_an_error_naming_it(tmp_path: Path) -> None:
+    path = _spec(tmp_path)
+    for f in (tmp_path / "data" / "noise").iterdir():
+        f.rename(f.with_suffix(".txt"))
+    assert _preflight(path) == [
+        f"s.yaml:11:31: corpora.noise.root: expected audio files ending in .flac, .wav in "
+        f"'{tmp_path / 'data' / 'noise'}', got none"]
+
+
+def test_one_corrupt_file_among_good_ones_is_left_to_the_build(tmp_path: Path) -> None:
+    path = _spec(tmp_path)
+    (tmp_path / "data" / "noise" / "n0.wav").write_bytes(b"broken")
+    assert _preflight(path) == []
+
+
+def test_missing_espeak_for_generated_speech(tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(preflight_module, "program_available", lambda name: False)
+    text = SPEC.replace("{kind: folder, root: data/speech}", "{kind: generated}")
+    assert _preflight(_spec(tmp_path, text)) == [
+        "s.yaml:10:18: corpora.speech.kind: expected espeak-ng on the PATH to generate "
+        "speech, got none; apt-get install espeak-ng (or use a librispeech or folder corpus)"]
+
+
+def test_missing_sofar_for_a_sofa_hrtf(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(preflight_module, "module_available", lambda name: name != "sofar")
+    (tmp_path / "h.sofa").write_bytes(b"")
+    text = SPEC.replace("{kind: mono}", "{kind: binaural, hrtf: {kind: sofa, path: h.sofa}}")
+    assert _preflight(_spec(tmp_path, text)) == [
+        "s.yaml:8:43: microphone.hrtf.kind: expected the sofar package to read a SOFA HRTF, "
+        "got none installed; pip install 'sonicspec[sofa]'"]
+
+
+def test_fma_without_mp3_support(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from sonicspec.testing.corpora import write_fsd50k
+
+    monkeypatch.setattr(preflight_module, "mp3_readable", lambda: False)
+    (tmp_path / "data" / "fma" / "fma_small").mkdir(parents=True)
+    (tmp_path / "data" / "fma" / "fma_metadata").mkdir()
+    (tmp_path / "data" / "fma" / "fma_metadata" / "tracks.csv").write_text("")
+    write_fsd50k(tmp_path / "data" / "fsd", 2, 1, clip_duration_s=1.0)
+    text = SPEC.replace("  noise: {kind: folder, root: data/noise}",
+                        "  noise: {kind: fsd50k, root: data/fsd}\n"
+                        "  music: {kind: fma, root: data/fma}")
+    found = _preflight(_spec(tmp_path, text))
+    assert len(found) == 1, found
+    assert found[0].startswith("s.yaml:12:17: corpora.music.kind: expected a libsndfile that "
+                               "reads MP3 (FMA's tracks are MP3), got libsndfile ")
+    assert found[0].endswith("; pip install -U soundfile (its wheels bring libsndfile 1.1 or "
+                             "later)")
+
+
+def test_check_files_and_plan_exit_2_with_located_errors(tmp_path: Path) -> None:
+    path = _spec(tmp_path)
+    for f in (tmp_path / "data" / "noise").iterdir():
+        f.write_bytes(b"junk")
+    assert run_cli("validate", str(path)).returncode == 0
+    done = run_cli("validate", "--check-files", str(path))
+    assert done.returncode == 2
+    assert f"{path}:11:31: corpora.noise.root: expected readable audio files in " in done.stderr
+    assert f"{path}: invalid (1 error)" in done.stderr
+    done = run_cli("plan", str(path))
+    assert done.returncode == 2
+    assert f"{path}:11:31: corpora.noise.root: expected readable audio" in done.stderr
+    assert not (tmp_path / ".sonicspec-store").exists()
+
+
+@pytest.mark.parametrize("command,extra", [
+    (["scene", "inspect"], []),
+    (["rir"], ["--source", "1", "1", "1", "--mic", "2", "2", "1"]),
+])
+def test_plot_without_matplotlib_exits_2_before_any_work(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
+        command: list[str], extra: list[str]) -> None:
+    monkeypatch.setattr(preflight_module, "module_available", lambda name: name != "matplotlib")
+    # No spec file at all: the check comes before anything is read.
+    code = main([*command, str(tmp_path / "none.yaml"), *extra,
+                 "--plot", str(tmp_path / "p.png")])
+    assert code == 2
+    assert capsys.readouterr().err == ("sonicspec: error: --plot needs matplotlib: "
+                                       "pip install 'sonicspec[plot]'\n")

@@ -215,8 +215,12 @@ def _subdirs(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.is_dir() and not _hidden(p))
 
 
-def _probe(path: Path) -> tuple[int, int] | str:
-    """(frames, sample rate) of an audio file, or the problem message if it is unusable."""
+def probe_audio(path: Path) -> tuple[int, int] | str:
+    """(frames, sample rate) of an audio file, or the problem message if it is unusable.
+
+    The one test of whether a corpus file is usable: the readers and ``validate
+    --check-files`` both ask it.
+    """
     try:
         info = sf.info(str(path))
     except (RuntimeError, OSError, ValueError) as err:  # LibsndfileError is a RuntimeError
@@ -374,7 +378,7 @@ def _index_chapter(chapter_dir: Path, speaker: str, split: str, items: list[Corp
             problems.append(f"{flac}: utterance {uid} missing from its transcript {trans}; "
                             "skipped")
             continue
-        probe = _probe(flac)
+        probe = probe_audio(flac)
         if isinstance(probe, str):
             problems.append(probe)
             continue
@@ -442,7 +446,7 @@ def index_fsd50k(root: Path, split_ratios: Mapping[str, float], exclude_labels: 
         if not path.is_file():
             problems.append(f"{path}: listed in the ground truth but missing; skipped")
             continue
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
             problems.append(probe)
             continue
@@ -567,7 +571,7 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
     items: list[CorpusItem] = []
     for stem in sorted(listed):
         path, labels = listed[stem]
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
             problems.append(probe)
             continue
@@ -581,7 +585,8 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
 # Plain folders
 
 
-def _extensions(extensions: Sequence[str]) -> set[str]:
+def normalise_extensions(extensions: Sequence[str]) -> set[str]:
+    """File endings as the readers match them: lower case with the dot (``WAV`` -> ``.wav``)."""
     exts = {e.lower() if e.startswith(".") else f".{e.lower()}" for e in extensions if e}
     if not exts:
         raise CorpusError("folder corpus extensions: expected at least one file ending, "
@@ -589,7 +594,9 @@ def _extensions(extensions: Sequence[str]) -> set[str]:
     return exts
 
 
-def _audio_files(root: Path, exts: set[str]) -> Iterator[Path]:
+def audio_files(root: Path, exts: set[str]) -> Iterator[Path]:
+    """Files below ``root`` with one of the endings ``exts`` (lower case, with the dot), in
+    sorted walking order; dot-files and dot-folders are left out."""
     for dirpath, dirnames, filenames in os.walk(root):
         dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
         for name in sorted(filenames):
@@ -608,11 +615,11 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
     """
     root = Path(root)
     _require_dir(root, "folder corpus root")
-    exts = _extensions(extensions)
+    exts = normalise_extensions(extensions)
     ratios = _check_ratios(split_ratios, "folder corpus split_ratios")
     problems: list[str] = []
     listed: dict[str, tuple[Path, str]] = {}
-    for path in _audio_files(root, exts):
+    for path in audio_files(root, exts):
         rel = path.relative_to(root)
         uid = rel.with_suffix("").as_posix()
         speaker = rel.parts[0] if len(rel.parts) > 1 else ""
@@ -637,7 +644,7 @@ def _probe_listed(listed: Mapping[str, tuple[Path, str]], split_of: Mapping[str,
     items: list[CorpusItem] = []
     for uid in sorted(listed):
         path, speaker = listed[uid]
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
             problems.append(probe)
             continue
@@ -656,13 +663,13 @@ def index_split_folders(root: Path, splits: Sequence[str],
     """
     root = Path(root)
     _require_dir(root, "split folder corpus root")
-    exts = _extensions(extensions)
+    exts = normalise_extensions(extensions)
     problems: list[str] = []
     listed: dict[str, tuple[Path, str]] = {}
     split_of: dict[str, str] = {}
     for split in splits:
         _require_dir(root / split, f"split folder corpus, split '{split}'")
-        for path in _audio_files(root / split, exts):
+        for path in audio_files(root / split, exts):
             uid = path.relative_to(root).with_suffix("").as_posix()
             if uid in listed:
                 problems.append(f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")

@@ -617,8 +617,10 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
             continue
         root = corpus.root
         if isinstance(corpus, LibriSpeechCorpusSpec):
+            # Only the subsets of the spec's splits are read (README: no val split, no
+            # dev-clean needed).
             for split, subsets in corpus.subsets.items():
-                for sub in subsets:
+                for sub in subsets if split in spec.splits else ():
                     exists(
                         (*path, "subsets", split),
                         f"{root}/{sub}",
