@@ -340,3 +340,65 @@ def test_readme_spec_validates_plans_and_indexes_its_corpora(tmp_path: Path) -> 
         if job.params["role"] == "noise":  # 0.875 : 0.125 of the clips without speech
             n = len(index.items)
             assert len(index.split("test")) == round(0.125 * n) >= 1
+
+
+# --- skipped corpus files are counted (issue 7) -------------------------------------------
+
+
+def test_index_records_skipped_files_with_reasons(tmp_path: Path) -> None:
+    from sonicspec.audio.corpora import CorpusIndex, index_folder
+
+    _corpora(tmp_path)
+    root = tmp_path / "data" / "noise"
+    (root / "n0.wav").write_bytes(b"broken")
+    (root / "loose.wav").write_bytes(b"")
+    index = index_folder(root, [".wav"], {"train": 1.0},
+                         np.random.default_rng(0), by_speaker=False)
+    assert [p for p, _ in index.skipped] == [str(root / "loose.wav"), str(root / "n0.wav")]
+    assert all(r.startswith("unreadable audio (") for _, r in index.skipped)
+    assert len(index.items) == 3
+    # Kept through the index's JSON (the corpus cache).
+    assert CorpusIndex.from_dict(index.to_dict()).skipped == index.skipped
+
+
+def test_librispeech_chapter_without_transcript_is_recorded_file_by_file(tmp_path: Path) -> None:
+    from sonicspec.audio.corpora import index_librispeech
+
+    chapter = tmp_path / "ls" / "dev" / "11" / "22"
+    _wav(chapter / "11-22-0000.flac")
+    _wav(chapter / "11-22-0001.flac")
+    ok = tmp_path / "ls" / "dev" / "12" / "23"
+    _wav(ok / "12-23-0000.flac")
+    (ok / "12-23.trans.txt").write_text("12-23-0000 HELLO\n")
+    index = index_librispeech(tmp_path / "ls", {"train": ["dev"]})
+    assert index.skipped == (
+        (str(chapter / "11-22-0000.flac"), "transcript file 11-22.trans.txt missing"),
+        (str(chapter / "11-22-0001.flac"), "transcript file 11-22.trans.txt missing"))
+    assert len(index.problems) == 1  # the log keeps one line per chapter
+
+
+def test_corpus_artifact_lists_skipped_files_and_skipped_files_reads_them(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.stages import run_job
+    from sonicspec.stages.corpus import skipped_files
+    from sonicspec.store import ArtifactStore
+
+    path = _spec(tmp_path)
+    (tmp_path / "data" / "noise" / "n0.wav").write_bytes(b"broken")
+    (tmp_path / "data" / "speech" / "stray.wav").write_bytes(b"")
+    loaded, _ = validate_file(path)
+    plan = compile_spec(loaded, cache=False)
+    store = ArtifactStore(plan.store_dir)
+    assert skipped_files(plan, store) == {}
+    with caplog.at_level("WARNING", logger="sonicspec.stages.corpus"):
+        for job in plan.by_step()["corpus"]:
+            run_job(plan, job.key)
+    skipped = skipped_files(plan, store)
+    assert list(skipped) == ["speech", "noise"]
+    assert skipped["speech"] == [{"path": "stray.wav", "reason": "not inside a speaker folder"}]
+    (noise,) = skipped["noise"]
+    assert noise["path"] == "n0.wav" and noise["reason"].startswith("unreadable audio (")
+    # The log warning stays.
+    assert any("corpora.noise:" in r.getMessage() and "n0.wav: unreadable audio" in
+               r.getMessage() for r in caplog.records)

@@ -48,7 +48,7 @@ import soundfile as sf
 from sonicspec.errors import AudioError, CorpusError, SonicspecError
 from sonicspec.shares import split_shares
 
-INDEX_FORMAT = 1
+INDEX_FORMAT = 2
 """Version of the JSON an index is stored as; a cache in another format is rebuilt."""
 
 FMA_SIZES = ("small", "medium", "large", "full")
@@ -121,7 +121,11 @@ class CorpusIndex:
     items: tuple[CorpusItem, ...]
     """Sorted by (split, id) on construction."""
     problems: tuple[str, ...] = ()
-    """One message per skipped file, naming the file and the reason."""
+    """One message per problem met (mostly a skipped file), naming the file and the reason."""
+    skipped: tuple[tuple[str, str], ...] = ()
+    """(path, reason) of every file left out: unreadable, unlisted, duplicated, listed but
+    missing. Paths as the reader saw them (the corpus stage stores them relative to the
+    root)."""
 
     def __post_init__(self) -> None:
         items = tuple(sorted(self.items, key=lambda it: (it.split, it.id)))
@@ -133,6 +137,7 @@ class CorpusIndex:
             seen.add(item.id)
         object.__setattr__(self, "items", items)
         object.__setattr__(self, "problems", tuple(self.problems))
+        object.__setattr__(self, "skipped", tuple((str(p), str(r)) for p, r in self.skipped))
 
     @property
     def splits(self) -> list[str]:
@@ -177,7 +182,8 @@ class CorpusIndex:
         """Plain JSON-ready dict, with the index format version."""
         return {"format": INDEX_FORMAT, "kind": self.kind,
                 "items": [item.to_dict() for item in self.items],
-                "problems": list(self.problems)}
+                "problems": list(self.problems),
+                "skipped": [{"path": p, "reason": r} for p, r in self.skipped]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CorpusIndex:
@@ -187,7 +193,8 @@ class CorpusIndex:
                               f"{d.get('format')!r}")
         return cls(kind=str(d["kind"]),
                    items=tuple(CorpusItem.from_dict(item) for item in d["items"]),
-                   problems=tuple(str(p) for p in d.get("problems", ())))
+                   problems=tuple(str(p) for p in d.get("problems", ())),
+                   skipped=tuple((s["path"], s["reason"]) for s in d.get("skipped", ())))
 
 
 # --------------------------------------------------------------------------------------------
@@ -216,7 +223,7 @@ def _subdirs(path: Path) -> list[Path]:
 
 
 def probe_audio(path: Path) -> tuple[int, int] | str:
-    """(frames, sample rate) of an audio file, or the problem message if it is unusable.
+    """(frames, sample rate) of an audio file, or why it is unusable.
 
     The one test of whether a corpus file is usable: the readers and ``validate
     --check-files`` both ask it.
@@ -224,9 +231,9 @@ def probe_audio(path: Path) -> tuple[int, int] | str:
     try:
         info = sf.info(str(path))
     except (RuntimeError, OSError, ValueError) as err:  # LibsndfileError is a RuntimeError
-        return f"{path}: unreadable audio ({err}); skipped"
+        return f"unreadable audio ({err})"
     if info.frames <= 0 or info.samplerate <= 0:
-        return f"{path}: no audio samples; skipped"
+        return "no audio samples"
     return int(info.frames), int(info.samplerate)
 
 
@@ -271,9 +278,25 @@ def _assign_by_ratio(keys: Sequence[str], ratios: Mapping[str, float],
     return out
 
 
-def _finish(kind: str, items: list[CorpusItem], problems: list[str], splits: Sequence[str],
+class _Findings(list):
+    """The problem messages of an indexing run (a list of str), and which files it skipped."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.skipped: list[tuple[str, str]] = []
+
+    def skip(self, path: Path, reason: str, message: str | None = None) -> None:
+        """Record ``path`` as skipped for ``reason`` and report it (by default
+        ``<path>: <reason>; skipped``; ``message=""`` records without a message)."""
+        self.skipped.append((str(path), reason))
+        if message != "":
+            self.append(message or f"{path}: {reason}; skipped")
+
+
+def _finish(kind: str, items: list[CorpusItem], problems: _Findings, splits: Sequence[str],
             where: str) -> CorpusIndex:
-    index = CorpusIndex(kind=kind, items=tuple(items), problems=tuple(problems))
+    index = CorpusIndex(kind=kind, items=tuple(items), problems=tuple(problems),
+                        skipped=tuple(problems.skipped))
     for name in sorted(splits):
         if not index.split(name):
             hint = f"; skipped files: {'; '.join(problems[:3])}" if problems else ""
@@ -329,7 +352,7 @@ def index_librispeech(root: Path, subsets: Mapping[str, Sequence[str]]) -> Corpu
                                   f"in '{other}' and '{split}'; speakers would cross splits")
             _require_dir(root / name, f"LibriSpeech subset '{name}'")
     items: list[CorpusItem] = []
-    problems: list[str] = []
+    problems = _Findings()
     split_of_speaker: dict[str, str] = {}
     for subset, split in sorted(split_of_subset.items()):
         for speaker_dir in _subdirs(root / subset):
@@ -345,7 +368,7 @@ def index_librispeech(root: Path, subsets: Mapping[str, Sequence[str]]) -> Corpu
     return _finish("librispeech", items, problems, list(subsets), "LibriSpeech")
 
 
-def _read_transcript(path: Path, problems: list[str]) -> dict[str, str] | None:
+def _read_transcript(path: Path, problems: _Findings) -> dict[str, str] | None:
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as err:
@@ -360,7 +383,7 @@ def _read_transcript(path: Path, problems: list[str]) -> dict[str, str] | None:
 
 
 def _index_chapter(chapter_dir: Path, speaker: str, split: str, items: list[CorpusItem],
-                   problems: list[str]) -> None:
+                   problems: _Findings) -> None:
     flacs = sorted(p for p in chapter_dir.glob("*.flac") if p.is_file() and not _hidden(p))
     if not flacs:
         return
@@ -368,19 +391,24 @@ def _index_chapter(chapter_dir: Path, speaker: str, split: str, items: list[Corp
     if not trans.is_file():
         problems.append(f"{trans}: transcript file missing; skipped the {len(flacs)} "
                         f"utterances of {chapter_dir}")
+        for flac in flacs:
+            problems.skip(flac, f"transcript file {trans.name} missing", "")
         return
     words = _read_transcript(trans, problems)
     if words is None:
+        for flac in flacs:
+            problems.skip(flac, f"transcript file {trans.name} unreadable", "")
         return
     for flac in flacs:
         uid = flac.stem
         if uid not in words:
-            problems.append(f"{flac}: utterance {uid} missing from its transcript {trans}; "
-                            "skipped")
+            problems.skip(flac, f"utterance missing from its transcript {trans.name}",
+                          f"{flac}: utterance {uid} missing from its transcript {trans}; "
+                          "skipped")
             continue
         probe = probe_audio(flac)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(flac, probe)
             continue
         items.append(CorpusItem(id=uid, path=str(flac.resolve()), split=split,
                                 speaker=speaker, num_samples=probe[0],
@@ -421,7 +449,7 @@ def index_fsd50k(root: Path, split_ratios: Mapping[str, float], exclude_labels: 
     ratios = _check_ratios(split_ratios, "FSD50K split_ratios")
     excluded = set(exclude_labels)
     listed: dict[str, tuple[Path, tuple[str, ...]]] = {}
-    problems: list[str] = []
+    problems = _Findings()
     for part, folder in (("dev", "FSD50K.dev_audio"), ("eval", "FSD50K.eval_audio")):
         gt = root / "FSD50K.ground_truth" / f"{part}.csv"
         rows = _read_csv_dicts(gt, ("fname", "labels"), f"FSD50K {part} ground truth")
@@ -444,11 +472,11 @@ def index_fsd50k(root: Path, split_ratios: Mapping[str, float], exclude_labels: 
     for fname in sorted(listed):
         path, labels = listed[fname]
         if not path.is_file():
-            problems.append(f"{path}: listed in the ground truth but missing; skipped")
+            problems.skip(path, "listed in the ground truth but missing")
             continue
         probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=fname, path=str(path.resolve()), split=split_of[fname],
                                 speaker="", num_samples=probe[0], sample_rate_hz=probe[1],
@@ -478,7 +506,7 @@ class _CsvFieldLimit:
         csv.field_size_limit(self._old)
 
 
-def _read_fma_tracks(path: Path, problems: list[str]
+def _read_fma_tracks(path: Path, problems: _Findings
                      ) -> dict[int, tuple[str, tuple[int, ...]]]:
     """track id -> (genre_top, genres_all) from FMA's three-header-row tracks.csv."""
     _require_file(path, "FMA track metadata")
@@ -543,7 +571,7 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
     ratios = _check_ratios(split_ratios, "FMA split_ratios")
     audio_dir = root / f"fma_{size}"
     _require_dir(audio_dir, f"FMA audio (fma_{size})")
-    problems: list[str] = []
+    problems = _Findings()
     tracks_csv = root / "fma_metadata" / "tracks.csv"
     tracks = _read_fma_tracks(tracks_csv, problems)
     names = _read_fma_genres(root / "fma_metadata" / "genres.csv")
@@ -551,11 +579,12 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
     for mp3 in sorted(p for p in audio_dir.glob("*/*.mp3") if p.is_file() and not _hidden(p)):
         stem = mp3.stem
         if not stem.isdigit():
-            problems.append(f"{mp3}: expected an FMA file name <track id>.mp3; skipped")
+            problems.skip(mp3, "expected an FMA file name <track id>.mp3")
             continue
         meta = tracks.get(int(stem))
         if meta is None:
-            problems.append(f"{mp3}: track {int(stem)} is not in {tracks_csv}; skipped")
+            problems.skip(mp3, f"track {int(stem)} is not in {tracks_csv.name}",
+                          f"{mp3}: track {int(stem)} is not in {tracks_csv}; skipped")
             continue
         genre_top, genres = meta
         if instrumental_only and not (FMA_INSTRUMENTAL_GENRE_ID in genres
@@ -564,7 +593,8 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
         labels = tuple(names.get(g, str(g)) for g in genres) or \
             ((genre_top,) if genre_top else ())
         if stem in listed:
-            problems.append(f"{mp3}: track {stem} found twice; the first kept")
+            problems.skip(mp3, f"track {stem} found twice; the first kept",
+                          f"{mp3}: track {stem} found twice; the first kept")
             continue
         listed[stem] = (mp3, labels)
     split_of = _assign_by_ratio(list(listed), ratios, rng)
@@ -573,7 +603,7 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
         path, labels = listed[stem]
         probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=stem, path=str(path.resolve()), split=split_of[stem],
                                 speaker="", num_samples=probe[0], sample_rate_hz=probe[1],
@@ -617,17 +647,18 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
     _require_dir(root, "folder corpus root")
     exts = normalise_extensions(extensions)
     ratios = _check_ratios(split_ratios, "folder corpus split_ratios")
-    problems: list[str] = []
+    problems = _Findings()
     listed: dict[str, tuple[Path, str]] = {}
     for path in audio_files(root, exts):
         rel = path.relative_to(root)
         uid = rel.with_suffix("").as_posix()
         speaker = rel.parts[0] if len(rel.parts) > 1 else ""
         if by_speaker and not speaker:
-            problems.append(f"{path}: not inside a speaker folder; skipped")
+            problems.skip(path, "not inside a speaker folder")
             continue
         if uid in listed:
-            problems.append(f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
+            problems.skip(path, f"same id {uid!r} as {listed[uid][0].name}",
+                          f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
             continue
         listed[uid] = (path, speaker if by_speaker else "")
     if by_speaker:
@@ -640,13 +671,13 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
 
 
 def _probe_listed(listed: Mapping[str, tuple[Path, str]], split_of: Mapping[str, str],
-                  problems: list[str]) -> list[CorpusItem]:
+                  problems: _Findings) -> list[CorpusItem]:
     items: list[CorpusItem] = []
     for uid in sorted(listed):
         path, speaker = listed[uid]
         probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=uid, path=str(path.resolve()), split=split_of[uid],
                                 speaker=speaker, num_samples=probe[0],
@@ -664,7 +695,7 @@ def index_split_folders(root: Path, splits: Sequence[str],
     root = Path(root)
     _require_dir(root, "split folder corpus root")
     exts = normalise_extensions(extensions)
-    problems: list[str] = []
+    problems = _Findings()
     listed: dict[str, tuple[Path, str]] = {}
     split_of: dict[str, str] = {}
     for split in splits:
@@ -672,7 +703,8 @@ def index_split_folders(root: Path, splits: Sequence[str],
         for path in audio_files(root / split, exts):
             uid = path.relative_to(root).with_suffix("").as_posix()
             if uid in listed:
-                problems.append(f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
+                problems.skip(path, f"same id {uid!r} as {listed[uid][0].name}",
+                          f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
                 continue
             listed[uid] = (path, "")
             split_of[uid] = split

@@ -203,7 +203,7 @@ def _corpora(spec: DatasetSpec, base: Path, missing: set[tuple]) -> list[Problem
                 if not isinstance(probe, str):
                     readable.add(where)
                     break
-                tried.append(probe.removesuffix("; skipped"))
+                tried.append(f"{file}: {probe}")
             else:
                 if not tried:
                     why = (f"expected audio files ending in {', '.join(sorted(endings))} in "
