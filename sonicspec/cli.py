@@ -30,6 +30,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     report = []
     for path in args.specs:
         loaded, problems = validate_file(path, files=args.check_files)
+        if loaded is not None and args.check_files:
+            loaded, problems = _preflight(loaded, problems)
         errors = [p for p in problems if p.severity == "error"]
         warnings = [p for p in problems if p.severity == "warning"]
         if args.json:
@@ -71,6 +73,18 @@ def cmd_validate(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
     return worst
+
+
+def _preflight(loaded, problems: list) -> tuple:
+    """``(loaded, problems)`` with what a build would meet in files, corpora and environment
+    added; ``loaded`` becomes None if any of it is an error."""
+    from sonicspec.spec.load import sort_problems
+    from sonicspec.stages.preflight import preflight
+
+    found = [p for p in preflight(loaded) if p not in problems]
+    if any(p.severity == "error" for p in found):
+        loaded = None
+    return loaded, sort_problems([*problems, *found])
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
@@ -127,6 +141,25 @@ def _compile(loaded, args: argparse.Namespace):
                         store_dir=getattr(args, "store_dir", None))
 
 
+def _preflight_or_exit(loaded, spec: str) -> bool:
+    """Print what a build would meet (errors and warnings); False if any is an error."""
+    from sonicspec.stages.preflight import preflight
+
+    problems = preflight(loaded)
+    _print_problems(problems, spec)
+    return not any(p.severity == "error" for p in problems)
+
+
+def _plot_unavailable(args: argparse.Namespace) -> bool:
+    """True (after the message) if ``--plot`` was asked and matplotlib is not installed."""
+    from sonicspec.stages.preflight import PLOT_NEEDS, module_available
+
+    if args.plot and not module_available("matplotlib"):
+        print(f"sonicspec: error: {PLOT_NEEDS}", file=sys.stderr)
+        return True
+    return False
+
+
 def _last_plan_path(plan) -> Path:
     return Path(plan.store_dir) / "plans" / f"last-build-{plan.name}.json"
 
@@ -144,6 +177,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.summary:
         print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
         return EXIT_OK
+    if not _preflight_or_exit(loaded, args.spec):
+        return EXIT_INVALID
     plan = _compile(loaded, args)
     last = _last_plan_path(plan)
     old = recorded_keys(last)
@@ -187,7 +222,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     from sonicspec.store import ArtifactStore
 
     loaded = _load_or_exit(args.spec, args)
-    if loaded is None:
+    if loaded is None or not _preflight_or_exit(loaded, args.spec):
         return EXIT_INVALID
     plan = _compile(loaded, args)
     if args.until:
@@ -280,6 +315,8 @@ def _choose_scene(loaded, args: argparse.Namespace) -> bool:
 def cmd_scene_inspect(args: argparse.Namespace) -> int:
     from sonicspec.stages.inspect import format_facts, inspect_scene
 
+    if _plot_unavailable(args):
+        return EXIT_INVALID
     loaded = _load_or_exit(args.spec)
     if loaded is None or not _choose_scene(loaded, args):
         return EXIT_INVALID
@@ -291,6 +328,8 @@ def cmd_scene_inspect(args: argparse.Namespace) -> int:
 def cmd_rir(args: argparse.Namespace) -> int:
     from sonicspec.stages.rir import format_rir_facts, rir_from_spec
 
+    if _plot_unavailable(args):
+        return EXIT_INVALID
     loaded = _load_or_exit(args.spec)
     if loaded is None or not _choose_scene(loaded, args):
         return EXIT_INVALID

@@ -437,7 +437,7 @@ def test_index_sorts_round_trips_and_rejects_duplicate_ids() -> None:
     assert CorpusItem.from_dict(index.items[1].to_dict()).labels == ("x", "y")
     with pytest.raises(CorpusError, match=r"fma corpus: expected unique item ids, got 'a' more"):
         CorpusIndex("fma", (item("a"), item("a", "val")))
-    with pytest.raises(CorpusError, match=r"corpus index: expected format 1, got 0"):
+    with pytest.raises(CorpusError, match=r"corpus index: expected format 2, got 0"):
         CorpusIndex.from_dict({**index.to_dict(), "format": 0})
 
 

@@ -377,3 +377,30 @@ def test_the_store_and_the_dataset_folder_cannot_nest(tmp_path: Path) -> None:
     done = cli("validate", str(spec))
     assert done.returncode == 2
     assert "must not lie inside one another" in done.stderr
+
+
+# --- 8. nothing is skipped silently -------------------------------------------------------------
+
+
+def test_skipped_corpus_files_are_counted_in_the_summary_and_dataset_json(tmp_path: Path) -> None:
+    import numpy as np
+    import soundfile as sf
+
+    spec = write_spec(tmp_path)
+    noise = tmp_path / "noise"
+    noise.mkdir()
+    rng = np.random.default_rng(3)
+    for k in range(12):
+        sf.write(str(noise / f"clip{k:02d}.wav"), 0.1 * rng.standard_normal(16000 * 3), 16000)
+    (noise / "broken.wav").write_bytes(b"RIFF....WAVEjunk" * 10)
+    text = spec.read_text()
+    old = "noise: {kind: generated, clips_per_split: 4, clip_duration_s: 3.0}"
+    assert old in text
+    spec.write_text(text.replace(old, "noise: {kind: folder, root: noise}"))
+    done = cli("build", str(spec), "--cores", "2")
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"corpus files skipped .*: noise 1 \(first: broken\.wav, ", done.stderr)
+    summary = json.loads((tmp_path / "out" / "demo" / "dataset.json").read_text())
+    skipped = summary["corpus_files_skipped"]
+    assert skipped["noise"]["count"] == 1 and skipped["noise"]["files"][0]["path"] == "broken.wav"
+    assert skipped["speech"]["count"] == 0

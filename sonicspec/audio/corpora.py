@@ -45,9 +45,10 @@ from typing import Any
 import numpy as np
 import soundfile as sf
 
-from sonicspec.errors import AudioError, CorpusError
+from sonicspec.errors import AudioError, CorpusError, SonicspecError
+from sonicspec.shares import split_shares
 
-INDEX_FORMAT = 1
+INDEX_FORMAT = 2
 """Version of the JSON an index is stored as; a cache in another format is rebuilt."""
 
 FMA_SIZES = ("small", "medium", "large", "full")
@@ -120,7 +121,11 @@ class CorpusIndex:
     items: tuple[CorpusItem, ...]
     """Sorted by (split, id) on construction."""
     problems: tuple[str, ...] = ()
-    """One message per skipped file, naming the file and the reason."""
+    """One message per problem met (mostly a skipped file), naming the file and the reason."""
+    skipped: tuple[tuple[str, str], ...] = ()
+    """(path, reason) of every file left out: unreadable, unlisted, duplicated, listed but
+    missing. Paths as the reader saw them (the corpus stage stores them relative to the
+    root)."""
 
     def __post_init__(self) -> None:
         items = tuple(sorted(self.items, key=lambda it: (it.split, it.id)))
@@ -132,6 +137,7 @@ class CorpusIndex:
             seen.add(item.id)
         object.__setattr__(self, "items", items)
         object.__setattr__(self, "problems", tuple(self.problems))
+        object.__setattr__(self, "skipped", tuple((str(p), str(r)) for p, r in self.skipped))
 
     @property
     def splits(self) -> list[str]:
@@ -176,7 +182,8 @@ class CorpusIndex:
         """Plain JSON-ready dict, with the index format version."""
         return {"format": INDEX_FORMAT, "kind": self.kind,
                 "items": [item.to_dict() for item in self.items],
-                "problems": list(self.problems)}
+                "problems": list(self.problems),
+                "skipped": [{"path": p, "reason": r} for p, r in self.skipped]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CorpusIndex:
@@ -186,7 +193,8 @@ class CorpusIndex:
                               f"{d.get('format')!r}")
         return cls(kind=str(d["kind"]),
                    items=tuple(CorpusItem.from_dict(item) for item in d["items"]),
-                   problems=tuple(str(p) for p in d.get("problems", ())))
+                   problems=tuple(str(p) for p in d.get("problems", ())),
+                   skipped=tuple((s["path"], s["reason"]) for s in d.get("skipped", ())))
 
 
 # --------------------------------------------------------------------------------------------
@@ -214,28 +222,27 @@ def _subdirs(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.is_dir() and not _hidden(p))
 
 
-def _probe(path: Path) -> tuple[int, int] | str:
-    """(frames, sample rate) of an audio file, or the problem message if it is unusable."""
+def probe_audio(path: Path) -> tuple[int, int] | str:
+    """(frames, sample rate) of an audio file, or why it is unusable.
+
+    The one test of whether a corpus file is usable: the readers and ``validate
+    --check-files`` both ask it.
+    """
     try:
         info = sf.info(str(path))
     except (RuntimeError, OSError, ValueError) as err:  # LibsndfileError is a RuntimeError
-        return f"{path}: unreadable audio ({err}); skipped"
+        return f"unreadable audio ({err})"
     if info.frames <= 0 or info.samplerate <= 0:
-        return f"{path}: no audio samples; skipped"
+        return "no audio samples"
     return int(info.frames), int(info.samplerate)
 
 
 def _check_ratios(ratios: Mapping[str, float], where: str) -> dict[str, float]:
-    """The positive shares, by split name; they must sum to 1."""
-    if not ratios:
-        raise CorpusError(f"{where}: expected at least one split with a share, got none")
-    for name, share in ratios.items():
-        if not math.isfinite(share) or share < 0:
-            raise CorpusError(f"{where}: expected shares >= 0, got {name}: {share}")
-    total = math.fsum(ratios.values())
-    if abs(total - 1.0) > 1e-6:
-        raise CorpusError(f"{where}: expected shares summing to 1, got {total:g}")
-    return {name: float(share) for name, share in sorted(ratios.items()) if share > 0}
+    """The positive shares, by split name; they must sum to 1 (:func:`split_shares`)."""
+    try:
+        return split_shares(ratios, list(ratios))
+    except SonicspecError as err:
+        raise CorpusError(f"{where}: {err}") from None
 
 
 def _ratio_counts(n: int, ratios: Mapping[str, float]) -> dict[str, int]:
@@ -271,9 +278,25 @@ def _assign_by_ratio(keys: Sequence[str], ratios: Mapping[str, float],
     return out
 
 
-def _finish(kind: str, items: list[CorpusItem], problems: list[str], splits: Sequence[str],
+class _Findings(list):
+    """The problem messages of an indexing run (a list of str), and which files it skipped."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.skipped: list[tuple[str, str]] = []
+
+    def skip(self, path: Path, reason: str, message: str | None = None) -> None:
+        """Record ``path`` as skipped for ``reason`` and report it (by default
+        ``<path>: <reason>; skipped``; ``message=""`` records without a message)."""
+        self.skipped.append((str(path), reason))
+        if message != "":
+            self.append(message or f"{path}: {reason}; skipped")
+
+
+def _finish(kind: str, items: list[CorpusItem], problems: _Findings, splits: Sequence[str],
             where: str) -> CorpusIndex:
-    index = CorpusIndex(kind=kind, items=tuple(items), problems=tuple(problems))
+    index = CorpusIndex(kind=kind, items=tuple(items), problems=tuple(problems),
+                        skipped=tuple(problems.skipped))
     for name in sorted(splits):
         if not index.split(name):
             hint = f"; skipped files: {'; '.join(problems[:3])}" if problems else ""
@@ -329,7 +352,7 @@ def index_librispeech(root: Path, subsets: Mapping[str, Sequence[str]]) -> Corpu
                                   f"in '{other}' and '{split}'; speakers would cross splits")
             _require_dir(root / name, f"LibriSpeech subset '{name}'")
     items: list[CorpusItem] = []
-    problems: list[str] = []
+    problems = _Findings()
     split_of_speaker: dict[str, str] = {}
     for subset, split in sorted(split_of_subset.items()):
         for speaker_dir in _subdirs(root / subset):
@@ -345,7 +368,7 @@ def index_librispeech(root: Path, subsets: Mapping[str, Sequence[str]]) -> Corpu
     return _finish("librispeech", items, problems, list(subsets), "LibriSpeech")
 
 
-def _read_transcript(path: Path, problems: list[str]) -> dict[str, str] | None:
+def _read_transcript(path: Path, problems: _Findings) -> dict[str, str] | None:
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as err:
@@ -360,7 +383,7 @@ def _read_transcript(path: Path, problems: list[str]) -> dict[str, str] | None:
 
 
 def _index_chapter(chapter_dir: Path, speaker: str, split: str, items: list[CorpusItem],
-                   problems: list[str]) -> None:
+                   problems: _Findings) -> None:
     flacs = sorted(p for p in chapter_dir.glob("*.flac") if p.is_file() and not _hidden(p))
     if not flacs:
         return
@@ -368,19 +391,24 @@ def _index_chapter(chapter_dir: Path, speaker: str, split: str, items: list[Corp
     if not trans.is_file():
         problems.append(f"{trans}: transcript file missing; skipped the {len(flacs)} "
                         f"utterances of {chapter_dir}")
+        for flac in flacs:
+            problems.skip(flac, f"transcript file {trans.name} missing", "")
         return
     words = _read_transcript(trans, problems)
     if words is None:
+        for flac in flacs:
+            problems.skip(flac, f"transcript file {trans.name} unreadable", "")
         return
     for flac in flacs:
         uid = flac.stem
         if uid not in words:
-            problems.append(f"{flac}: utterance {uid} missing from its transcript {trans}; "
-                            "skipped")
+            problems.skip(flac, f"utterance missing from its transcript {trans.name}",
+                          f"{flac}: utterance {uid} missing from its transcript {trans}; "
+                          "skipped")
             continue
-        probe = _probe(flac)
+        probe = probe_audio(flac)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(flac, probe)
             continue
         items.append(CorpusItem(id=uid, path=str(flac.resolve()), split=split,
                                 speaker=speaker, num_samples=probe[0],
@@ -421,7 +449,7 @@ def index_fsd50k(root: Path, split_ratios: Mapping[str, float], exclude_labels: 
     ratios = _check_ratios(split_ratios, "FSD50K split_ratios")
     excluded = set(exclude_labels)
     listed: dict[str, tuple[Path, tuple[str, ...]]] = {}
-    problems: list[str] = []
+    problems = _Findings()
     for part, folder in (("dev", "FSD50K.dev_audio"), ("eval", "FSD50K.eval_audio")):
         gt = root / "FSD50K.ground_truth" / f"{part}.csv"
         rows = _read_csv_dicts(gt, ("fname", "labels"), f"FSD50K {part} ground truth")
@@ -444,11 +472,11 @@ def index_fsd50k(root: Path, split_ratios: Mapping[str, float], exclude_labels: 
     for fname in sorted(listed):
         path, labels = listed[fname]
         if not path.is_file():
-            problems.append(f"{path}: listed in the ground truth but missing; skipped")
+            problems.skip(path, "listed in the ground truth but missing")
             continue
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=fname, path=str(path.resolve()), split=split_of[fname],
                                 speaker="", num_samples=probe[0], sample_rate_hz=probe[1],
@@ -478,7 +506,7 @@ class _CsvFieldLimit:
         csv.field_size_limit(self._old)
 
 
-def _read_fma_tracks(path: Path, problems: list[str]
+def _read_fma_tracks(path: Path, problems: _Findings
                      ) -> dict[int, tuple[str, tuple[int, ...]]]:
     """track id -> (genre_top, genres_all) from FMA's three-header-row tracks.csv."""
     _require_file(path, "FMA track metadata")
@@ -543,7 +571,7 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
     ratios = _check_ratios(split_ratios, "FMA split_ratios")
     audio_dir = root / f"fma_{size}"
     _require_dir(audio_dir, f"FMA audio (fma_{size})")
-    problems: list[str] = []
+    problems = _Findings()
     tracks_csv = root / "fma_metadata" / "tracks.csv"
     tracks = _read_fma_tracks(tracks_csv, problems)
     names = _read_fma_genres(root / "fma_metadata" / "genres.csv")
@@ -551,11 +579,12 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
     for mp3 in sorted(p for p in audio_dir.glob("*/*.mp3") if p.is_file() and not _hidden(p)):
         stem = mp3.stem
         if not stem.isdigit():
-            problems.append(f"{mp3}: expected an FMA file name <track id>.mp3; skipped")
+            problems.skip(mp3, "expected an FMA file name <track id>.mp3")
             continue
         meta = tracks.get(int(stem))
         if meta is None:
-            problems.append(f"{mp3}: track {int(stem)} is not in {tracks_csv}; skipped")
+            problems.skip(mp3, f"track {int(stem)} is not in {tracks_csv.name}",
+                          f"{mp3}: track {int(stem)} is not in {tracks_csv}; skipped")
             continue
         genre_top, genres = meta
         if instrumental_only and not (FMA_INSTRUMENTAL_GENRE_ID in genres
@@ -564,16 +593,17 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
         labels = tuple(names.get(g, str(g)) for g in genres) or \
             ((genre_top,) if genre_top else ())
         if stem in listed:
-            problems.append(f"{mp3}: track {stem} found twice; the first kept")
+            problems.skip(mp3, f"track {stem} found twice; the first kept",
+                          f"{mp3}: track {stem} found twice; the first kept")
             continue
         listed[stem] = (mp3, labels)
     split_of = _assign_by_ratio(list(listed), ratios, rng)
     items: list[CorpusItem] = []
     for stem in sorted(listed):
         path, labels = listed[stem]
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=stem, path=str(path.resolve()), split=split_of[stem],
                                 speaker="", num_samples=probe[0], sample_rate_hz=probe[1],
@@ -585,7 +615,8 @@ def index_fma(root: Path, size: str, split_ratios: Mapping[str, float],
 # Plain folders
 
 
-def _extensions(extensions: Sequence[str]) -> set[str]:
+def normalise_extensions(extensions: Sequence[str]) -> set[str]:
+    """File endings as the readers match them: lower case with the dot (``WAV`` -> ``.wav``)."""
     exts = {e.lower() if e.startswith(".") else f".{e.lower()}" for e in extensions if e}
     if not exts:
         raise CorpusError("folder corpus extensions: expected at least one file ending, "
@@ -593,7 +624,9 @@ def _extensions(extensions: Sequence[str]) -> set[str]:
     return exts
 
 
-def _audio_files(root: Path, exts: set[str]) -> Iterator[Path]:
+def audio_files(root: Path, exts: set[str]) -> Iterator[Path]:
+    """Files below ``root`` with one of the endings ``exts`` (lower case, with the dot), in
+    sorted walking order; dot-files and dot-folders are left out."""
     for dirpath, dirnames, filenames in os.walk(root):
         dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
         for name in sorted(filenames):
@@ -612,19 +645,20 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
     """
     root = Path(root)
     _require_dir(root, "folder corpus root")
-    exts = _extensions(extensions)
+    exts = normalise_extensions(extensions)
     ratios = _check_ratios(split_ratios, "folder corpus split_ratios")
-    problems: list[str] = []
+    problems = _Findings()
     listed: dict[str, tuple[Path, str]] = {}
-    for path in _audio_files(root, exts):
+    for path in audio_files(root, exts):
         rel = path.relative_to(root)
         uid = rel.with_suffix("").as_posix()
         speaker = rel.parts[0] if len(rel.parts) > 1 else ""
         if by_speaker and not speaker:
-            problems.append(f"{path}: not inside a speaker folder; skipped")
+            problems.skip(path, "not inside a speaker folder")
             continue
         if uid in listed:
-            problems.append(f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
+            problems.skip(path, f"same id {uid!r} as {listed[uid][0].name}",
+                          f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
             continue
         listed[uid] = (path, speaker if by_speaker else "")
     if by_speaker:
@@ -637,13 +671,13 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
 
 
 def _probe_listed(listed: Mapping[str, tuple[Path, str]], split_of: Mapping[str, str],
-                  problems: list[str]) -> list[CorpusItem]:
+                  problems: _Findings) -> list[CorpusItem]:
     items: list[CorpusItem] = []
     for uid in sorted(listed):
         path, speaker = listed[uid]
-        probe = _probe(path)
+        probe = probe_audio(path)
         if isinstance(probe, str):
-            problems.append(probe)
+            problems.skip(path, probe)
             continue
         items.append(CorpusItem(id=uid, path=str(path.resolve()), split=split_of[uid],
                                 speaker=speaker, num_samples=probe[0],
@@ -660,16 +694,17 @@ def index_split_folders(root: Path, splits: Sequence[str],
     """
     root = Path(root)
     _require_dir(root, "split folder corpus root")
-    exts = _extensions(extensions)
-    problems: list[str] = []
+    exts = normalise_extensions(extensions)
+    problems = _Findings()
     listed: dict[str, tuple[Path, str]] = {}
     split_of: dict[str, str] = {}
     for split in splits:
         _require_dir(root / split, f"split folder corpus, split '{split}'")
-        for path in _audio_files(root / split, exts):
+        for path in audio_files(root / split, exts):
             uid = path.relative_to(root).with_suffix("").as_posix()
             if uid in listed:
-                problems.append(f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
+                problems.skip(path, f"same id {uid!r} as {listed[uid][0].name}",
+                          f"{path}: same id {uid!r} as {listed[uid][0]}; skipped")
                 continue
             listed[uid] = (path, "")
             split_of[uid] = split

@@ -49,9 +49,9 @@ def slice_segments(mesh: SceneMesh, z_m: float) -> tuple[np.ndarray, np.ndarray]
 def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: dict[str, Any] | None,
                     path: Path, *, title: str = "") -> Path:
     """Floor plan per floor: walkable area, walls, obstacles, mic, sources and their paths."""
+    plt = _pyplot()  # first: without matplotlib, its message rather than an ImportError
     from matplotlib.collections import LineCollection
 
-    plt = _pyplot()
     n = max(1, len(nav.grids))
     fig, axes = plt.subplots(1, n, figsize=(6.5 * n, 6), squeeze=False)
     for k, ax in enumerate(axes[0]):

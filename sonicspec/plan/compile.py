@@ -417,7 +417,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                 "manifests": list(spec.outputs.manifests),
                 "splits": {s: spec.splits[s].groups for s in spec.splits},
             },
-            tuple(export_keys),
+            (*corpus_inputs, *export_keys),  # corpora: their skipped files are reported
             "dataset",
         )
     )

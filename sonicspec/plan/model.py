@@ -25,7 +25,7 @@ class Step:
 
 
 STEPS: tuple[Step, ...] = (
-    Step("corpus", 1, 1, 2000, 60, "index (or generate) a corpus"),
+    Step("corpus", 2, 1, 2000, 60, "index (or generate) a corpus"),
     Step("mesh", 1, 1, 4000, 30, "build or import a scene, repair it"),
     Step("navigation", 1, 1, 4000, 30, "walkable area of each floor"),
     Step("placement", 1, 1, 2000, 10, "mic, sources and trajectories per group"),

@@ -14,6 +14,8 @@ import posixpath
 from collections.abc import Collection, Iterator
 from pathlib import Path
 
+from sonicspec.errors import SonicspecError
+from sonicspec.shares import split_shares
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
     FolderCorpusSpec,
@@ -374,19 +376,25 @@ def _corpus_split_problems(path: tuple, corpus: object, splits: list[str]) -> It
                     )
                 used.setdefault(sub, s)
     elif isinstance(corpus, (FolderCorpusSpec, Fsd50kCorpusSpec, FmaCorpusSpec)):
-        ratios = corpus.split_ratios
-        for s in splits:
-            if s not in ratios:
-                yield _err(
-                    (*path, "split_ratios"),
-                    f"no share given for split {s!r}" + did_you_mean(s, list(ratios)),
-                )
+        ratios = corpus.split_ratios or {}
+        bad = False
         for s, r in ratios.items():
             if not 0 < r <= 1:
+                bad = True
                 yield _err((*path, "split_ratios", s), f"shares must lie in (0, 1], got {r:g}")
-        total = sum(ratios.values())
-        if abs(total - 1.0) > 1e-6:
-            yield _err((*path, "split_ratios"), f"shares must sum to 1, got {total:g}")
+            elif s not in splits:
+                yield _warn(
+                    (*path, "split_ratios", s),
+                    f"expected shares of the spec's splits ({', '.join(splits)}), got one for "
+                    f"{s!r}, which is not used"
+                    + did_you_mean(s, [x for x in splits if x not in ratios]),
+                )
+        if not bad:
+            # The corpus stage's own rule, so validate accepts exactly what a build reads.
+            try:
+                split_shares(corpus.split_ratios, splits)
+            except SonicspecError as exc:
+                yield _err((*path, "split_ratios"), str(exc))
 
 
 def _check_corpora(spec: DatasetSpec) -> Iterator[Problem]:
@@ -640,8 +648,10 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
             continue
         root = corpus.root
         if isinstance(corpus, LibriSpeechCorpusSpec):
+            # Only the subsets of the spec's splits are read (README: no val split, no
+            # dev-clean needed).
             for split, subsets in corpus.subsets.items():
-                for sub in subsets:
+                for sub in subsets if split in spec.splits else ():
                     exists(
                         (*path, "subsets", split),
                         f"{root}/{sub}",

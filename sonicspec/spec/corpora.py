@@ -8,7 +8,10 @@ from pydantic import Field
 
 from sonicspec.spec.base import SpecModel, SplitName
 
-DEFAULT_SPLIT_RATIOS = {"train": 0.7, "val": 0.2, "test": 0.1}
+DEFAULT_SHARES_TEXT = (
+    " Left out: SonicSet's 7:2:1 (train:val:test) renormalised over the spec's splits "
+    "(train and test only: 0.875 and 0.125)."
+)
 
 
 class LibriSpeechCorpusSpec(SpecModel):
@@ -38,9 +41,10 @@ class FolderCorpusSpec(SpecModel):
         min_length=1,
         description="File endings read (case-insensitive).",
     )
-    split_ratios: dict[SplitName, float] = Field(
-        default_factory=lambda: dict(DEFAULT_SPLIT_RATIOS),
-        description="Share of files (speech: of speakers) per split; shares must sum to 1.",
+    split_ratios: dict[SplitName, float] | None = Field(
+        None,
+        description="Share of files (speech: of speakers) per split; shares of the spec's "
+        "splits must sum to 1." + DEFAULT_SHARES_TEXT,
     )
 
 
@@ -57,9 +61,10 @@ class Fsd50kCorpusSpec(SpecModel):
 
     kind: Literal["fsd50k"] = Field(description="Corpus type.")
     root: str = Field(min_length=1, description="Folder holding the FSD50K folders.")
-    split_ratios: dict[SplitName, float] = Field(
-        default_factory=lambda: dict(DEFAULT_SPLIT_RATIOS),
-        description="Share of clips per split (SonicSet: 7:2:1); shares must sum to 1.",
+    split_ratios: dict[SplitName, float] | None = Field(
+        None,
+        description="Share of clips per split; shares of the spec's splits must sum to 1."
+        + DEFAULT_SHARES_TEXT,
     )
     exclude_labels: list[str] = Field(
         default_factory=lambda: ["Speech", "Human_voice", "Singing", "Music"],
@@ -75,9 +80,10 @@ class FmaCorpusSpec(SpecModel):
     size: Literal["small", "medium", "large", "full"] = Field(
         "small", description="Which FMA audio folder to read."
     )
-    split_ratios: dict[SplitName, float] = Field(
-        default_factory=lambda: dict(DEFAULT_SPLIT_RATIOS),
-        description="Share of tracks per split (SonicSet: 7:2:1); shares must sum to 1.",
+    split_ratios: dict[SplitName, float] | None = Field(
+        None,
+        description="Share of tracks per split; shares of the spec's splits must sum to 1."
+        + DEFAULT_SHARES_TEXT,
     )
     instrumental_only: bool = Field(
         True, description="Keep only tracks whose genres include Instrumental (no vocals)."

@@ -32,6 +32,16 @@ def _locate(problems: list[Problem], smap: SourceMap) -> list[Problem]:
     return out
 
 
+def locate_in_file(problems: list[Problem], source: str | Path) -> list[Problem]:
+    """``problems`` (paths into the spec at ``source``) with line and column, sorted; as given
+    if the file cannot be read or parsed. For checks run after loading (preflight)."""
+    try:
+        _, smap = parse_text(Path(source).read_text(encoding="utf-8"), str(source))
+    except (OSError, UnicodeDecodeError, SpecError):
+        return sort_problems(problems)
+    return sort_problems(_locate(problems, smap))
+
+
 def validate_text(
     text: str, source: str, base_dir: Path | None = None, *, files: bool = False,
     cli_outputs: Collection[str] = (),

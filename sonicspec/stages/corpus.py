@@ -5,7 +5,8 @@ corpus root, so the artifact is the same wherever the corpus lives) is the artif
 stored as one compressed JSON array so a 100 000-utterance corpus does not bloat the group's
 metadata. A second copy is cached beside the corpus in the spec's ``cache_dir``, so a cleaned
 store re-indexes without re-reading every file header. Files that cannot be used are logged by
-name as warnings and listed in the artifact.
+name as warnings and listed in the artifact (``skipped``: path below the root and the reason;
+:func:`skipped_files` reads them back for a plan).
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ from sonicspec.audio.corpora import (
     index_librispeech,
     index_split_folders,
 )
-from sonicspec.plan.model import Job
+from sonicspec.errors import CorpusError, SonicspecError
+from sonicspec.plan.model import Job, Plan
+from sonicspec.shares import split_shares
 from sonicspec.stages.context import JobContext
+from sonicspec.store import ArtifactStore
 
 log = logging.getLogger("sonicspec.stages.corpus")
 
@@ -49,6 +53,15 @@ def _generated(params: dict[str, Any], cache: Path, key: str) -> CorpusIndex:
     return index_split_folders(root, splits)
 
 
+def corpus_shares(ratios: dict[str, float] | None, splits: list[str], role: str
+                  ) -> dict[str, float]:
+    """The shares a ratio-split corpus gives the spec's splits (:func:`split_shares`)."""
+    try:
+        return split_shares(ratios, splits)
+    except SonicspecError as err:
+        raise CorpusError(f"corpora.{role}.split_ratios: {err}") from None
+
+
 def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
                 rng: np.random.Generator) -> CorpusIndex:
     """The index a corpus job describes (its folder from ``paths``, ratio splits from ``rng``)."""
@@ -58,10 +71,10 @@ def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
         return _generated(params, Path(paths["cache"]), key)
     root = Path(paths["root"])
     splits = params["splits"]
-    ratios = {s: r for s, r in corpus.get("split_ratios", {}).items() if s in splits}
     if kind == "librispeech":
         return index_librispeech(root, {s: v for s, v in corpus["subsets"].items()
                                         if s in splits})
+    ratios = corpus_shares(corpus.get("split_ratios"), splits, role)
     if kind == "fsd50k":
         return index_fsd50k(root, ratios, corpus["exclude_labels"], rng)
     if kind == "fma":
@@ -87,7 +100,9 @@ def _portable(index: CorpusIndex, root: Path) -> CorpusIndex:
     corpus (or the spec) lives and two machines store the same bytes."""
     prefix = str(root).rstrip("/") + "/"
     items = tuple(replace(i, path=os.path.relpath(i.path, root)) for i in index.items)
-    return CorpusIndex(index.kind, items, tuple(p.replace(prefix, "") for p in index.problems))
+    skipped = tuple((os.path.relpath(p, root), r) for p, r in index.skipped)
+    return CorpusIndex(index.kind, items, tuple(p.replace(prefix, "") for p in index.problems),
+                       skipped)
 
 
 def read_index(arrays: dict[str, np.ndarray]) -> CorpusIndex:
@@ -113,4 +128,20 @@ def run(ctx: JobContext) -> None:
                          "hours": round(sum(i.duration_s for i in items) / 3600.0, 6)}
     ctx.write({"index_json": np.frombuffer(blob, dtype=np.uint8)},
               {"role": params["role"], "kind": params["corpus"]["kind"],
-               "splits": counts, "problems": list(index.problems)})
+               "splits": counts, "problems": list(index.problems),
+               "skipped": [{"path": p, "reason": r} for p, r in index.skipped]})
+
+
+def skipped_files(plan: Plan, store: ArtifactStore) -> dict[str, list[dict[str, str]]]:
+    """Role -> the files its corpus index left out, ``{"path", "reason"}`` each (path relative
+    to the corpus root), for every corpus job of ``plan`` already in ``store``.
+
+    For the build summary and dataset.json: a corrupt file is skipped with a warning in the
+    corpus job's log, and this is where it is counted.
+    """
+    out: dict[str, list[dict[str, str]]] = {}
+    for job in plan.by_step()["corpus"]:
+        if store.exists("corpus", job.key):
+            data = store.read_data("corpus", job.key)
+            out[job.params["role"]] = [dict(s) for s in data.get("skipped", ())]
+    return out

@@ -44,7 +44,12 @@ def run(ctx: JobContext) -> None:
                       "files": sum(len(g["files"]) for g in items),
                       "audio_hours": round(sum(g["duration_s"] for g in items) / 3600.0, 6)}
               for split, items in sorted(by_split.items())}
+    jobs = ctx.plan.by_key()
+    skipped = {jobs[k].params["role"]: ctx.store.read_data("corpus", k).get("skipped", [])
+               for k in ctx.input_keys("corpus")}
     summary = {
+        "corpus_files_skipped": {role: {"count": len(files), "files": files}
+                                 for role, files in sorted(skipped.items())},
         "name": params["spec"]["name"],
         "description": params["spec"]["description"],
         "sonicspec_version": __version__,

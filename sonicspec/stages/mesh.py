@@ -85,6 +85,26 @@ def assign_materials(mesh: SceneMesh, library: str, overrides: dict[str, str],
     return mesh.with_materials(rule)
 
 
+def load_scan(scene: dict[str, Any], paths: dict[str, str]) -> SceneMesh:
+    """The file of a ``mesh`` scene read as the mesh stage reads it (before materials and
+    repair); ``validate --check-files`` reads meshes through it too."""
+    from sonicspec.geometry.io import load_matterport, load_mesh
+
+    scale = UNIT_SCALE_M[scene["unit"]]
+    default = scene["default_material"] or "default"
+    if "semantic" in paths:
+        up = "z" if scene["up_axis"] == "auto" else scene["up_axis"]
+        return load_matterport(
+            paths["mesh"],
+            paths["semantic"],
+            paths.get("house"),
+            up_axis=up,
+            unit_scale=scale,
+            material=default,
+        )
+    return load_mesh(paths["mesh"], scene["up_axis"], scale, material=default)
+
+
 def build_scene_mesh(
     params: dict[str, Any], paths: dict[str, str], rng: np.random.Generator
 ) -> tuple[SceneMesh, dict[str, Any]]:
@@ -102,22 +122,7 @@ def build_scene_mesh(
         report["repair"] = None
         return mesh, report
 
-    from sonicspec.geometry.io import load_matterport, load_mesh
-
-    scale = UNIT_SCALE_M[scene["unit"]]
-    default = scene["default_material"] or "default"
-    if "semantic" in paths:
-        up = "z" if scene["up_axis"] == "auto" else scene["up_axis"]
-        mesh = load_matterport(
-            paths["mesh"],
-            paths["semantic"],
-            paths.get("house"),
-            up_axis=up,
-            unit_scale=scale,
-            material=default,
-        )
-    else:
-        mesh = load_mesh(paths["mesh"], scene["up_axis"], scale, material=default)
+    mesh = load_scan(scene, paths)
     mesh = assign_materials(mesh, params["library"], params["label_materials"],
                             scene["default_material"])
     repair = scene["repair"]

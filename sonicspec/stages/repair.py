@@ -188,7 +188,8 @@ def verify_dataset_folder(out: Path) -> tuple[int, list[str]]:
     recorded = list(written_files(dataset_job, store.read_data("dataset", key)))
     export_job = Job("export", {}, ())
     for k in store.read("dataset", key).provenance["input_keys"]:
-        recorded += written_files(export_job, store.read_data("export", k))
+        if store.exists("export", k):  # (the others are corpora)
+            recorded += written_files(export_job, store.read_data("export", k))
     for r in recorded:
         if r["path"] == CHECKSUMS_NAME:
             continue

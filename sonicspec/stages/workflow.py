@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -199,6 +199,8 @@ class BuildResult:
     check: CheckReport
     elapsed_s: float
     warnings: list[str]
+    skipped: dict[str, list[dict[str, str]]] = field(default_factory=dict)
+    """Corpus files the indexes left out, by role (``stages.corpus.skipped_files``)."""
     summary: str = ""
 
     @property
@@ -268,6 +270,11 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         f"({result.check.files_hashed} re-hashed)",
         f"dataset: {groups} groups, {hours:.3f} h of audio per track",
     ]
+    skipped = {role: files for role, files in result.skipped.items() if files}
+    if skipped:
+        lines.append("corpus files skipped (unreadable or unusable; listed in dataset.json): "
+                     + ", ".join(f"{role} {len(files)} (first: {files[0]['path']}, "
+                                 f"{files[0]['reason']})" for role, files in skipped.items()))
     if result.warnings:
         lines.append(f"{len(result.warnings)} warning{'s' * (len(result.warnings) != 1)} in "
                      "the jobs' logs:")
@@ -298,6 +305,8 @@ def build(
     the dataset folder are claimed with their marker files first, so a build never writes into
     a folder that is not its own.
     """
+    from sonicspec.stages.corpus import skipped_files  # reads audio libraries: only here
+
     store = ArtifactStore(plan.store_dir)
     out = Path(plan.output_dir)
     dataset_key = next((j.key for j in plan.jobs if j.step == "dataset"), None)
@@ -340,7 +349,8 @@ def build(
             cache.save()
         result = BuildResult(code=code, ran=ran, reused=len(present - ran_keys), check=check,
                              elapsed_s=time.monotonic() - start,
-                             warnings=job_warnings(plan, ran_keys))
+                             warnings=job_warnings(plan, ran_keys),
+                             skipped=skipped_files(plan, store))
         if not dry_run:
             result.summary = format_summary(plan, result)
             print(result.summary, file=stream)
