@@ -54,3 +54,17 @@ def build_digest(plan: Plan) -> dict[str, str]:
         if p.is_file():
             out[f"out/{p.relative_to(folder)}"] = hashlib.sha256(p.read_bytes()).hexdigest()
     return out
+
+
+EDITS = [  # (section of the spec, old text, new text): one edit each, applied one after another
+    ("scenes", "walls: gypsum_board", "walls: concrete_painted"),
+    ("microphone", "height_m: 1.5", "height_m: 1.4"),
+    ("placement", "noise_distance_m: [1.0, 4.0]", "noise_distance_m: [1.0, 3.5]"),
+    ("trajectory", "rir_spacing_m: 0.25", "rir_spacing_m: 0.3"),
+    ("acoustics", "rays: 600", "rays: 500"),
+    ("corpora", "clips_per_split: 4, clip_duration_s: 3.0}\n  music",
+     "clips_per_split: 5, clip_duration_s: 3.0}\n  music"),
+    ("mixture", "duration_s: 10.0", "duration_s: 10.0\n  loudness: {speech_lufs: -20}"),
+    ("splits", "train: {groups: 2,", "train: {groups: 3,"),
+    ("outputs", "manifests: [lhotse]", "manifests: [lhotse, csv]"),
+]

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from build_cases import build_digest, plan_for, write_spec
+from build_cases import EDITS, build_digest, plan_for, write_spec
 
 from sonicspec.export.checksums import CHECKSUMS_NAME, DATASET_MARKER
 from sonicspec.plan.compile import plan_changes
@@ -59,18 +59,6 @@ def ran_by_step(result) -> dict[str, int]:
 
 # --- 1. an edit runs exactly the jobs whose keys are new ---------------------------------
 
-EDITS = [  # (section, old text, new text) applied one after another
-    ("scenes", "walls: gypsum_board", "walls: concrete_painted"),
-    ("microphone", "height_m: 1.5", "height_m: 1.4"),
-    ("placement", "noise_distance_m: [1.0, 4.0]", "noise_distance_m: [1.0, 3.5]"),
-    ("trajectory", "rir_spacing_m: 0.25", "rir_spacing_m: 0.3"),
-    ("acoustics", "rays: 600", "rays: 500"),
-    ("corpora", "clips_per_split: 4, clip_duration_s: 3.0}\n  music",
-     "clips_per_split: 5, clip_duration_s: 3.0}\n  music"),
-    ("mixture", "duration_s: 10.0", "duration_s: 10.0\n  loudness: {speech_lufs: -20}"),
-    ("splits", "train: {groups: 2,", "train: {groups: 3,"),
-    ("outputs", "manifests: [lhotse]", "manifests: [lhotse, csv]"),
-]
 
 
 def test_each_edit_runs_exactly_the_jobs_the_plan_says_are_new(copy) -> None:
@@ -404,3 +392,14 @@ def test_skipped_corpus_files_are_counted_in_the_summary_and_dataset_json(tmp_pa
     skipped = summary["corpus_files_skipped"]
     assert skipped["noise"]["count"] == 1 and skipped["noise"]["files"][0]["path"] == "broken.wav"
     assert skipped["speech"]["count"] == 0
+
+
+def test_files_left_from_a_bigger_build_are_reported(copy) -> None:
+    folder, _plan, _ = copy
+    spec = folder / "demo.yaml"
+    spec.write_text(spec.read_text().replace("train: {groups: 2,", "train: {groups: 1,"))
+    done = cli("build", str(spec), "--cores", "2")
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"\d+ file\(s\) in the dataset folder are not part of this dataset "
+                     r"\(first: train/000001/", done.stderr), done.stderr
+    assert (folder / "out" / "demo" / "train" / "000001").is_dir()  # reported, not deleted

@@ -95,16 +95,24 @@ def verify_dataset(out: Path) -> tuple[int, list[FileProblem]]:
         elif file_sha256(full) != digest:
             problems.append(FileProblem(rel, "contents differ from the checksum recorded "
                                              "when it was written"))
+    for rel in unlisted_files(out, listed):
+        what = ("unfinished temporary file (a writer died); safe to delete"
+                if ".tmp-" in rel.rsplit("/", 1)[-1] else "not written by the build")
+        problems.append(FileProblem(rel, what))
+    return len(listed), problems
+
+
+def unlisted_files(out: Path, listed: dict[str, str]) -> list[str]:
+    """Files under ``out`` that the checksum list does not name (nor the list and marker)."""
     known = set(listed) | {CHECKSUMS_NAME, DATASET_MARKER}
+    found = []
     for dirpath, dirs, files in os.walk(out):
         dirs.sort()
         for name in sorted(files):
             rel = Path(dirpath, name).relative_to(out).as_posix()
             if rel not in known:
-                what = ("unfinished temporary file (a writer died); safe to delete"
-                        if ".tmp-" in name else "not written by the build")
-                problems.append(FileProblem(rel, what))
-    return len(listed), problems
+                found.append(rel)
+    return found
 
 
 class UnsafeOutputError(SpecError):

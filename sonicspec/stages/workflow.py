@@ -21,7 +21,12 @@ from typing import Any, TextIO
 
 import sonicspec
 from sonicspec.errors import SonicspecError
-from sonicspec.export.checksums import claim_folder
+from sonicspec.export.checksums import (
+    CHECKSUMS_NAME,
+    claim_folder,
+    read_checksums,
+    unlisted_files,
+)
 from sonicspec.plan.model import STEPS, Job, Plan, Step
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import progress_path
@@ -201,6 +206,8 @@ class BuildResult:
     warnings: list[str]
     skipped: dict[str, list[dict[str, str]]] = field(default_factory=dict)
     """Corpus files the indexes left out, by role (``stages.corpus.skipped_files``)."""
+    stray_files: list[str] = field(default_factory=list)
+    """Files in the dataset folder that the finished dataset does not list."""
     summary: str = ""
 
     @property
@@ -275,6 +282,11 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         lines.append("corpus files skipped (unreadable or unusable; listed in dataset.json): "
                      + ", ".join(f"{role} {len(files)} (first: {files[0]['path']}, "
                                  f"{files[0]['reason']})" for role, files in skipped.items()))
+    if result.stray_files:
+        lines.append(f"{len(result.stray_files)} file(s) in the dataset folder are not part of "
+                     f"this dataset (first: {result.stray_files[0]}; left by an earlier build "
+                     "of another spec, or added by hand): `sonicspec verify "
+                     f"{plan.output_dir}` lists them")
     if result.warnings:
         lines.append(f"{len(result.warnings)} warning{'s' * (len(result.warnings) != 1)} in "
                      "the jobs' logs:")
@@ -352,6 +364,8 @@ def build(
                              warnings=job_warnings(plan, ran_keys),
                              skipped=skipped_files(plan, store))
         if not dry_run:
+            if code == 0 and dataset_key is not None and (out / CHECKSUMS_NAME).is_file():
+                result.stray_files = unlisted_files(out, read_checksums(out))
             result.summary = format_summary(plan, result)
             print(result.summary, file=stream)
         return result

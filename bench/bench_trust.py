@@ -1,0 +1,283 @@
+"""Benchmark (issue 16): the fault table — edits, damage, kills, two builds at once, bad inputs.
+
+Everything runs through the command line, as a user works, on the cut-down demo that the
+pipeline tests build (``tests/build_cases.py``: 4 groups, 600 rays) in a fresh temporary
+folder. Each row names the case, what a trustworthy tool must do, what happened (exit code,
+the jobs the build ran against what ``plan`` predicted, the first line of the message), the
+wall time and the peak RSS of the command's process tree (``wait4``'s ``ru_maxrss``: the
+largest of the process and the children it waited for).
+
+Rows:
+- a fresh build; a rebuild with nothing changed;
+- one edit in each section of the spec, applied one after another: jobs run per step against
+  ``sonicspec plan --json``'s prediction of new jobs;
+- damage: a byte flipped in a store chunk, in an exported FLAC, in a metadata.json; a deleted
+  dataset folder; a deleted store artifact. ``verify`` must name it, ``build`` must repair it
+  and end with the reference bytes;
+- five kills at random points, then a resume to the reference bytes;
+- two builds of one store at once;
+- bad inputs: a YAML alias bomb, a 50 MB spec, 10^6 groups, a 1e9 m room, 10^7 rays,
+  outputs in /etc and ../: each must exit 2 with a message, in bounded memory.
+
+Reproduce:
+    python bench/bench_trust.py            # ~6 min on 2 cores
+    python bench/bench_trust.py --quick    # no kills, no edits table (~2 min)
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import random
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from build_cases import EDITS, write_spec  # noqa: E402  (the tests' cut-down demo)
+
+
+@dataclass
+class Run:
+    code: int
+    out: str
+    err: str
+    seconds: float
+    max_rss_mb: float
+
+
+def sonicspec(*args: str, timeout_s: float = 900) -> Run:
+    """Run the command line; its exit code, output, wall time and peak RSS."""
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        start = time.monotonic()
+        proc = subprocess.Popen([sys.executable, "-m", "sonicspec.cli", *args], stdout=out,
+                                stderr=err, text=True, start_new_session=True)
+        deadline = start + timeout_s
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() > deadline:
+                os.killpg(proc.pid, signal.SIGKILL)
+                pid, status, usage = os.wait4(proc.pid, 0)
+                break
+            time.sleep(0.02)
+        seconds = time.monotonic() - start
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        out.seek(0)
+        err.seek(0)
+        return Run(proc.returncode, out.read(), err.read(), seconds, usage.ru_maxrss / 1024)
+
+
+def digest(folder: Path) -> dict[str, str]:
+    """SHA-256 of the artifacts and dataset files (logs, plans, caches, Snakemake state out)."""
+    skip = {"logs", "benchmarks", "plans", ".snakemake", "cache", "build.lock"}
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*"))
+            if p.is_file() and not skip & set(p.relative_to(folder).parts)}
+
+
+def ran(err: str) -> str:
+    m = re.search(r"(\d+) jobs? run \(([^)]*)\)", err)
+    return f"{m.group(1)} ({m.group(2)})" if m else "?"
+
+
+def first_line(text: str) -> str:
+    lines = [x for x in text.splitlines() if x.strip() and not x.startswith("[")]
+    return lines[0][:110] if lines else ""
+
+
+class Table:
+    def __init__(self) -> None:
+        self.rows: list[tuple[str, ...]] = []
+
+    def add(self, case: str, expected: str, result: str, ok: bool, run: Run | None) -> None:
+        row = (case, expected, result, "yes" if ok else "NO",
+               f"{run.seconds:.1f}" if run else "", f"{run.max_rss_mb:.0f}" if run else "")
+        self.rows.append(row)
+        print(" | ".join(row), flush=True)
+
+    def markdown(self) -> str:
+        head = ("case", "a trustworthy tool", "what happened", "ok", "s", "peak MB")
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        lines += ["| " + " | ".join(c.replace("|", "/") for c in r) + " |" for r in self.rows]
+        return "\n".join(lines)
+
+
+def flip(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def damage_rows(table: Table, work: Path, spec: Path, reference: dict[str, str]) -> None:
+    store, out = work / "out" / "store", work / "out" / "demo"
+
+    def repaired(case: str, named_as: str, verify_dir: Path) -> None:
+        check = sonicspec("verify", str(verify_dir))
+        named = named_as in check.err
+        b = sonicspec("build", str(spec), "--cores", "2")
+        same = digest(work / "out") == reference
+        fixed = re.search(r"(\d+) repaired", b.err)
+        table.add(case, "verify names it (exit 1); build repairs it, same bytes",
+                  f"verify exit {check.code}{' names it' if named else ''}; build exit {b.code},"
+                  f" {fixed.group(1) if fixed else '?'} repaired, {ran(b.err)} jobs run, "
+                  f"{'same bytes' if same else 'DIFFERENT bytes'}",
+                  check.code == 1 and named and b.code == 0 and same, b)
+
+    chunk = next(p for p in sorted((store / "render").rglob("*")) if p.is_file()
+                 and p.name != "zarr.json" and p.stat().st_size > 100)
+    flip(chunk)
+    key = next(p for p in chunk.parents if p.suffix == ".zarr").stem
+    repaired("byte flipped in a store chunk", f"render {key}", store)
+    flac = next(iter(sorted(out.rglob("source1.flac"))))
+    flip(flac)
+    repaired("byte flipped in an exported FLAC", flac.relative_to(out).as_posix(), out)
+    meta = next(iter(sorted(out.rglob("metadata.json"))))
+    meta.write_text(meta.read_text().replace("1", "2", 1))
+    repaired("metadata.json edited", meta.relative_to(out).as_posix(), out)
+    for case, folder in (("dataset folder deleted", out),
+                         ("a store artifact (rir) deleted",
+                          next(p for p in sorted((store / "rir").glob("*/*.zarr"))))):
+        shutil.rmtree(folder)
+        b = sonicspec("build", str(spec), "--cores", "2")
+        same = digest(work / "out") == reference
+        table.add(case, "remade (with what follows), same bytes",
+                  f"exit {b.code}, {ran(b.err)} jobs run, {'same' if same else 'DIFFERENT'} "
+                  "bytes", b.code == 0 and same, b)
+    empty = work / "empty"
+    empty.mkdir()
+    v = sonicspec("verify", str(empty))
+    table.add("verify on an empty folder", "exit 2: not a store or dataset",
+              f"exit {v.code}: {first_line(v.err)}", v.code == 2, v)
+
+
+def kill_rows(table: Table, base: Path, reference: dict[str, str]) -> None:
+    work = base / "kills"
+    work.mkdir()
+    spec = write_spec(work)
+    rng = random.Random(16)
+    kills = 0
+    start = time.monotonic()
+    for _ in range(12):
+        if kills == 5:
+            break
+        proc = subprocess.Popen([sys.executable, "-m", "sonicspec.cli", "build", str(spec),
+                                 "--cores", "2"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True)
+        time.sleep(2 + rng.random() * 6)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            subprocess.run(["pkill", "-9", "-f", f"sonicspec job --plan {work}"], check=False)
+            kills += 1
+        proc.wait()
+    b = sonicspec("build", str(spec), "--cores", "2")
+    same = digest(work / "out") == reference
+    table.add(f"killed {kills}x at random points, then resumed",
+              "the resumed build gives the same bytes",
+              f"exit {b.code}, {'same' if same else 'DIFFERENT'} bytes "
+              f"({time.monotonic() - start:.0f} s in all)", b.code == 0 and same and kills == 5, b)
+
+
+def concurrent_row(table: Table, base: Path) -> None:
+    work = base / "concurrent"
+    work.mkdir()
+    spec = write_spec(work)
+    first = subprocess.Popen([sys.executable, "-m", "sonicspec.cli", "build", str(spec),
+                              "--cores", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                             text=True)
+    lock = work / "out" / "store" / "build.lock"
+    while not lock.exists() and first.poll() is None:
+        time.sleep(0.05)
+    second = sonicspec("build", str(spec), "--cores", "1")
+    first.communicate()
+    table.add("two builds of one store at once", "one runs; the other gets the lock error",
+              f"first exit {first.returncode}; second exit {second.code}: "
+              f"{first_line(second.err)[:70]}",
+              first.returncode == 0 and second.code == 1 and "another build" in second.err,
+              second)
+
+
+def bad_input_rows(table: Table, base: Path) -> None:
+    folder = base / "bad"
+    folder.mkdir()
+    spec = write_spec(folder)
+    text = spec.read_text()
+
+    def row(case: str, content: str | None, *args: str, command: str = "validate") -> None:
+        path = folder / f"{case.split()[0]}.yaml"
+        if content is not None:
+            path.write_text(content)
+        r = sonicspec(command, str(path), *args)
+        table.add(case, "exit 2 with a message, bounded memory",
+                  f"exit {r.code}: {first_line(r.err)}", r.code == 2, r)
+
+    bomb = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    for k in range(1, 10):
+        refs = ", ".join([f"*a{k - 1}"] * 9)
+        bomb.append(f"a{k}: &a{k} [{refs}]")
+    row("alias-bomb (9 levels x 9)", "sonicspec: 1\n" + "\n".join(bomb) + "\n")
+    filler = "# " + "x" * 98 + "\n"
+    row("50MB spec (comments)", text + filler * (50 * 2**20 // len(filler)))
+    big = text.replace("train: {groups: 2,", "train: {groups: 1000000,")
+    row("groups-1e6 (plan)", big, command="plan")
+    row("size-1e9 m room", text.replace("size_m: [6.0, 4.5, 2.7]", "size_m: [1e9, 1e9, 1e9]"))
+    row("rays-1e7", text.replace("rays: 600", "rays: 10000000"))
+    row("outputs-/etc", text.replace("dir: out/demo", "dir: /etc"), command="build")
+    row("outputs-../../x", text.replace("dir: out/demo", "dir: ../../x"), command="build")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="no kills, no edits table")
+    args = parser.parse_args()
+    table = Table()
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp)
+        work = base / "main"
+        work.mkdir()
+        spec = write_spec(work)
+        b = sonicspec("build", str(spec), "--cores", "2")
+        table.add("fresh build", "every job runs", f"exit {b.code}, {ran(b.err)} jobs run",
+                  b.code == 0, b)
+        reference = digest(work / "out")
+        b = sonicspec("build", str(spec), "--cores", "2")
+        checked = re.search(r"checked [^\n]*", b.err)
+        table.add("rebuild, nothing changed", "no job runs, nothing re-read",
+                  f"exit {b.code}, {ran(b.err)} jobs run; {checked.group(0) if checked else '?'}",
+                  b.code == 0 and " 0 jobs run" in b.err and "0 re-read" in b.err, b)
+        damage_rows(table, work, spec, reference)
+        if not args.quick:
+            edits = base / "edits"
+            shutil.copytree(work, edits)
+            espec = edits / "demo.yaml"
+            for section, old, new in EDITS:
+                espec.write_text(espec.read_text().replace(old, new, 1))
+                predicted = json.loads(sonicspec("plan", str(espec), "--json").out)["steps"]
+                want = {s: c["added"] for s, c in predicted.items() if c["added"]}
+                b = sonicspec("build", str(espec), "--cores", "2")
+                got = {s: int(n) for s, n in re.findall(r"(\w+) (\d+)", ran(b.err).split("(")[-1])}
+                table.add(f"edit: {section}", "runs exactly the jobs plan predicts",
+                          f"plan {sum(want.values())} new, build ran {ran(b.err)}",
+                          b.code == 0 and got == want, b)
+            kill_rows(table, base, reference)
+        concurrent_row(table, base)
+        bad_input_rows(table, base)
+    print()
+    print(table.markdown())
+    print(f"\n$ python bench/bench_trust.py{' --quick' if args.quick else ''}   "
+          f"# {os.cpu_count()} cores, {time.strftime('%Y-%m-%d')}")
+
+
+if __name__ == "__main__":
+    main()
