@@ -292,3 +292,22 @@ def test_real_corpus_layouts_feed_a_build(tmp_path: Path) -> None:
     music = read(group_folder(plan) / "music.flac")
     assert integrated_loudness(music, 16000) == pytest.approx(-24 + meta["group_gain_db"],
                                                               abs=0.1)
+
+
+def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -> None:
+    """Issue 20's bug: with a small corpus a noise clip repeats in its track and its last use
+    is cut at the clip's end; the render kept only the cut copy and the full use failed
+    ("segment 'n0': needs 48000 samples ... the clip has ...")."""
+    from sonicspec.audio.arrange import Clip, arrange_background, assemble
+    from sonicspec.stages.render import _AudioCache, track_audio
+
+    fs = 16000
+    clip = np.random.default_rng(0).uniform(-0.5, 0.5, 3 * fs)
+    sf.write(str(tmp_path / "n0.wav"), clip, fs, subtype="FLOAT")
+    segments = arrange_background([Clip("n0", 3 * fs)], 10 * fs, (4, 4), (0.0, 0.0), fs,
+                                  np.random.default_rng(1))
+    assert [s.id for s in segments] == ["n0"] * 4 and segments[-1].end - segments[-1].start < 3 * fs
+    track = {"files": {"n0": {"path": "n0.wav"}}}
+    dry = assemble(segments, track_audio(track, segments, _AudioCache(fs), tmp_path), 10 * fs)
+    for s in segments:
+        np.testing.assert_allclose(dry[s.start:s.end], clip[:s.end - s.start], atol=1e-7)

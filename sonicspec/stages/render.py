@@ -47,18 +47,27 @@ def _source_geometry(placement: dict[str, Any], name: str) -> dict[str, Any]:
     return placement[name]
 
 
+def track_audio(track: dict[str, Any], segments: list[Segment], cache: _AudioCache,
+                corpus_root: Path) -> dict[str, np.ndarray]:
+    """Each clip of a track, once, as long as its longest use needs.
+
+    A clip can be used twice in one track (a small corpus split), the second use cut at the
+    clip's end: keeping the last use's length (as before) made the first use fail.
+    """
+    need: dict[str, int] = {}
+    for seg in segments:
+        need[seg.id] = max(need.get(seg.id, 0), seg.offset + seg.end - seg.start)
+    return {sid: cache.clip(str(corpus_root / track["files"][sid]["path"]), n)
+            for sid, n in need.items()}
+
+
 def render_track(track: dict[str, Any], rirs: np.ndarray, source: dict[str, Any],
                  mic_m: np.ndarray, params: dict[str, Any], cache: _AudioCache,
                  clip_samples: int, corpus_root: Path) -> dict[str, np.ndarray]:
     """``{"reverberant", "dry", and any targets}`` arrays of one track."""
     rate = params["sample_rate_hz"]
     segments = [Segment.from_dict(s) for s in track["segments"]]
-    audio = {}
-    for seg in segments:
-        info = track["files"][seg.id]
-        audio[seg.id] = cache.clip(str(corpus_root / info["path"]),
-                                   seg.offset + seg.end - seg.start)
-    dry = assemble(segments, audio, clip_samples)
+    dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
     points = np.asarray(source["rir_points_m"], dtype=np.float64)
     if len(points) != rirs.shape[0]:
         raise StageError(f"track {track['name']}: {len(points)} RIR points in the placement but "
