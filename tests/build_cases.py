@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 from sonicspec.plan.compile import compile_spec
@@ -68,3 +69,11 @@ EDITS = [  # (section of the spec, old text, new text): one edit each, applied o
     ("splits", "train: {groups: 2,", "train: {groups: 3,"),
     ("outputs", "manifests: [lhotse]", "manifests: [lhotse, csv]"),
 ]
+
+
+def readme_spec() -> str:
+    """The YAML block under "The spec in one screen" in README.md."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    found = re.search(r"^## The spec in one screen\n\n```yaml\n(.*?)^```", text, re.S | re.M)
+    assert found, "README.md: the one-screen spec block moved"
+    return found.group(1)

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from build_cases import EDITS, build_digest, plan_for, write_spec
+from build_cases import EDITS, build_digest, plan_for, readme_spec, write_spec
 
 from sonicspec.export.checksums import CHECKSUMS_NAME, DATASET_MARKER
 from sonicspec.plan.compile import plan_changes
@@ -403,3 +403,29 @@ def test_files_left_from_a_bigger_build_are_reported(copy) -> None:
     assert re.search(r"\d+ file\(s\) in the dataset folder are not part of this dataset "
                      r"\(first: train/000001/", done.stderr), done.stderr
     assert (folder / "out" / "demo" / "train" / "000001").is_dir()  # reported, not deleted
+
+
+# --- 9. the README's own spec builds -------------------------------------------------------------
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="the LibriSpeech fixture speaks")
+def test_the_readme_spec_builds(tmp_path: Path) -> None:
+    """As written, but for its group counts (1 per split instead of 100 and 10), on tiny
+    corpora in the real LibriSpeech and FSD50K layouts. It failed 52 s into the build on the
+    corpus shares, then on a noise clip repeated in its track."""
+    from sonicspec.testing import corpora as tc
+
+    text = readme_spec()
+    for old, new in (("train: {groups: 100,", "train: {groups: 1,"),
+                     ("test: {groups: 10,", "test: {groups: 1,")):
+        assert old in text
+        text = text.replace(old, new)
+    tc.write_librispeech(tmp_path / "data" / "LibriSpeech",
+                         {"train-clean-360": 3, "test-clean": 3}, 5, seed=1)
+    tc.write_fsd50k(tmp_path / "data" / "FSD50K", 10, 4, clip_duration_s=8.0, seed=2)
+    spec = tmp_path / "readme.yaml"
+    spec.write_text(text)
+    done = cli("build", str(spec), "--cores", "2")
+    assert done.returncode == 0, done.stderr
+    assert "dataset written to" in done.stderr
+    assert cli("verify", str(tmp_path / "out")).returncode == 0

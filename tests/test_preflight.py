@@ -3,14 +3,14 @@ and corpora that cannot be read (issue 16, part 3)."""
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 import soundfile as sf
+from build_cases import readme_spec
 from spec_cases import BASE
-from test_cli_spec import ROOT, run_cli
+from test_cli_spec import run_cli
 
 from sonicspec.cli import main
 from sonicspec.errors import CorpusError, SonicspecError
@@ -302,14 +302,6 @@ def test_plot_without_matplotlib_exits_2_before_any_work(
 
 
 # --- the README's one-screen spec -------------------------------------------------------
-
-
-def readme_spec() -> str:
-    """The YAML block under "The spec in one screen" in README.md."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    found = re.search(r"^## The spec in one screen\n\n```yaml\n(.*?)^```", text, re.S | re.M)
-    assert found, "README.md: the one-screen spec block moved"
-    return found.group(1)
 
 
 @pytest.mark.skipif(not espeak_available(), reason="the LibriSpeech fixture speaks with espeak-ng")
