@@ -58,7 +58,8 @@ def test_message_format_matches_the_documented_example() -> None:
     text = BASE.replace("size_m: [6, 5, 3]", "size_m: [8, -1, 3]")
     _, problems = validate_text(text, "specs/x.yaml")
     lines = [p.format("specs/x.yaml") for p in problems]
-    assert "specs/x.yaml:8:13: scenes[0].size_m: all values must be > 0 (got [8, -1, 3])" in lines
+    assert ("specs/x.yaml:8:13: scenes[0].size_m: all values must be > 0 and <= 1000 "
+            "(got [8, -1, 3])") in lines
 
 
 @pytest.mark.parametrize(

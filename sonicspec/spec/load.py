@@ -4,7 +4,7 @@ A spec is parsed with PyYAML's composer so every value keeps the line and column
 Validation errors from pydantic and from the semantic checks are turned into
 :class:`Problem` objects that name the file, the line, the column, the field path and the fix:
 
-    specs/x.yaml:14:5: scenes[1].size_m: all values must be > 0 (got [8, -1, 3])
+    specs/x.yaml:14:5: scenes[1].size_m: all values must be > 0 and <= 1000 (got [8, -1, 3])
 """
 
 from __future__ import annotations
