@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, content_key, sha256_hex
+from sonicspec.plan.hashing import canonical_json, normalised_params_and_key, sha256_hex
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,10 @@ class Job:
                 f"job step: expected one of {', '.join(STEP_BY_NAME)}, got {self.step!r}"
             )
         # Params are normalised to plain JSON data so the key and the stored copy agree.
-        object.__setattr__(self, "params", json.loads(canonical_json(self.params)))
-        key = content_key(self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs)
+        params, key = normalised_params_and_key(
+            self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs
+        )
+        object.__setattr__(self, "params", params)
         object.__setattr__(self, "key", key)
 
     def to_dict(self) -> dict[str, Any]:
