@@ -93,7 +93,8 @@ def progress(plan: Plan, store: ArtifactStore) -> list[StepProgress]:
     out = []
     for step, jobs in plan.by_step().items():
         if jobs:
-            done = sum(store.exists(step, j.key) for j in jobs)
+            present = store.present(step, (j.key for j in jobs))
+            done = sum(j.key in present for j in jobs)
             out.append(StepProgress(step, done, len(jobs)))
     return out
 
