@@ -39,7 +39,7 @@ STEPS: tuple[Step, ...] = (
 STEP_BY_NAME: Mapping[str, Step] = {s.name: s for s in STEPS}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Job:
     """One unit of work: a step applied to parameters and to the artifacts of other jobs."""
 
@@ -172,7 +172,15 @@ class Plan:
 
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps(self.to_dict(), indent=1, sort_keys=True) + "\n")
+        head = self.to_dict()
+        del head["jobs"]
+        # One job per line, streamed: a plan of 10^6 groups has 1.5 million jobs, too many to
+        # hold as one indented text (json's indenting encoder is also its slow one).
+        with tmp.open("w") as fh:
+            fh.write(json.dumps(head, sort_keys=True)[:-1] + ', "jobs": [\n')
+            for i, job in enumerate(self.jobs):
+                fh.write((",\n" if i else "") + json.dumps(job.to_dict(), sort_keys=True))
+            fh.write("\n]}\n")
         os.replace(tmp, path)
         return path
 
