@@ -125,7 +125,7 @@ class Plan:
     def __iter__(self) -> Iterator[Job]:
         return iter(self.jobs)
 
-    def to_dict(self) -> dict[str, Any]:
+    def _header(self) -> dict[str, Any]:
         return {
             "format": "sonicspec-plan",
             "version": 1,
@@ -134,8 +134,10 @@ class Plan:
             "store_dir": self.store_dir,
             "output_dir": self.output_dir,
             "spec_digest": self.spec_digest,
-            "jobs": [j.to_dict() for j in self.jobs],
         }
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self._header(), "jobs": [j.to_dict() for j in self.jobs]}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Plan:
@@ -172,12 +174,10 @@ class Plan:
 
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        head = self.to_dict()
-        del head["jobs"]
         # One job per line, streamed: a plan of 10^6 groups has 1.5 million jobs, too many to
         # hold as one indented text (json's indenting encoder is also its slow one).
         with tmp.open("w") as fh:
-            fh.write(json.dumps(head, sort_keys=True)[:-1] + ', "jobs": [\n')
+            fh.write(json.dumps(self._header(), sort_keys=True)[:-1] + ', "jobs": [\n')
             for i, job in enumerate(self.jobs):
                 fh.write((",\n" if i else "") + json.dumps(job.to_dict(), sort_keys=True))
             fh.write("\n]}\n")
