@@ -20,7 +20,7 @@ class AcousticsSpec(SpecModel):
         le=1_000_000,
         description="Rays launched per source for the late part (splitting adds children); at "
         "most 1,000,000. Rays are traced in batches of 8,192, so memory does not grow with the "
-        "count but time does: 1,000,000 rays take about 13 s per source in a 6 m room on one "
+        "count but time does: 1,000,000 rays take about 14 s per source in a 6 m room on one "
         "core, and converged references use 50,000.",
     )
     image_source_order: int = Field(

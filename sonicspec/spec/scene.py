@@ -14,8 +14,8 @@ MAX_EXTENT_M = 1000.0
 
 MAX_FLOOR_AREA_M2 = 10_000.0
 """Largest floor-plan bounding box of a procedural room, m². The walkable-area grid has a cell
-every 5 cm over that box, and a 100 m x 100 m floor already takes 4.7 GB at its peak
-(bench/RESULTS.md); a larger one would exhaust a workstation's memory."""
+every 5 cm over that box, and a 100 m x 100 m floor already takes 4.9 GB at its peak
+(bench/RESULTS.md, issue 16); a larger one would exhaust a workstation's memory."""
 
 _LIMIT = (
     f"at most {MAX_EXTENT_M:g} m per extent and {MAX_FLOOR_AREA_M2:,.0f} m² of floor plan "
@@ -114,7 +114,7 @@ class _ProceduralBase(_SceneBase):
                 "floor_area",
                 "expected at most {limit} m² of floor plan, e.g. 100 m x 100 m (got a {dx} m x "
                 "{dy} m bounding box, {area} m²); the walkable-area grid has a cell every 5 cm "
-                "and its memory grows with the area (4.7 GB for 100 m x 100 m)",
+                "and its memory grows with the area (4.9 GB for 100 m x 100 m)",
                 {"limit": f"{MAX_FLOOR_AREA_M2:,.0f}", "dx": f"{dx:g}", "dy": f"{dy:g}",
                  "area": f"{dx * dy:,.0f}"},
             )

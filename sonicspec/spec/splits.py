@@ -8,7 +8,8 @@ from sonicspec.spec.base import SpecModel
 
 MAX_GROUPS = 1_000_000
 """Most groups per split and in all splits together: 10^6 groups of 60 s are 16,700 hours of
-audio, and the plan of 10^6 groups (1.5 million jobs) already takes a few GB to compile."""
+audio, and their plan has 1.5 million jobs (20 s and 1.3 GB to compile, a 1.4 GB plan file;
+bench/RESULTS.md, issue 16)."""
 
 
 class SplitSpec(SpecModel):
