@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ from spec_cases import BASE
 from sonicspec.cli import main
 from sonicspec.spec import validate_file
 from sonicspec.spec.templates import PRESETS
+from sonicspec.spec.validate import MAX_SPEC_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,6 +67,39 @@ def test_broken_files_get_their_own_message_and_exit_2(tmp_path: Path, name: str
     assert expected in result.stderr, result.stderr
     assert "Traceback" not in result.stderr + result.stdout
     assert result.stderr.startswith(str(path)), result.stderr
+
+
+def _limit_memory_to_1_gb() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))
+
+
+def test_alias_bomb_exits_2_in_bounded_memory(tmp_path: Path) -> None:
+    # Issue 16: 9 levels x 9 aliases ("billion laughs") took 12.9 GB before it was killed.
+    lines = ["sonicspec: 1", "a0: &a0 [" + ", ".join(["lol"] * 9) + "]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    path = write(tmp_path, "bomb.yaml", "\n".join([*lines, "name: *a9", ""]))
+    result = subprocess.run([sys.executable, "-m", "sonicspec.cli", "validate", str(path)],
+                            capture_output=True, text=True, timeout=120,
+                            preexec_fn=_limit_memory_to_1_gb)
+    assert result.returncode == 2, result.stderr
+    assert f"{path}:7:10: YAML aliases expand to more than 100,000 values" in result.stderr
+    assert "Traceback" not in result.stderr and "MemoryError" not in result.stderr
+
+
+def test_too_big_file_is_refused_before_it_is_read(tmp_path: Path) -> None:
+    path = tmp_path / "huge.yaml"
+    with path.open("wb") as fh:  # sparse: 8 GiB of nothing, refused by its size alone
+        fh.truncate(8 << 30)
+    loaded, problems = validate_file(path)
+    assert loaded is None
+    assert [p.format(str(path)) for p in problems] == [
+        f"{path}: expected a spec file of at most 4.0 MiB (4,194,304 bytes), got 8192.0 MiB "
+        "(8,589,934,592 bytes); real specs are a few KB; is this the right file?"
+    ]
+    small = write(tmp_path, "limit.yaml", "# " + "x" * (MAX_SPEC_BYTES - 3) + "\n")
+    assert "the file is empty" in validate_file(small)[1][0].message  # at the bound: read
+    result = run_cli("validate", str(path))
+    assert result.returncode == 2 and "expected a spec file of at most 4.0 MiB" in result.stderr
 
 
 def test_missing_file_exits_2(tmp_path: Path) -> None:

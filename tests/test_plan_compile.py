@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sonicspec.errors import CompileError
 from sonicspec.plan.compile import compile_spec, plan_changes
-from sonicspec.plan.model import Plan
+from sonicspec.plan.hashing import canonical_json, content_key, normalised_params_and_key, shared
+from sonicspec.plan.model import STEP_BY_NAME, Plan
 from sonicspec.spec import validate_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,7 +93,8 @@ def test_groups_per_shard_regroups_without_changing_group_ids(tmp_path: Path) ->
     assert groups_a == groups_b and len(groups_a) == 6
 
 
-def test_mesh_globs_expand_and_split_by_count(tmp_path: Path) -> None:
+def sonicset_with_tiny_data(tmp_path: Path) -> str:
+    """The sonicset spec over four tiny Matterport-style scans and empty corpus folders."""
     from sonicspec.testing.meshes import write_matterport_scene
 
     for name in ("aaa", "bbb", "ccc", "ddd"):
@@ -100,7 +106,12 @@ def test_mesh_globs_expand_and_split_by_count(tmp_path: Path) -> None:
     for old, new in (("data/LibriSpeech", "ls"), ("data/FSD50K", "fsd"), ("data/fma", "fma")):
         text = text.replace(f"root: {old}", f"root: {new}")
     for d in ("ls", "fsd", "fma"):
-        (tmp_path / d).mkdir()
+        (tmp_path / d).mkdir(exist_ok=True)
+    return text
+
+
+def test_mesh_globs_expand_and_split_by_count(tmp_path: Path) -> None:
+    text = sonicset_with_tiny_data(tmp_path)
     plan = plan_of(text, tmp_path)
     scenes = {j.params["scene_id"] for j in plan.by_step()["placement"]}
     assert scenes <= {"mp3d/aaa", "mp3d/bbb", "mp3d/ccc", "mp3d/ddd"} and len(scenes) == 4
@@ -139,3 +150,54 @@ def test_sofa_hrtf_enters_the_rir_key_by_content(tmp_path: Path) -> None:
     write_tiny_sofa(str(tmp_path / "h.sofa"), 44100.0)  # other content, same path
     assert steps_changed(a, plan_of(text, tmp_path)) == {
         "rir": 4, "render": 4, "mix": 4, "export": 4, "dataset": 1}
+
+
+def test_fast_keys_are_the_reference_keys(tmp_path: Path) -> None:
+    # Jobs key their params by splicing the canonical JSON of shared sub-dicts (issue 16: a
+    # plan of 10^6 groups). The keys must stay the bytes the reference path hashes, or every
+    # user's dataset would rebuild: re-key every job of varied plans the slow way.
+    varied = (DEMO.replace("Embedded demo", "Démo «intégrée» 中文 \\u2028")
+              .replace("groups_per_shard: 2", "groups_per_shard: 3")
+              .replace("train: {groups: 4,", "train: {groups: 11,")
+              .replace("rays: 4000", "rays: 4000\n  energy_threshold_db: 60.000000000000014\n"
+                       "  receiver_radius_m: 1.0e-3"))
+    plans = [plan_of(varied, tmp_path), plan_of(sonicset_with_tiny_data(tmp_path), tmp_path)]
+    assert plans[0].jobs[-1].params["spec"]["description"].startswith("Démo «intégrée» 中文")
+    for plan in plans:
+        for job in plan:
+            version = STEP_BY_NAME[job.step].version
+            assert job.key == content_key(job.step, version, job.params, job.inputs), job.label
+            reference = json.loads(canonical_json(job.params))
+            assert job.params == reference and list(job.params) == list(reference)
+        again = Plan.from_dict(json.loads(json.dumps(plan.to_dict())))  # plain dicts, no sharing
+        assert [j.key for j in again] == [j.key for j in plan]
+
+
+_json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(min_value=-(2**70), max_value=2**70)
+    | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.tuples(inner, inner)
+    | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(params=st.dictionaries(st.text(max_size=6), _json_values, max_size=5),
+       sharable=_json_values, inputs=st.lists(st.text(max_size=4), max_size=3))
+def test_fast_path_matches_canonical_json(params: dict, sharable: object, inputs: list) -> None:
+    if isinstance(sharable, (dict, list, tuple)):
+        params = {**params, "shared": shared(sharable)}
+    plain, key = normalised_params_and_key("rir", 3, params, inputs)
+    assert key == content_key("rir", 3, params, inputs)
+    assert json.dumps(plain) == json.dumps(json.loads(canonical_json(params)))
+
+
+def test_fast_path_falls_back_for_other_types() -> None:
+    params = {"n": np.int64(3), "x": np.float32(0.5)}
+    plain, key = normalised_params_and_key("rir", 1, params)
+    assert plain == {"n": 3, "x": 0.5} and key == content_key("rir", 1, params)
+    with pytest.raises(CompileError, match=r"params.bad: cannot hash a non-finite number"):
+        normalised_params_and_key("rir", 1, {"bad": float("nan")})
+    with pytest.raises(CompileError, match=r"params: keys must be text to hash, got 1"):
+        normalised_params_and_key("rir", 1, {1: "x"})

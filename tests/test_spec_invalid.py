@@ -10,8 +10,9 @@ import pytest
 import yaml
 from spec_cases import BASE, CASES, apply
 
+from sonicspec.errors import SpecError
 from sonicspec.spec import validate_text
-from sonicspec.spec.load import format_path
+from sonicspec.spec.load import MAX_YAML_DEPTH, MAX_YAML_VALUES, format_path, parse_text
 from sonicspec.spec.schema import json_schema
 
 
@@ -57,7 +58,8 @@ def test_message_format_matches_the_documented_example() -> None:
     text = BASE.replace("size_m: [6, 5, 3]", "size_m: [8, -1, 3]")
     _, problems = validate_text(text, "specs/x.yaml")
     lines = [p.format("specs/x.yaml") for p in problems]
-    assert "specs/x.yaml:8:13: scenes[0].size_m: all values must be > 0 (got [8, -1, 3])" in lines
+    assert ("specs/x.yaml:8:13: scenes[0].size_m: all values must be > 0 and <= 1000 "
+            "(got [8, -1, 3])") in lines
 
 
 @pytest.mark.parametrize(
@@ -119,3 +121,49 @@ def test_suspicious_acoustics_are_warnings_that_name_the_field() -> None:
     assert "w.yaml:" in warned["acoustics.roulette_db"]
     assert "too few plain directions" in warned["acoustics.horizontal_guiding"]
     assert "quarter of the wavelength" in warned["acoustics.simplify_tolerance_m"]
+
+
+def billion_laughs(levels: int = 9, refs: int = 9) -> str:
+    """The classic alias bomb: each level an anchored list of ``refs`` aliases of the last."""
+    lines = ["sonicspec: 1", "a0: &a0 [" + ", ".join(["lol"] * refs) + "]"]
+    for i in range(1, levels + 1):
+        lines.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * refs) + "]")
+    lines.append(f"name: *a{levels}")
+    return "\n".join(lines) + "\n"
+
+
+def test_alias_bomb_is_refused_at_the_alias_that_overflows() -> None:
+    # 9 levels of 9 aliases expand to 9^10 strings; counting stops at the alias that first
+    # passes the bound (line 7: a5's aliases of a4, 9^5 strings each).
+    with pytest.raises(SpecError, match=r"bomb.yaml:7:10: YAML aliases expand to more than "
+                       r"100,000 values; each \*alias repeats"):
+        parse_text(billion_laughs(), "bomb.yaml")
+
+
+def test_aliases_within_the_bound_still_expand() -> None:
+    text = "sonicspec: 1\nx: &x [1, 2, 3]\ny: [*x, *x]\nz: {<<: {a: 1}, b: *x}\n"
+    data, smap = parse_text(text, "ok.yaml")
+    assert data["y"] == [[1, 2, 3], [1, 2, 3]] and data["z"] == {"a": 1, "b": [1, 2, 3]}
+    assert smap.values[("y", 1)] == (2, 4)  # an alias's values are located at their anchor
+
+
+def test_many_plain_values_are_refused() -> None:
+    text = "sonicspec: 1\nname: [" + ",".join(["1"] * (MAX_YAML_VALUES + 1)) + "]\n"
+    with pytest.raises(SpecError, match=r"wide.yaml:2:\d+: expected at most 100,000 values in a "
+                       r"spec, got more"):
+        parse_text(text, "wide.yaml")
+
+
+def test_recursive_alias_is_refused() -> None:
+    with pytest.raises(SpecError, match=r"rec.yaml:2:11: alias \*x is used inside its own "
+                       r"anchor &x; expected an alias of a value that is already complete"):
+        parse_text("sonicspec: 1\na: &x [1, *x]\n", "rec.yaml")
+
+
+@pytest.mark.parametrize("name", ["deep.yaml", "deep.json"])
+def test_deep_nesting_is_refused(name: str) -> None:
+    depth = 50 * MAX_YAML_DEPTH
+    text = '{"sonicspec": 1, "name": ' + "[" * depth + "]" * depth + "}\n"
+    with pytest.raises(SpecError, match=rf"{name}:1:\d+: expected at most 100 levels of "
+                       r"nesting, got more"):
+        parse_text(text, name)

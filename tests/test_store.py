@@ -45,6 +45,17 @@ def test_round_trip_and_provenance(tmp_path: Path) -> None:
     assert store.verify() == []
 
 
+def test_present_agrees_with_exists(tmp_path: Path) -> None:
+    store = ArtifactStore(tmp_path)
+    assert store.present("rir", ["b" * 64]) == set()  # no stage folder yet
+    key = _write_example(store)
+    unfinished = "c" * 64  # a folder without zarr.json is not an artifact
+    (tmp_path / "rir" / "cc" / f"{unfinished}.zarr").mkdir(parents=True)
+    keys = [key, unfinished, "d" * 64]
+    assert store.present("rir", keys) == {k for k in keys if store.exists("rir", k)} == {key}
+    assert store.present("mix", keys) == set()
+
+
 def test_same_inputs_give_identical_bytes(tmp_path: Path) -> None:
     a, b = ArtifactStore(tmp_path / "a"), ArtifactStore(tmp_path / "b")
     _write_example(a)

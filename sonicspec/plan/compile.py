@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, rng_for, sha256_hex
+from sonicspec.plan.hashing import canonical_json, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
@@ -295,9 +295,11 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     digests.save()
 
     split_scenes = assign_split_scenes(spec, entries)
-    mic = _dump(spec.microphone)
+    # Sub-dicts every shard's jobs repeat are made once, with their canonical JSON, so keying
+    # 10^6 groups does not encode them again per job (the keys are the same bytes).
+    mic = shared(_dump(spec.microphone))
     mixture = _dump(spec.mixture)
-    arrangement = {
+    arrangement = shared({
         k: mixture[k]
         for k in (
             "duration_s",
@@ -309,28 +311,38 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
             "music_clips",
             "music_gap_s",
         )
-    }
+    })
+    placement_spec, trajectory = shared(_dump(spec.placement)), shared(_dump(spec.trajectory))
+    acoustics, materials = shared(_dump(spec.acoustics)), shared(_dump(spec.materials))
+    loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
+    targets = shared(list(spec.mixture.targets))
+    rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
-    scene_materials = {e.id: getattr(spec.scenes[e.index], "label_materials", {}) for e in entries}
+    scene_materials = {
+        e.id: shared(getattr(spec.scenes[e.index], "label_materials", {})) for e in entries
+    }
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
     for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard"):
         outputs.pop(k)  # where and how finely: no export writes other bytes for them
+    outputs = shared(outputs)
 
     for split, scenes in split_scenes.items():
-        per_group = group_scenes(spec, split, scenes)
-        for scene_id in sorted(set(per_group)):
-            groups = [f"{split}/{i:06d}" for i, s in enumerate(per_group) if s == scene_id]
+        by_scene: dict[str, list[str]] = {}
+        for i, scene_id in enumerate(group_scenes(spec, split, scenes)):
+            by_scene.setdefault(scene_id, []).append(f"{split}/{i:06d}")
+        for scene_id in sorted(by_scene):
+            groups = by_scene[scene_id]
             for n, shard in enumerate(_shards(groups, spec.outputs.groups_per_shard)):
                 tag = f"{split}/{scene_id}#{n}"
-                common = {"groups": shard, "split": split, "seed": spec.seed}
+                common = {"groups": shared(shard), "split": split, "seed": spec.seed}
                 placement = Job(
                     "placement",
                     {
                         **common,
                         "scene_id": scene_id,
-                        "placement": _dump(spec.placement),
-                        "trajectory": _dump(spec.trajectory),
+                        "placement": placement_spec,
+                        "trajectory": trajectory,
                         "microphone": mic,
                         "speakers": spec.mixture.speakers,
                         "noise": "noise" in corpus_keys,
@@ -353,13 +365,13 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                     "rir",
                     {
                         **common,
-                        "acoustics": _dump(spec.acoustics),
-                        "materials": _dump(spec.materials),
+                        "acoustics": acoustics,
+                        "materials": materials,
                         "scene_label_materials": scene_materials[scene_id],
                         "microphone": mic,
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
                         "sample_rate_hz": spec.sample_rate_hz,
-                        "files": rir_files,
+                        "files": rir_files_shared,
                     },
                     (mesh_keys[scene_id], placement.key),
                     f"rir {tag}",
@@ -370,7 +382,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                     {
                         **common,
                         "interpolation": spec.mixture.interpolation,
-                        "targets": list(spec.mixture.targets),
+                        "targets": targets,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
@@ -382,12 +394,12 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                     "mix",
                     {
                         **common,
-                        "loudness": mixture["loudness"],
-                        "tasks": mixture["tasks"],
+                        "loudness": loudness,
+                        "tasks": tasks,
                         "speakers": spec.mixture.speakers,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "binaural": spec.microphone.kind == "binaural",
-                        "targets": list(spec.mixture.targets),
+                        "targets": targets,
                     },
                     (render.key,),
                     f"mix {tag}",

@@ -51,6 +51,106 @@ def canonical_json(value: Any) -> str:
     )
 
 
+# --- the fast path: the same text, without re-encoding what many jobs share -----------------
+#
+# A plan of 10^6 groups has 1.5 million jobs whose params repeat the same sub-dicts (acoustics,
+# materials, microphone, ...). Encoding those once and splicing their text into every job's
+# canonical JSON gives byte-identical text (hence identical keys) at a fraction of the cost.
+# The text below is what ``json.dumps(sort_keys=True, separators=(",", ":"),
+# ensure_ascii=True)`` writes: keys in sorted order, strings by the same C escaper, ints and
+# floats by their ``repr``; anything else takes the reference path (:func:`canonical_json`).
+
+_encode_str = json.encoder.encode_basestring_ascii  # type: ignore[attr-defined]
+
+
+class _NotPlain(Exception):
+    """A value the fast path does not handle; the caller falls back to :func:`canonical_json`."""
+
+
+class SharedDict(dict):
+    """A params sub-dict many jobs share, normalised once and holding its canonical JSON.
+
+    Made by :func:`shared`; jobs keep the same object (no copy per job) and their keys splice
+    its text. Treat it as read-only: its text is not recomputed.
+    """
+
+    __slots__ = ("canonical",)
+
+
+class SharedList(list):
+    """The list counterpart of :class:`SharedDict`."""
+
+    __slots__ = ("canonical",)
+
+
+def shared(value: Any) -> SharedDict | SharedList:
+    """``value`` (a mapping or a sequence) as plain JSON data carrying its canonical text."""
+    try:
+        plain, text = _fast(value)
+    except _NotPlain:
+        text = canonical_json(value)
+        plain = json.loads(text)
+    out = SharedDict(plain) if isinstance(plain, dict) else SharedList(plain)
+    out.canonical = text
+    return out
+
+
+def _fast(value: Any) -> tuple[Any, str]:
+    """(plain copy, canonical JSON) of exact JSON types and shared values; else _NotPlain."""
+    t = type(value)
+    if t is str:
+        return value, _encode_str(value)
+    if t is SharedDict or t is SharedList:
+        return value, value.canonical
+    if t is dict:
+        plain = {}
+        parts = []
+        for k in sorted(value):
+            if type(k) is not str:
+                raise _NotPlain
+            v, text = _fast(value[k])
+            plain[k] = v
+            parts.append(f"{_encode_str(k)}:{text}")
+        return plain, "{" + ",".join(parts) + "}"
+    if t is list or t is tuple:
+        items = [_fast(v) for v in value]
+        return [v for v, _ in items], "[" + ",".join(text for _, text in items) + "]"
+    if t is int:
+        return value, int.__repr__(value)
+    if t is float:
+        if not math.isfinite(value):
+            raise _NotPlain
+        return value, float.__repr__(value)
+    if value is None:
+        return None, "null"
+    if t is bool:
+        return value, "true" if value else "false"
+    raise _NotPlain
+
+
+def normalised_params_and_key(
+    stage: str, stage_version: int, params: Mapping[str, Any], input_keys: Sequence[str] = ()
+) -> tuple[dict[str, Any], str]:
+    """Params as plain JSON data (shared values kept) and the job's :func:`content_key`.
+
+    The same key as ``content_key(stage, stage_version, params, input_keys)``, byte for byte
+    (tested on whole plans), without re-encoding :func:`shared` sub-dicts for every job.
+    """
+    try:
+        if type(params) is not dict or type(stage) is not str or type(stage_version) is not int:
+            raise _NotPlain
+        plain, text = _fast(params)
+        _, inputs = _fast(list(input_keys))
+    except _NotPlain:
+        text = canonical_json(params)
+        return json.loads(text), content_key(stage, stage_version, params, input_keys)
+    # The envelope's keys in sorted order: input_keys, params, stage, stage_version.
+    return plain, sha256_hex(
+        f'{{"input_keys":{inputs},"params":{text},"stage":{_encode_str(stage)},'
+        f'"stage_version":{stage_version}}}'
+    )
+
+
 def sha256_hex(text: str | bytes) -> str:
     data = text.encode("utf-8") if isinstance(text, str) else text
     return hashlib.sha256(data).hexdigest()

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, content_key, sha256_hex
+from sonicspec.plan.hashing import canonical_json, normalised_params_and_key, sha256_hex
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ STEPS: tuple[Step, ...] = (
 STEP_BY_NAME: Mapping[str, Step] = {s.name: s for s in STEPS}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Job:
     """One unit of work: a step applied to parameters and to the artifacts of other jobs."""
 
@@ -58,8 +58,10 @@ class Job:
                 f"job step: expected one of {', '.join(STEP_BY_NAME)}, got {self.step!r}"
             )
         # Params are normalised to plain JSON data so the key and the stored copy agree.
-        object.__setattr__(self, "params", json.loads(canonical_json(self.params)))
-        key = content_key(self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs)
+        params, key = normalised_params_and_key(
+            self.step, STEP_BY_NAME[self.step].version, self.params, self.inputs
+        )
+        object.__setattr__(self, "params", params)
         object.__setattr__(self, "key", key)
 
     def to_dict(self) -> dict[str, Any]:
@@ -123,7 +125,7 @@ class Plan:
     def __iter__(self) -> Iterator[Job]:
         return iter(self.jobs)
 
-    def to_dict(self) -> dict[str, Any]:
+    def _header(self) -> dict[str, Any]:
         return {
             "format": "sonicspec-plan",
             "version": 1,
@@ -132,8 +134,10 @@ class Plan:
             "store_dir": self.store_dir,
             "output_dir": self.output_dir,
             "spec_digest": self.spec_digest,
-            "jobs": [j.to_dict() for j in self.jobs],
         }
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self._header(), "jobs": [j.to_dict() for j in self.jobs]}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Plan:
@@ -170,7 +174,13 @@ class Plan:
 
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps(self.to_dict(), indent=1, sort_keys=True) + "\n")
+        # One job per line, streamed: a plan of 10^6 groups has 1.5 million jobs, too many to
+        # hold as one indented text (json's indenting encoder is also its slow one).
+        with tmp.open("w") as fh:
+            fh.write(json.dumps(self._header(), sort_keys=True)[:-1] + ', "jobs": [\n')
+            for i, job in enumerate(self.jobs):
+                fh.write((",\n" if i else "") + json.dumps(job.to_dict(), sort_keys=True))
+            fh.write("\n]}\n")
         os.replace(tmp, path)
         return path
 

@@ -17,8 +17,11 @@ class AcousticsSpec(SpecModel):
     rays: int = Field(
         20_000,
         ge=100,
-        le=10_000_000,
-        description="Rays launched per source for the late part (splitting adds children).",
+        le=1_000_000,
+        description="Rays launched per source for the late part (splitting adds children); at "
+        "most 1,000,000. Rays are traced in batches of 8,192, so memory does not grow with the "
+        "count but time does: 1,000,000 rays take about 14 s per source in a 6 m room on one "
+        "core, and converged references use 50,000.",
     )
     image_source_order: int = Field(
         3, ge=0, le=8, description="Highest reflection order found exactly by image sources."

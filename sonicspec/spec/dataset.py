@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
+from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.spec.base import Identifier, SpecModel, SplitName
@@ -15,7 +16,7 @@ from sonicspec.spec.mixture import MixtureSpec
 from sonicspec.spec.outputs import OutputsSpec
 from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import SceneSpec
-from sonicspec.spec.splits import SplitSpec
+from sonicspec.spec.splits import MAX_GROUPS, SplitSpec
 from sonicspec.spec.trajectory import ShortestPathTrajectorySpec, TrajectorySpec
 
 SPEC_VERSION = 1
@@ -48,8 +49,22 @@ class DatasetSpec(SpecModel):
     corpora: CorporaSpec = Field(description="Speech, noise and music corpora.")
     mixture: MixtureSpec = Field(default_factory=MixtureSpec, description="Mixing recipe.")
     splits: dict[SplitName, SplitSpec] = Field(
-        min_length=1, description="Splits by name (e.g. train, val, test)."
+        min_length=1,
+        description="Splits by name (e.g. train, val, test); at most 1,000,000 groups in all.",
     )
     outputs: OutputsSpec = Field(
         default_factory=OutputsSpec, description="Output locations and formats."
     )
+
+    @field_validator("splits")
+    @classmethod
+    def _groups_bounded(cls, splits: dict[str, SplitSpec]) -> dict[str, SplitSpec]:
+        total = sum(s.groups for s in splits.values())
+        if total > MAX_GROUPS:
+            raise PydanticCustomError(
+                "groups_total",
+                "expected at most {limit} groups in all splits together (got {total}: {each})",
+                {"limit": f"{MAX_GROUPS:,}", "total": f"{total:,}",
+                 "each": ", ".join(f"{k}: {s.groups:,}" for k, s in splits.items())},
+            )
+        return splits

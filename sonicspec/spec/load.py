@@ -4,7 +4,7 @@ A spec is parsed with PyYAML's composer so every value keeps the line and column
 Validation errors from pydantic and from the semantic checks are turned into
 :class:`Problem` objects that name the file, the line, the column, the field path and the fix:
 
-    specs/x.yaml:14:5: scenes[1].size_m: all values must be > 0 (got [8, -1, 3])
+    specs/x.yaml:14:5: scenes[1].size_m: all values must be > 0 and <= 1000 (got [8, -1, 3])
 """
 
 from __future__ import annotations
@@ -89,6 +89,91 @@ class LoadedSpec:
     warnings: tuple[Problem, ...] = ()
 
 
+MAX_YAML_VALUES = 100_000
+"""Most values (scalars, lists, mappings) a document may hold once its aliases are expanded.
+
+Real specs hold a few hundred; a polygon with 1,000 corners about 3,000. The bound stops an
+alias bomb ("billion laughs": nine nested aliases, each used nine times, expand to 10^9 values)
+while it is parsed, before any Python object is made for it."""
+
+MAX_YAML_DEPTH = 100
+"""Most levels of nesting a document may have (real specs have under ten); deeper nesting
+would exhaust the parser's recursion instead of failing with a message."""
+
+
+class _LimitError(yaml.YAMLError):
+    """A document over :data:`MAX_YAML_VALUES` or :data:`MAX_YAML_DEPTH`, or a recursive alias."""
+
+    def __init__(self, problem: str, mark: yaml.Mark) -> None:
+        super().__init__(problem)
+        self.problem = problem
+        self.problem_mark = mark
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, counting as it composes what the aliases would expand to.
+
+    The composer makes an alias point to its anchor's node, so composing stays as small as the
+    text; building Python values from that graph copies the anchor's values at every use. Each
+    node's expanded size (itself and every descendant, aliases counted in full) is remembered
+    by identity, so an alias adds its anchor's size in one step: counting costs one pass over
+    the text, whatever the aliases would expand to.
+    """
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._sizes: dict[int, int] = {}
+        self._values = 0
+        self._depth = 0
+        self._aliased = False
+
+    def _count(self, n: int, mark: yaml.Mark) -> None:
+        self._values += n
+        if self._values > MAX_YAML_VALUES:
+            if self._aliased:
+                what = (
+                    f"YAML aliases expand to more than {MAX_YAML_VALUES:,} values; each *alias "
+                    "repeats everything under its &anchor, so nested aliases grow exponentially "
+                    "(write the values out, or use fewer aliases)"
+                )
+            else:
+                what = (
+                    f"expected at most {MAX_YAML_VALUES:,} values in a spec, got more; "
+                    "real specs hold a few hundred (is this the right file?)"
+                )
+            raise _LimitError(what, mark)
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            node = super().compose_node(parent, index)
+            size = self._sizes.get(id(node))
+            if size is None:
+                raise _LimitError(
+                    f"alias *{event.anchor} is used inside its own anchor &{event.anchor}; "
+                    "expected an alias of a value that is already complete",
+                    event.start_mark,
+                )
+            self._aliased = True
+            self._count(size, event.start_mark)
+            return node
+        self._depth += 1
+        if self._depth > MAX_YAML_DEPTH:
+            raise _LimitError(
+                f"expected at most {MAX_YAML_DEPTH} levels of nesting, got more", event.start_mark
+            )
+        self._count(1, event.start_mark)
+        node = super().compose_node(parent, index)
+        self._depth -= 1
+        size = 1
+        if isinstance(node, yaml.SequenceNode):
+            size += sum(self._sizes[id(item)] for item in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            size += sum(self._sizes[id(k)] + self._sizes[id(v)] for k, v in node.value)
+        self._sizes[id(node)] = size
+        return node
+
+
 def _mark(node: yaml.Node) -> tuple[int, int]:
     return node.start_mark.line + 1, node.start_mark.column + 1
 
@@ -138,9 +223,15 @@ def parse_text(text: str, source: str) -> tuple[Any, SourceMap]:
         except json.JSONDecodeError as exc:
             problem = Problem((), f"malformed JSON: {exc.msg}", exc.lineno, exc.colno)
             raise SpecError(problem.format(source), [problem]) from None
-    loader = yaml.SafeLoader(text)
+        except RecursionError:
+            pass  # nested too deep for the JSON parser: the YAML pass below says where
+    loader = _BoundedLoader(text)
     try:
         node = loader.get_single_node()
+    except _LimitError as exc:
+        mark = exc.problem_mark
+        problem = Problem((), exc.problem, mark.line + 1, mark.column + 1)
+        raise SpecError(problem.format(source), [problem]) from None
     except yaml.composer.ComposerError as exc:
         line = exc.problem_mark.line + 1 if exc.problem_mark else None
         col = exc.problem_mark.column + 1 if exc.problem_mark else None

@@ -4,14 +4,27 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
+from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.base import Identifier, SpecModel, vector
 
-Vec2 = vector(2)
-Vec3 = vector(3)
-PositiveVec2 = vector(2, gt=0)
-PositiveVec3 = vector(3, gt=0)
+MAX_EXTENT_M = 1000.0
+"""Largest size or coordinate of a procedural room or obstacle, metres (each extent)."""
+
+MAX_FLOOR_AREA_M2 = 10_000.0
+"""Largest floor-plan bounding box of a procedural room, m². The walkable-area grid has a cell
+every 5 cm over that box, and a 100 m x 100 m floor already takes 4.9 GB at its peak
+(bench/RESULTS.md, issue 16); a larger one would exhaust a workstation's memory."""
+
+_LIMIT = (
+    f"at most {MAX_EXTENT_M:g} m per extent and {MAX_FLOOR_AREA_M2:,.0f} m² of floor plan "
+    "(the walkable-area grid's memory grows with the floor area)"
+)
+Vec2 = vector(2, ge=-MAX_EXTENT_M, le=MAX_EXTENT_M)
+Vec3 = vector(3, ge=-MAX_EXTENT_M, le=MAX_EXTENT_M)
+PositiveVec2 = vector(2, gt=0, le=MAX_EXTENT_M)
+PositiveVec3 = vector(3, gt=0, le=MAX_EXTENT_M)
 
 
 class SurfaceMaterialsSpec(SpecModel):
@@ -26,8 +39,12 @@ class BoxObstacleSpec(SpecModel):
     """An axis-aligned box (before yaw) standing in the room, e.g. a cabinet or a partition."""
 
     kind: Literal["box"] = Field(description="Obstacle type.")
-    center_m: Vec3 = Field(description="Centre of the box in scene coordinates, metres.")
-    size_m: PositiveVec3 = Field(description="Edge lengths along x, y, z before rotation, metres.")
+    center_m: Vec3 = Field(
+        description="Centre of the box in scene coordinates, metres (within ±1000)."
+    )
+    size_m: PositiveVec3 = Field(
+        description="Edge lengths along x, y, z before rotation, metres (at most 1000)."
+    )
     yaw_deg: float = Field(0.0, description="Rotation about the vertical axis, degrees.")
     material: str = Field("wood_panel", description="Material of every face of the box.")
     label: str = Field("furniture", description="Semantic label (mpcat40 category) of the box.")
@@ -37,10 +54,17 @@ class CylinderObstacleSpec(SpecModel):
     """A vertical cylinder, e.g. a column or a round table."""
 
     kind: Literal["cylinder"] = Field(description="Obstacle type.")
-    center_xy_m: Vec2 = Field(description="Axis position on the floor plan, metres.")
-    radius_m: float = Field(gt=0, description="Radius, metres.")
-    height_m: float = Field(gt=0, description="Height, metres.")
-    base_z_m: float = Field(0.0, description="Height of the bottom face above z = 0, metres.")
+    center_xy_m: Vec2 = Field(
+        description="Axis position on the floor plan, metres (within ±1000)."
+    )
+    radius_m: float = Field(gt=0, le=MAX_EXTENT_M / 2, description="Radius, metres (at most 500).")
+    height_m: float = Field(gt=0, le=MAX_EXTENT_M, description="Height, metres (at most 1000).")
+    base_z_m: float = Field(
+        0.0,
+        ge=-MAX_EXTENT_M,
+        le=MAX_EXTENT_M,
+        description="Height of the bottom face above z = 0, metres (within ±1000).",
+    )
     material: str = Field("concrete_painted", description="Material of the cylinder.")
     label: str = Field("column", description="Semantic label (mpcat40 category).")
 
@@ -52,7 +76,9 @@ class MeshObstacleSpec(SpecModel):
     path: str = Field(
         min_length=1, description="Mesh file (glb, gltf, ply, obj), relative to the spec file."
     )
-    position_m: Vec3 = Field(description="Where the mesh's origin is placed, metres.")
+    position_m: Vec3 = Field(
+        description="Where the mesh's origin is placed, metres (within ±1000)."
+    )
     yaw_deg: float = Field(0.0, description="Rotation about the vertical axis, degrees.")
     scale: float = Field(1.0, gt=0, description="Uniform scale applied before placing (unitless).")
     material: str = Field("wood_panel", description="Material of every face of the object.")
@@ -76,12 +102,30 @@ class _ProceduralBase(_SceneBase):
         default_factory=list, description="Objects placed in the room, each with its own material."
     )
 
+    def floor_polygon(self) -> list[tuple[float, float]]:
+        raise NotImplementedError
+
+    @model_validator(mode="after")
+    def _floor_area_bounded(self) -> _ProceduralBase:
+        xs, ys = zip(*self.floor_polygon(), strict=True)
+        dx, dy = max(xs) - min(xs), max(ys) - min(ys)
+        if dx * dy > MAX_FLOOR_AREA_M2:
+            raise PydanticCustomError(
+                "floor_area",
+                "expected at most {limit} m² of floor plan, e.g. 100 m x 100 m (got a {dx} m x "
+                "{dy} m bounding box, {area} m²); the walkable-area grid has a cell every 5 cm "
+                "and its memory grows with the area (4.9 GB for 100 m x 100 m)",
+                {"limit": f"{MAX_FLOOR_AREA_M2:,.0f}", "dx": f"{dx:g}", "dy": f"{dy:g}",
+                 "area": f"{dx * dy:,.0f}"},
+            )
+        return self
+
 
 class ShoeboxSceneSpec(_ProceduralBase):
     """A rectangular room occupying [0, size] along x, y and z (z up)."""
 
     kind: Literal["shoebox"] = Field(description="Scene type.")
-    size_m: PositiveVec3 = Field(description="Length, width, height, metres.")
+    size_m: PositiveVec3 = Field(description=f"Length, width, height, metres; {_LIMIT}.")
 
     def floor_polygon(self) -> list[tuple[float, float]]:
         x, y, _ = self.size_m
@@ -95,8 +139,10 @@ class CylinderSceneSpec(_ProceduralBase):
     """A round room centred on (radius, radius), floor at z = 0."""
 
     kind: Literal["cylinder"] = Field(description="Scene type.")
-    radius_m: float = Field(gt=0, description="Radius, metres.")
-    height_m: float = Field(gt=0, description="Height, metres.")
+    radius_m: float = Field(
+        gt=0, le=MAX_EXTENT_M / 2, description=f"Radius, metres (at most 500); {_LIMIT}."
+    )
+    height_m: float = Field(gt=0, le=MAX_EXTENT_M, description="Height, metres (at most 1000).")
     segments: int = Field(48, ge=8, le=1024, description="Facets approximating the circle.")
 
     def floor_polygon(self) -> list[tuple[float, float]]:
@@ -119,7 +165,7 @@ class LShapeSceneSpec(_ProceduralBase):
     """An L-shaped room: the ``size_m`` box minus a ``cutout_m`` corner at its +x, +y end."""
 
     kind: Literal["l_shape"] = Field(description="Scene type.")
-    size_m: PositiveVec3 = Field(description="Outer length, width, height, metres.")
+    size_m: PositiveVec3 = Field(description=f"Outer length, width, height, metres; {_LIMIT}.")
     cutout_m: PositiveVec2 = Field(
         description="Size along x and y of the corner removed at (+x, +y), metres; "
         "smaller than the outer size."
@@ -139,9 +185,12 @@ class PolygonSceneSpec(_ProceduralBase):
 
     kind: Literal["polygon"] = Field(description="Scene type.")
     floor_m: list[Vec2] = Field(
-        min_length=3, description="Floor-plan vertices [x, y] in order (either direction), metres."
+        min_length=3,
+        description=f"Floor-plan vertices [x, y] in order (either direction), metres; {_LIMIT}.",
     )
-    height_m: float = Field(gt=0, description="Ceiling height, metres.")
+    height_m: float = Field(
+        gt=0, le=MAX_EXTENT_M, description="Ceiling height, metres (at most 1000)."
+    )
 
     def floor_polygon(self) -> list[tuple[float, float]]:
         return [tuple(p) for p in self.floor_m]

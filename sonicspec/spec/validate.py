@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Collection
 from pathlib import Path
 
@@ -86,14 +87,34 @@ def validate_text(
     return LoadedSpec(spec=spec, source=source, base_dir=base, warnings=warnings), problems
 
 
+MAX_SPEC_BYTES = 4 * 1024 * 1024
+"""Largest spec file read (4 MiB). Real specs are a few KB (specs/sonicset.yaml, 90 scenes by
+glob, is 2.9 KB); the bound keeps a wrong file (a mesh, a log, a generated dump) from costing
+minutes and gigabytes of parsing. The file's size is checked before it is read."""
+
+
+def _mib(n: int) -> str:
+    return f"{n / (1024 * 1024):.1f} MiB ({n:,} bytes)"
+
+
 def validate_file(
     path: str | Path, *, files: bool = False, cli_outputs: Collection[str] = ()
 ) -> tuple[LoadedSpec | None, list[Problem]]:
     """Validate the spec file at ``path`` (see :func:`validate_text`)."""
     path = Path(path)
     source = str(path)
+    limit = f"expected a spec file of at most {_mib(MAX_SPEC_BYTES)}, got"
+    hint = "real specs are a few KB; is this the right file?"
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open(encoding="utf-8") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size > MAX_SPEC_BYTES:
+                return None, [Problem((), f"{limit} {_mib(size)}; {hint}")]
+            # At most one character past the bound: a file that grows while it is read, or
+            # a device that reports size 0, is still not read whole.
+            text = fh.read(MAX_SPEC_BYTES + 1)
+        if len(text) > MAX_SPEC_BYTES:
+            return None, [Problem((), f"{limit} more; {hint}")]
     except FileNotFoundError:
         return None, [Problem((), "no such file")]
     except IsADirectoryError:

@@ -55,6 +55,12 @@ class CheckReport:
     files_hashed: int = 0
 
 
+def present_keys(plan: Plan, store: ArtifactStore) -> set[str]:
+    """Keys of the plan's jobs whose artifacts are in the store."""
+    return {k for step, jobs in plan.by_step().items() if jobs
+            for k in store.present(step, (j.key for j in jobs))}
+
+
 def written_files(job: Job, data: Any) -> Iterator[dict[str, Any]]:
     """The dataset-folder files an ``export`` or ``dataset`` artifact records."""
     if job.step == "export":
@@ -88,7 +94,7 @@ def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repai
                    tick: Callable[[str], None] | None = None) -> CheckReport:
     """Check what the plan already has; with ``repair``, remove what must be made again."""
     report = CheckReport()
-    present = {j.key for j in plan.jobs if store.exists(j.step, j.key)}
+    present = present_keys(plan, store)
     bad: dict[str, str] = {}
     out = Path(plan.output_dir)
     for n, job in enumerate(plan.jobs):

@@ -30,7 +30,7 @@ from sonicspec.export.checksums import (
 from sonicspec.plan.model import STEPS, Job, Plan, Step
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import progress_path
-from sonicspec.stages.repair import CheckReport, check_existing, record_written
+from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
 from sonicspec.store import ArtifactStore
 from sonicspec.store.lock import StoreLock
 
@@ -109,7 +109,8 @@ def progress(plan: Plan, store: ArtifactStore) -> list[StepProgress]:
     out = []
     for step, jobs in plan.by_step().items():
         if jobs:
-            done = sum(store.exists(step, j.key) for j in jobs)
+            present = store.present(step, (j.key for j in jobs))
+            done = sum(j.key in present for j in jobs)
             out.append(StepProgress(step, done, len(jobs)))
     return out
 
@@ -346,7 +347,7 @@ def build(
             print(f"removed {len(check.removed)} artifact(s) to remake them (the damaged ones "
                   "and the jobs that follow from them)", file=stream)
         cache.save()
-        present = {j.key for j in plan.jobs if store.exists(j.step, j.key)}
+        present = present_keys(plan, store)
         code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
                                         dry_run=dry_run, stream=stream, poll_s=poll_s,
                                         on_start=on_start, snakemake_args=snakemake_args,

@@ -18,7 +18,7 @@ import shutil
 import socket
 import time
 import uuid
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -109,6 +109,29 @@ class ArtifactStore:
             doomed = path.parent / f"{TEMP_PREFIX}{key}-removed-{uuid.uuid4().hex[:8]}.zarr"
             os.rename(path, doomed)
             shutil.rmtree(doomed, ignore_errors=True)
+    def present(self, stage: str, keys: Iterable[str]) -> set[str]:
+        """Those of ``keys`` whose artifact exists (as :meth:`exists` says).
+
+        Lists each prefix folder once instead of a ``stat`` per key: a plan of 10^6 groups
+        has 1.5 million jobs, and most of them are usually not built.
+        """
+        wanted = set(keys)
+        found: set[str] = set()
+        folder = self.root / stage
+        try:
+            prefixes = os.listdir(folder)
+        except (FileNotFoundError, NotADirectoryError):
+            return found
+        for prefix in prefixes:
+            try:
+                names = os.listdir(folder / prefix)
+            except (FileNotFoundError, NotADirectoryError):
+                continue
+            for name in names:
+                key = name[: -len(".zarr")]
+                if name.endswith(".zarr") and key in wanted and self.exists(stage, key):
+                    found.add(key)
+        return found
 
     def write(
         self,
