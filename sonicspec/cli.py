@@ -253,7 +253,7 @@ def cmd_job(args: argparse.Namespace) -> int:
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr
     )
-    run_job(Plan.read(Path(args.plan)), args.key)
+    run_job(Plan.read_job(Path(args.plan), args.key), args.key)
     return EXIT_OK
 
 

@@ -50,6 +50,31 @@ def test_plan_round_trips_through_json(tmp_path: Path) -> None:
     assert [j.key for j in Plan.read(path)] == [j.key for j in plan]
 
 
+def test_a_job_reads_only_its_excerpt_of_the_plan(tmp_path: Path) -> None:
+    plan = plan_of(DEMO, tmp_path)
+    path = plan.write(tmp_path / "plan.json")
+    jobs = plan.by_key()
+    for job in plan.jobs:
+        part = Plan.read_job(path, job.key)
+        assert part.excerpt and (part.name, part.seed, part.store_dir) == (
+            plan.name, plan.seed, plan.store_dir)
+        assert [j.key for j in part.jobs] == [*dict.fromkeys(job.inputs), job.key]
+        assert all(j.params == jobs[j.key].params and j.paths == jobs[j.key].paths
+                   for j in part.jobs)
+    # Another layout (an older plan file, indented) is read whole, with the same result.
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(plan.to_dict(), indent=1, sort_keys=True))
+    export = plan.by_step()["export"][0]
+    assert [j.key for j in Plan.read_job(old, export.key).jobs] == [
+        j.key for j in Plan.read_job(path, export.key).jobs]
+    with pytest.raises(CompileError, match="no job with key 000000000000"):
+        Plan.read_job(path, "0" * 64)
+    path.write_text(path.read_text().replace('"rays": 4000', '"rays": 4001', 1))
+    rir = plan.by_step()["rir"][0]
+    with pytest.raises(CompileError, match="parameters hash to"):
+        Plan.read_job(path, rir.key)
+
+
 def test_edited_plan_file_is_refused(tmp_path: Path) -> None:
     plan = plan_of(DEMO, tmp_path)
     path = plan.write(tmp_path / "plan.json")
@@ -176,8 +201,9 @@ def test_fast_keys_are_the_reference_keys(tmp_path: Path) -> None:
 _json_values = st.recursive(
     st.none() | st.booleans() | st.integers(min_value=-(2**70), max_value=2**70)
     | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=8),
-    lambda inner: st.lists(inner, max_size=4) | st.tuples(inner, inner)
-    | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    lambda inner: st.one_of(st.lists(inner, min_size=1, max_size=4), st.tuples(inner, inner),
+                            st.dictionaries(st.text(max_size=6), inner, min_size=1,
+                                            max_size=4)),
     max_leaves=20,
 )
 

@@ -9,7 +9,12 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, normalised_params_and_key, sha256_hex
+from sonicspec.plan.hashing import (
+    KEY_LENGTH,
+    canonical_json,
+    normalised_params_and_key,
+    sha256_hex,
+)
 
 
 @dataclass(frozen=True)
@@ -85,8 +90,12 @@ class Plan:
     output_dir: str
     spec_digest: str
     jobs: tuple[Job, ...]
+    excerpt: bool = field(default=False, compare=False)
+    """Only some jobs of a plan (:meth:`read_job`): their inputs' inputs are not in it."""
 
     def __post_init__(self) -> None:
+        if self.excerpt:
+            return
         seen: set[str] = set()
         for job in self.jobs:
             missing = [k for k in job.inputs if k not in seen]
@@ -140,7 +149,7 @@ class Plan:
         return {**self._header(), "jobs": [j.to_dict() for j in self.jobs]}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+    def from_dict(cls, data: Mapping[str, Any], *, excerpt: bool = False) -> Plan:
         if data.get("format") != "sonicspec-plan" or data.get("version") != 1:
             raise CompileError("plan file: not a sonicspec plan (version 1)")
         jobs = []
@@ -166,6 +175,7 @@ class Plan:
             data["output_dir"],
             data["spec_digest"],
             tuple(jobs),
+            excerpt,
         )
 
     def write(self, path: Path) -> Path:
@@ -183,6 +193,64 @@ class Plan:
             fh.write("\n]}\n")
         os.replace(tmp, path)
         return path
+
+    @classmethod
+    def read_job(cls, path: Path, key: str) -> Plan:
+        """The excerpt of a plan file that one job needs: the header, the job and the jobs of
+        its inputs, each checked against its key.
+
+        ``sonicspec job`` runs once per job: parsing and re-hashing every job of the plan in
+        each would cost more than many jobs (a plan of 10^6 groups takes minutes to read).
+        Plans are written one job per line (:meth:`write`), so two passes over the lines find
+        the few that matter. Any other layout is read whole.
+        """
+        marker = ', "jobs": [\n'
+        try:
+            with open(path) as fh:
+                first = fh.readline()
+                if not first.endswith(marker):
+                    return cls._excerpt(cls.read(path), key)
+                header = json.loads(first[: -len(marker)] + "}")
+                job = cls._lines_with_keys(fh, {key})
+                if key not in job:
+                    raise CompileError(f"plan file {path}: no job with key {key[:12]}")
+                fh.seek(0)
+                fh.readline()
+                wanted = set(job[key]["inputs"])
+                items = cls._lines_with_keys(fh, wanted) if wanted else {}
+        except FileNotFoundError:
+            raise CompileError(f"plan file {path}: does not exist") from None
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CompileError(f"plan file {path}: unreadable ({exc})") from exc
+        missing = wanted - set(items)
+        if missing:
+            raise CompileError(f"plan file {path}: job {key[:12]} needs "
+                               f"{sorted(missing)[0][:12]}, which the plan does not have")
+        order = [items[k] for k in job[key]["inputs"]] + [job[key]]
+        data = {**header, "jobs": list({item["key"]: item for item in order}.values())}
+        return cls.from_dict(data, excerpt=True)
+
+    @staticmethod
+    def _lines_with_keys(lines, keys: set[str]) -> dict[str, dict[str, Any]]:
+        found: dict[str, dict[str, Any]] = {}
+        tag = '"key": "'
+        for line in lines:
+            at = line.find(tag)
+            if at >= 0 and line[at + len(tag): at + len(tag) + KEY_LENGTH] in keys:
+                item = json.loads(line.rstrip().rstrip(","))
+                found[item["key"]] = item
+                if len(found) == len(keys):
+                    break
+        return found
+
+    @classmethod
+    def _excerpt(cls, plan: Plan, key: str) -> Plan:
+        jobs = plan.by_key()
+        if key not in jobs:
+            raise CompileError(f"plan: no job with key {key[:12]}")
+        order = [jobs[k] for k in jobs[key].inputs] + [jobs[key]]
+        return cls(plan.name, plan.seed, plan.store_dir, plan.output_dir, plan.spec_digest,
+                   tuple({j.key: j for j in order}.values()), excerpt=True)
 
     @classmethod
     def read(cls, path: Path) -> Plan:
