@@ -388,6 +388,9 @@ def test_skipped_corpus_files_are_counted_in_the_summary_and_dataset_json(tmp_pa
     done = cli("build", str(spec), "--cores", "2")
     assert done.returncode == 0, done.stderr
     assert re.search(r"corpus files skipped .*: noise 1 \(first: broken\.wav, ", done.stderr)
+    # The corpus job's warning is in the summary too, with the job's label.
+    assert re.search(r"\d+ warnings? in the jobs' logs:\n(  .*\n)*  corpus noise: .*WARNING"
+                     r".*broken\.wav", done.stderr), done.stderr
     summary = json.loads((tmp_path / "out" / "demo" / "dataset.json").read_text())
     skipped = summary["corpus_files_skipped"]
     assert skipped["noise"]["count"] == 1 and skipped["noise"]["files"][0]["path"] == "broken.wav"
