@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +34,11 @@ from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.bands import default_bands
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
-from sonicspec.acoustics.metrics import figures_from_energy
+from sonicspec.acoustics.metrics import (
+    RoomAcousticFigures,
+    figures_from_energy,
+    room_acoustic_figures,
+)
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplify_flat_areas
@@ -48,12 +53,15 @@ if TYPE_CHECKING:
 __all__ = [
     "LATE_ENVELOPE_RELATIVE_WIDTH",
     "RENDERED_KINDS",
+    "RirResult",
     "SimulationSettings",
     "acoustic_scene",
+    "check_inside",
     "check_receiver",
     "load_hrirs",
     "ray_trace_settings",
     "receiver_renderer",
+    "rir_results",
     "simulate_rirs",
     "traced_geometry",
 ]
@@ -283,6 +291,121 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     return rirs, facts
 
 
+@dataclass(frozen=True, eq=False)
+class RirResult:
+    """One RIR and the facts about it.
+
+    Attributes
+    ----------
+    rir : (channels, samples) float32
+        Sound pressure for a unit point source (free-field direct sound 1/(4πr) at r/c);
+        channels as the receiver renders them (ACN/SN3D for ambisonics, left/right ears).
+    sample_rate_hz : int
+    bands_hz : tuple of float
+        The octave bands simulated (and of the per-band figures).
+    source_m, mic_m : tuple of float
+        The positions, metres.
+    arrivals : int
+        Early arrivals rendered exactly: the direct sound and the image sources.
+    direct : {"visible", "through walls", "blocked"}
+        The direct path: in sight, heard through transmitting surfaces, or absent.
+    image_source_order : int
+        The image-source order completed (lower than asked when a scene has too many).
+    escaped_ray_fraction : float
+        Share of the traced energy that left the scene (a leaking mesh shows here).
+    expected : dict
+        T30, EDT and C50 per band of the energy the RIR was synthesised to have, without the
+        late noise's draw (:func:`~sonicspec.acoustics.metrics.figures_from_energy`).
+    traced_faces : int
+        Triangles traced (after flat areas were merged).
+    """
+
+    rir: np.ndarray
+    sample_rate_hz: int
+    bands_hz: tuple[float, ...]
+    source_m: tuple[float, ...]
+    mic_m: tuple[float, ...]
+    arrivals: int
+    direct: str
+    image_source_order: int
+    escaped_ray_fraction: float
+    expected: dict[str, Any]
+    traced_faces: int
+
+    @cached_property
+    def figures(self) -> RoomAcousticFigures:
+        """ISO 3382-1 figures of the first channel (the omni W channel for ambisonics, the
+        left ear for binaural), per band and broadband."""
+        return room_acoustic_figures(self.rir[0], self.sample_rate_hz, self.bands_hz)
+
+    @property
+    def t30_s(self) -> np.ndarray:
+        """T30 per band, seconds (NaN where the decay does not reach -35 dB)."""
+        return self.figures.t30_s
+
+    @property
+    def edt_s(self) -> np.ndarray:
+        """Early decay time per band, seconds."""
+        return self.figures.edt_s
+
+    @property
+    def c50_db(self) -> np.ndarray:
+        """Clarity C50 per band, dB."""
+        return self.figures.c50_db
+
+    @property
+    def drr_db(self) -> float:
+        """Direct-to-reverberant ratio, dB (broadband)."""
+        return self.figures.drr_db
+
+    @property
+    def direct_visible(self) -> bool:
+        """Whether the source is in sight of the microphone."""
+        return self.direct == "visible"
+
+    @property
+    def distance_m(self) -> float:
+        return float(np.linalg.norm(np.subtract(self.source_m, self.mic_m)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The facts, JSON-ready (what ``sonicspec rir --json`` prints, without the RIR)."""
+        return {"arrivals": self.arrivals, "direct": self.direct,
+                "image_source_order": self.image_source_order,
+                "escaped_ray_fraction": self.escaped_ray_fraction, "expected": self.expected,
+                "source_m": list(self.source_m), "mic_m": list(self.mic_m),
+                "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
+                "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
+                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict()}
+
+
+def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                settings: SimulationSettings, rng: np.random.Generator,
+                microphone: Mapping[str, Any] | None = None, hrirs: HrirSet | None = None,
+                n_threads: int = 1) -> list[RirResult]:
+    """:func:`simulate_rirs` for a few positions, each RIR with its facts and figures.
+
+    Parameters and randomness as :func:`simulate_rirs` (with ``expected_figures``), whose
+    RIRs these are, byte for byte.
+
+    Returns
+    -------
+    list of RirResult
+        One per source position.
+    """
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    rirs, facts = simulate_rirs(scene, mic_m, points, settings, rng, microphone=microphone,
+                                hrirs=hrirs, n_threads=n_threads, expected_figures=True)
+    mic = tuple(float(v) for v in np.asarray(mic_m, dtype=np.float64).reshape(3))
+    return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
+                      bands_hz=tuple(settings.bands_hz),
+                      source_m=tuple(float(v) for v in point), mic_m=mic,
+                      arrivals=f["arrivals"], direct=f["direct"],
+                      image_source_order=f["image_source_order"],
+                      escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
+                      traced_faces=scene.n_faces)
+            for rir, f, point in zip(rirs, facts, points, strict=True)]
+
+
 Renderer = Callable[[Arrivals, Any, np.random.Generator], np.ndarray]
 
 
@@ -360,6 +483,21 @@ def load_hrirs(path: str | Path) -> HrirSet:
         return hrir_set_from_sofa(sofa)
     except AcousticsError as exc:
         raise AcousticsError(f"microphone.hrtf.path: {path}: {exc}") from exc
+
+
+def check_inside(vertices: np.ndarray, where: str, **points: Any) -> None:
+    """Refuse positions outside the bounding box of a scene's ``vertices``.
+
+    Raises
+    ------
+    AcousticsError
+        Naming the position (the keyword it came as), the scene (``where``) and its bounds.
+    """
+    lo, hi = np.min(vertices, axis=0), np.max(vertices, axis=0)
+    for name, p in points.items():
+        if np.any(np.asarray(p) < lo) or np.any(np.asarray(p) > hi):
+            raise AcousticsError(f"{name}: {list(p)} is outside {where} "
+                                 f"(bounds {lo.round(2).tolist()} .. {hi.round(2).tolist()})")
 
 
 def check_receiver(microphone: Mapping[str, Any], hrirs: HrirSet | None = None) -> None:

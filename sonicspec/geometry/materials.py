@@ -333,8 +333,8 @@ def _warn_fallback(mesh: SceneMesh, fell_back: dict[str, str], library: Material
     share = sum(s for s, _ in items)
     warnings.warn(
         f"{where}: expected a material for every face label, got none for "
-        f"{', '.join(text for _, text in items)}; they take library {library.name!r}'s "
-        f"fallback ({100 * share:.1f} % of the area in all); map each label to a material "
+        f"{', '.join(text for _, text in items)}; the fallback of library {library.name!r} "
+        f"covers {100 * share:.1f} % of the area in all; map each label to a material "
         "(a default material covers faces without a label)",
         SonicspecWarning, stacklevel=3)
 

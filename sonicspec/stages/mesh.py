@@ -107,13 +107,7 @@ def build_scene_mesh(
                             scene["default_material"], where=f"scene {scene_id!r}")
     repair = scene["repair"]
     if repair["enabled"]:
-        settings = RepairSettings(
-            merge_distance_m=repair["merge_distance_m"],
-            min_component_area_m2=repair["min_component_area_m2"],
-            max_hole_size_m=repair["max_hole_size_m"],
-            orient=repair["orient"],
-            if_not_watertight=repair["on_leak"],
-        )
+        settings = RepairSettings.from_spec(repair)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", SonicspecWarning)
             mesh, rep = repair_mesh(mesh, settings)

@@ -15,12 +15,13 @@ import numpy as np
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
+    check_inside,
     check_receiver,
     load_hrirs,
+    rir_results,
     simulate_rirs,
 )
 from sonicspec.acoustics.image_sources import planar_regions
-from sonicspec.errors import AcousticsError
 from sonicspec.geometry.materials import material_library
 
 
@@ -31,7 +32,6 @@ def spec_materials(materials: dict[str, Any]):
 
 def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
     """One RIR in a spec's scene (``sonicspec rir``), and the facts to report with it."""
-    from sonicspec.acoustics.metrics import room_acoustic_figures
     from sonicspec.plan.hashing import rng_for
     from sonicspec.stages.inspect import build_scene
 
@@ -42,28 +42,26 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
         hrirs = load_hrirs(loaded.base_dir / microphone["hrtf"]["path"])
     check_receiver(microphone, hrirs)
     mesh, _, mesh_job, _, warnings = build_scene(loaded, scene_id)
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    for name, p in (("--source", source_m), ("--mic", mic_m)):
-        if np.any(np.asarray(p) < lo) or np.any(np.asarray(p) > hi):
-            raise AcousticsError(f"{name}: {list(p)} is outside scene {scene_id!r} "
-                                 f"(bounds {lo.round(2).tolist()} .. {hi.round(2).tolist()})")
+    check_inside(mesh.vertices, f"scene {scene_id!r}", **{"--source": source_m, "--mic": mic_m})
     settings = SimulationSettings.from_spec(spec.acoustics.model_dump(mode="json"),
                                             spec.sample_rate_hz, spec.speed_of_sound_m_s)
     scene = acoustic_scene(mesh, spec_materials(spec.materials.model_dump(mode="json")),
                            settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
-    (rir,), (facts,) = simulate_rirs(scene, np.asarray(mic_m), np.asarray([source_m]),
-                                     settings, rng, microphone=microphone, hrirs=hrirs,
-                                     expected_figures=True)
-    # Figures of the first channel (the omni W channel for ambisonics).
-    figures = room_acoustic_figures(rir[0], spec.sample_rate_hz, settings.bands_hz)
-    facts = {**facts, "scene_id": scene_id, "source_m": list(source_m), "mic_m": list(mic_m),
-             "channels": int(rir.shape[0]),
-             "distance_m": float(np.linalg.norm(np.subtract(source_m, mic_m))),
-             "sample_rate_hz": spec.sample_rate_hz, "samples": int(rir.shape[-1]),
-             "mesh_triangles": mesh.n_faces, "traced_triangles": scene.n_faces,
-             "figures": figures.to_dict(), "warnings": warnings}
-    return rir, facts
+    (result,) = rir_results(scene, np.asarray(mic_m), np.asarray([source_m]), settings, rng,
+                            microphone=microphone, hrirs=hrirs)
+    facts = {"scene_id": scene_id, **result.to_dict(), "mesh_triangles": mesh.n_faces,
+             "warnings": warnings}
+    return result.rir, facts
+
+
+def _material_lines(areas: dict[str, float] | None) -> list[str]:
+    """The materials of a scene and their share of its surface, on one line."""
+    if not areas:
+        return []
+    total = sum(areas.values()) or 1.0
+    return ["materials: " + ", ".join(f"{name} {area:.1f} m² ({100 * area / total:.0f} %)"
+                                      for name, area in areas.items())]
 
 
 def format_rir_facts(facts: dict[str, Any]) -> str:
@@ -85,6 +83,7 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
         f"order {facts['image_source_order']}), direct path {facts['direct']}",
         f"mesh: {facts['mesh_triangles']:,} triangles, traced as {facts['traced_triangles']:,} "
         "(flat areas merged within acoustics.simplify_tolerance_m)",
+        *_material_lines(facts.get("materials_m2")),
         f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
         *per_band(fig),
     ]
