@@ -57,8 +57,9 @@ from bench_rlr import (
 )
 
 import sonicspec.acoustics.raytrace as raytrace
+from sonicspec.acoustics.engine import acoustic_scene, ray_trace_settings
 from sonicspec.acoustics.image_sources import planar_regions
-from sonicspec.stages.rir import acoustic_scene, ray_trace_settings
+from sonicspec.geometry.materials import load_library
 
 # Session 7's `sonicset` preset, the baseline of these experiments (the preset now traces
 # 4,000 rays with roulette from 20 dB down): rays, order, splitting, ball, roulette, guiding.
@@ -108,7 +109,7 @@ def axis_guided_launch(gamma: float, half_width_rad: float):
 
 def by_azimuth(mesh) -> None:
     settings = sonicspec_settings(*PRESET)
-    scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+    scene = acoustic_scene(mesh, load_library("sonicset"), settings)
     st = dataclasses.replace(ray_trace_settings(settings, 2), guiding=0.999)
     air = settings.air()
     print("1 kHz energy of each sector's 3,000 launches (|z| < 0.02), normalised as if they "
@@ -129,7 +130,7 @@ def by_azimuth(mesh) -> None:
 def reference(mesh):
     """The apartment's scene and regions, and bench_rlr's converged T30 (mean of its 16 runs)."""
     ref_settings = sonicspec_settings(*ref_setting(20_000, False))
-    scene = acoustic_scene(mesh, {"library": "sonicset"}, ref_settings)
+    scene = acoustic_scene(mesh, load_library("sonicset"), ref_settings)
     regions = planar_regions(scene)
     t0 = time.perf_counter()
     runs = [sonicspec_rir(scene, regions, ref_settings, REF_SEED_BASE + k, 2)[1]["expected"]
@@ -195,12 +196,12 @@ def tail_roughness(mesh) -> None:
     roulette from 30 and 20 dB down, raw and as the rir stage smooths it, summed in 10 ms
     windows from 0.3 to 1.5 s: the scatter of their levels around a fitted decay, the empty
     windows (after the last ray, or between bursts) and how far T30 moves."""
+    from sonicspec.acoustics.engine import LATE_ENVELOPE_RELATIVE_WIDTH
     from sonicspec.acoustics.metrics import figures_from_energy
-    from sonicspec.stages.rir import LATE_ENVELOPE_RELATIVE_WIDTH
 
     for roulette in (30.0, 20.0):
         settings = sonicspec_settings(4000, 3, 2.0, 4.0, roulette, 0.5)
-        scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+        scene = acoustic_scene(mesh, load_library("sonicset"), settings)
         st, air = ray_trace_settings(settings, 2), settings.air()
         hists = [raytrace.trace_rays(scene, MIC_M, SOURCE_M[None], np.random.default_rng(seed),
                                      st, air)[0].histogram for seed in range(1, 9)]

@@ -84,13 +84,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_navigation import apartment, subdivide
 
+from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene, simulate_rirs
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.metrics import room_acoustic_figures
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec
-from sonicspec.stages.rir import RirSettings, acoustic_scene, simulate_rirs
 
 BANDS_HZ = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0)
 SOURCE_M = np.array([12.5, 9.0, 1.5])  # the 10 × 7 m room at x 10..20, y 7..14
@@ -338,16 +338,16 @@ def error_stats(figs: list[dict], refs: list[dict]) -> dict:
 
 # --------------------------------------------------------------------------- sonicspec (child)
 def sonicspec_settings(rays: int, order: int, splitting: float = 0.0, ball: float = 0.0,
-                       roulette: float = 0.0, guiding: float = 0.0) -> RirSettings:
+                       roulette: float = 0.0, guiding: float = 0.0) -> SimulationSettings:
     acoustics = AcousticsSpec().model_dump(mode="json")
     acoustics.update(rays=rays, image_source_order=order, ray_splitting=splitting,
                      free_air_ball_m=ball, roulette_db=roulette, horizontal_guiding=guiding)
-    return RirSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
+    return SimulationSettings.from_spec(acoustics, SAMPLE_RATE_HZ, SPEED_OF_SOUND_M_S)
 
 
-def sonicspec_rir(scene, regions, settings: RirSettings, seed: int, n_threads: int
+def sonicspec_rir(scene, regions, settings: SimulationSettings, seed: int, n_threads: int
                   ) -> tuple[np.ndarray, dict]:
-    """One mono RIR by the rir stage's ``simulate_rirs`` (the same bytes whatever
+    """One mono RIR by the engine's ``simulate_rirs`` (the same bytes whatever
     ``n_threads``) and its facts: the image-source order completed (3 stops at 2 in this scene:
     more than 2 M candidates; its warning is silenced here) and the *expected* figures of the
     same trace (``facts["expected"]``): T30, EDT and C50 per band of the energy the RIR is
@@ -361,14 +361,14 @@ def sonicspec_rir(scene, regions, settings: RirSettings, seed: int, n_threads: i
     return rir[0].astype(np.float64), facts
 
 
-def prepared_scene(tmp: Path, settings: RirSettings):
+def prepared_scene(tmp: Path, settings: SimulationSettings):
     """Embree scene, planar regions and the tracer's per-scene tables, built once per mesh,
     and its compiled kernels, loaded once per process (a 10-ray RIR does both, through every
     step a timed RIR takes: image sources, trace, synthesis, figures); returns the scene, the
     regions and the seconds."""
     mesh = load_mesh(tmp)
     w0, c0 = time.perf_counter(), time.process_time()
-    scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+    scene = acoustic_scene(mesh, load_library("sonicset"), settings)
     regions = planar_regions(scene)
     sonicspec_rir(scene, regions, dataclasses.replace(settings, rays=10), 0, 1)
     return scene, regions, time.perf_counter() - w0, time.process_time() - c0
@@ -609,7 +609,7 @@ def main() -> int:
         rlr_material_json(mesh, tmp / "rlr_materials.json")
         diffuse_material_json(tmp / "rlr_materials.json", tmp / "rlr_materials_diffuse.json")
         settings = sonicspec_settings(1000, 1)
-        scene = acoustic_scene(mesh, {"library": "sonicset"}, settings)
+        scene = acoustic_scene(mesh, load_library("sonicset"), settings)
         distance = check_positions(scene, SOURCE_M, MIC_M)
         counts = np.bincount(mesh.face_material, minlength=len(mesh.materials))
         print(f"python {platform.python_version()}, {os.cpu_count()} cpus, load average "

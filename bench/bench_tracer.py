@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sonicspec.acoustics import engine
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
@@ -38,7 +39,6 @@ from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplified_scene
 from sonicspec.acoustics.theory import shoebox_decay_t60
 from sonicspec.spec.acoustics import AcousticsSpec
-from sonicspec.stages import rir as rir_stage
 
 BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
 SIZE = (10.0, 7.0, 3.0)
@@ -211,7 +211,7 @@ def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
 
     fs = 16_000
     bands = default_bands(fs)  # the spec's "auto": 125 Hz - 4 kHz at 16 kHz
-    settings = rir_stage.RirSettings(
+    settings = engine.SimulationSettings(
         sample_rate_hz=fs, bands_hz=bands, rays=n_rays, image_source_order=3,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True, temperature_c=20.0,
         relative_humidity_pct=50.0, transmission=False, diffuse_rain=True,
@@ -228,14 +228,14 @@ def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
           f"alpha 0.2, s 0.5, {n_rays} rays, ISM order 3, {fs} Hz, bands {list(bands)}")
     print("Eyring T30 [s]:", np.round(eyring, 3))
 
-    # sonicspec: the stage's own function, its pieces timed in passing
+    # sonicspec: the engine's own function (what the rir stage calls), its pieces timed in passing
     warm_up()
     totals: dict[str, float] = {}
     for name in ("direct_sound", "image_sources", "trace_rays", "synthesize_rir"):
-        _timed(rir_stage, name, totals)
+        _timed(engine, name, totals)
     t = time.perf_counter()
-    rirs, facts = rir_stage.simulate_rirs(scene, TRAJ_MIC, points, settings,
-                                          np.random.default_rng(0))
+    rirs, facts = engine.simulate_rirs(scene, TRAJ_MIC, points, settings,
+                                       np.random.default_rng(0))
     t_ss = time.perf_counter() - t
     rest = t_ss - sum(totals.values())
     print(f"sonicspec simulate_rirs: {t_ss:6.2f} s for {n_points} RIRs "
@@ -348,12 +348,12 @@ def equal_accuracy(seeds: int = 6) -> None:
           f"{seeds} seeds; T30 (500 Hz-1 kHz): Eyring {eyring:.3f} s, exact {exact:.3f} s")
     ours = []
     for rays in (100, 200, 500, 1_000, 2_000):
-        st = rir_stage.RirSettings(rays=rays, **settings)
+        st = engine.SimulationSettings(rays=rays, **settings)
         times, t30 = [], []
         for seed in range(seeds):
             t = time.perf_counter()
-            (rir,), _ = rir_stage.simulate_rirs(scene, RCV[0], SRC[None], st,
-                                                np.random.default_rng(seed), regions)
+            (rir,), _ = engine.simulate_rirs(scene, RCV[0], SRC[None], st,
+                                             np.random.default_rng(seed), regions)
             times.append(time.perf_counter() - t)
             t30.append(mid_t30(rir[0]))
         ours.append(stats("sonicspec", rays, times, t30))

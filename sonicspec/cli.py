@@ -326,28 +326,99 @@ def cmd_scene_inspect(args: argparse.Namespace) -> int:
 
 
 def cmd_rir(args: argparse.Namespace) -> int:
-    from sonicspec.stages.rir import format_rir_facts, rir_from_spec
+    from sonicspec.stages.rir import format_rir_facts
 
     if _plot_unavailable(args):
         return EXIT_INVALID
-    loaded = _load_or_exit(args.spec)
-    if loaded is None or not _choose_scene(loaded, args):
+    if (args.spec is None) == (args.mesh is None):
+        print("sonicspec: error: rir: expected a SPEC or --mesh FILE, got "
+              f"{'both' if args.spec else 'neither'}", file=sys.stderr)
         return EXIT_INVALID
-    rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
+    if args.mesh is not None:
+        if args.scene is not None:
+            print("sonicspec: error: --scene: expected a SPEC to choose a scene from, got "
+                  "--mesh; the mesh is the scene", file=sys.stderr)
+            return EXIT_INVALID
+        rir, facts = _rir_of_mesh(args)
+        if rir is None:
+            return EXIT_INVALID
+        title = f"{Path(args.mesh).name}: source {args.source} -> mic {args.mic}"
+    else:
+        mesh_only = [flag for flag, value in (
+            ("--material", args.material), ("--default-material", args.default_material),
+            ("--library", args.library), ("--repair", args.repair), ("--rays", args.rays),
+            ("--seed", args.seed), ("--sample-rate", args.sample_rate))
+            if value not in (None, False)]
+        if mesh_only:
+            print(f"sonicspec: error: {mesh_only[0]}: expected --mesh FILE with it, got a "
+                  "SPEC (the spec sets materials, acoustics and the seed)", file=sys.stderr)
+            return EXIT_INVALID
+        from sonicspec.stages.rir import rir_from_spec
+
+        loaded = _load_or_exit(args.spec)
+        if loaded is None or not _choose_scene(loaded, args):
+            return EXIT_INVALID
+        rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
+        title = f"{args.scene}: source {args.source} -> mic {args.mic}"
+    for warning in facts["warnings"]:
+        print(f"sonicspec: warning: {warning}", file=sys.stderr)
     if args.output:
         from sonicspec.export.files import write_audio
 
-        write_audio(Path(args.output), rir, loaded.spec.sample_rate_hz,
+        write_audio(Path(args.output), rir, facts["sample_rate_hz"],
                     audio_format="wav", subtype="FLOAT")
         facts["output"] = args.output
     if args.plot:
         from sonicspec.export.plots import plot_rir
 
-        plot_rir(rir[0], loaded.spec.sample_rate_hz, facts["figures"]["bands_hz"], Path(args.plot),
-                 title=f"{args.scene}: source {args.source} -> mic {args.mic}")
+        plot_rir(rir[0], facts["sample_rate_hz"], facts["figures"]["bands_hz"], Path(args.plot),
+                 title=title)
         facts["plot"] = args.plot
     print(json.dumps(facts, indent=2) if args.json else format_rir_facts(facts))
     return EXIT_OK
+
+
+def _rir_of_mesh(args: argparse.Namespace):
+    """``sonicspec rir --mesh``: the RIR and facts through the Python API, or (None, None)
+    after a message when the mesh, a label or a material name is wrong."""
+    import warnings
+
+    from pydantic import ValidationError
+
+    from sonicspec.api import RirSettings, Scene, compute_rir
+    from sonicspec.errors import SonicspecError, SonicspecWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SonicspecWarning)
+        try:
+            scene = Scene.from_file(args.mesh, dict(args.material or []),
+                                    default_material=args.default_material,
+                                    library=args.library or "sonicspec", repair=args.repair)
+        except SonicspecError as exc:
+            print(f"sonicspec: error: {exc}", file=sys.stderr)
+            return None, None
+        flags = {"rays": ("--rays", args.rays), "sample_rate_hz": ("--sample-rate",
+                                                                   args.sample_rate)}
+        try:
+            settings = RirSettings(**{k: v for k, (_, v) in flags.items() if v is not None})
+        except ValidationError as exc:
+            error = exc.errors()[0]
+            print(f"sonicspec: error: {flags[error['loc'][0]][0]}: {error['msg'].lower()}, got "
+                  f"{error['input']}", file=sys.stderr)
+            return None, None
+        result = compute_rir(scene, args.source, args.mic, settings, seed=args.seed or 0)
+    facts = {"scene_id": scene.name, **result.to_dict(), "mesh_triangles": scene.mesh.n_faces,
+             "materials_m2": scene.material_areas_m2(),
+             "warnings": [str(w.message) for w in caught
+                          if issubclass(w.category, SonicspecWarning)]}
+    return result.rir, facts
+
+
+def _label_material(text: str) -> tuple[str, str]:
+    label, sep, name = text.partition("=")
+    if not sep or not label or not name:
+        raise argparse.ArgumentTypeError(f"expected LABEL=NAME, got {text!r}")
+    return label, name
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -442,9 +513,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
     p.set_defaults(func=cmd_scene_inspect)
 
-    p = sub.add_parser("rir", help="one room impulse response in a spec's scene, with T30, EDT, "
-                       "C50 and DRR")
-    p.add_argument("spec", metavar="SPEC")
+    p = sub.add_parser("rir", help="one room impulse response, in a spec's scene or in a mesh "
+                       "file, with T30, EDT, C50 and DRR")
+    p.add_argument("spec", metavar="SPEC", nargs="?",
+                   help="a dataset spec (or give --mesh instead)")
     p.add_argument("--scene", metavar="ID", help="scene id (required if the spec has several)")
     p.add_argument("--source", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
                    help="source position, metres")
@@ -453,6 +525,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="RIR.wav", help="write the RIR (float32 WAV)")
     p.add_argument("--plot", metavar="FILE.png", help="waveform, decay curves, arrivals")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    g = p.add_argument_group("without a spec", "a mesh file (glb, gltf, obj, ply; metres, "
+                             "z up for obj/ply) whose labels (object or group names, PLY "
+                             "face labels) map to materials; the spec's acoustics defaults")
+    g.add_argument("--mesh", metavar="FILE", help="the room's mesh file")
+    g.add_argument("--material", metavar="LABEL=NAME", action="append", type=_label_material,
+                   help="material of a label (repeat for each label)")
+    g.add_argument("--default-material", metavar="NAME",
+                   help="material of faces without a label")
+    g.add_argument("--library", choices=("sonicspec", "sonicset"),
+                   help="material library (default: sonicspec)")
+    g.add_argument("--repair", action="store_true",
+                   help="repair the mesh first (off: the mesh is traced as given)")
+    g.add_argument("--rays", type=int, metavar="N", help="rays traced (default: 20000)")
+    g.add_argument("--seed", type=int, metavar="N", help="random seed (default: 0)")
+    g.add_argument("--sample-rate", type=int, metavar="HZ", help="sample rate (default: 16000)")
     p.set_defaults(func=cmd_rir)
 
     p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")

@@ -77,3 +77,11 @@ def readme_spec() -> str:
     found = re.search(r"^## The spec in one screen\n\n```yaml\n(.*?)^```", text, re.S | re.M)
     assert found, "README.md: the one-screen spec block moved"
     return found.group(1)
+
+
+def readme_python() -> str:
+    """The Python block under "One RIR from Python" in README.md."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    found = re.search(r"^## One RIR from Python\n.*?^```python\n(.*?)^```", text, re.S | re.M)
+    assert found, "README.md: the Python example block moved"
+    return found.group(1)

@@ -169,15 +169,15 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     runs, 125 Hz went to +11.5 % in 2 of 30). Asserted too: the default threshold does
     truncate (its T30 the shorter over the bands)."""
     pra = pytest.importorskip("pyroomacoustics")
+    from sonicspec.acoustics import engine
     from sonicspec.acoustics.bands import default_bands
-    from sonicspec.stages import rir as rir_stage
 
     fs = 16_000
     bands = default_bands(fs)
     size, n_faces = (10.0, 7.0, 3.0), 12
     scene = AcousticScene(*shoebox(*size), np.full((n_faces, len(bands)), 0.2),
                           np.full((n_faces, len(bands)), 0.5), np.zeros((n_faces, len(bands))))
-    settings = rir_stage.RirSettings(
+    settings = engine.SimulationSettings(
         rays=5_000, sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=False,
         temperature_c=20.0, relative_humidity_pct=50.0, transmission=False,
@@ -187,8 +187,8 @@ def test_t30_against_pyroomacoustics_hybrid_in_the_same_room():
     # which next to pyroomacoustics' own run-to-run spread left the 10 % with a thin margin
     # (one run in ~20 failed at 500 Hz with a single 20,000-ray RIR).
     ours = np.mean([room_acoustic_figures(
-        rir_stage.simulate_rirs(scene, RCV[0], SRC[None], settings,
-                                np.random.default_rng(seed))[0][0][0].astype(np.float64),
+        engine.simulate_rirs(scene, RCV[0], SRC[None], settings,
+                             np.random.default_rng(seed))[0][0][0].astype(np.float64),
         fs, bands).t30_s for seed in range(4)], axis=0)
 
     def pyroomacoustics_t30(seed: int, **ray_tracing) -> np.ndarray:
@@ -524,10 +524,10 @@ def test_settings_and_input_errors():
 def spec_default_trace_settings(max_time_s: float) -> RayTraceSettings:
     """The tracer settings the spec's default ``acoustics`` section gives (roulette 30 dB,
     horizontal guiding 0.3, 20,000 rays)."""
+    from sonicspec.acoustics.engine import SimulationSettings, ray_trace_settings
     from sonicspec.spec.acoustics import AcousticsSpec
-    from sonicspec.stages.rir import RirSettings, ray_trace_settings
 
-    rir = RirSettings.from_spec(AcousticsSpec().model_dump(mode="json"), 16_000, 343.0)
+    rir = SimulationSettings.from_spec(AcousticsSpec().model_dump(mode="json"), 16_000, 343.0)
     return RayTraceSettings(**{**ray_trace_settings(rir, 3).__dict__, "max_time_s": max_time_s})
 
 

@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 import trimesh
 
+from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene
 from sonicspec.acoustics.image_sources import image_sources
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplified_scene, simplify_flat_areas
 from sonicspec.errors import AcousticsError
+from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.procedural import add_obstacles, box_obstacle, l_shape
 from sonicspec.spec.acoustics import AcousticsSpec
-from sonicspec.stages.rir import RirSettings, acoustic_scene
 from sonicspec.testing.rooms import shoebox, uniform_scene
 
 
@@ -199,11 +200,11 @@ def test_the_rir_stage_traces_the_simplified_mesh_unless_told_not_to(tolerance_m
     acoustics = AcousticsSpec().model_dump(mode="json")
     if tolerance_m is not None:
         acoustics["simplify_tolerance_m"] = tolerance_m
-    settings = RirSettings.from_spec(acoustics, 16_000, 343.0)
-    scene = acoustic_scene(mesh, {"library": "sonicspec"}, settings)
+    settings = SimulationSettings.from_spec(acoustics, 16_000, 343.0)
+    scene = acoustic_scene(mesh, load_library("sonicspec"), settings)
     assert (scene.n_faces < len(faces) / 10) is simplified
     # The same coefficients on the same areas either way.
-    full = acoustic_scene(mesh, {"library": "sonicspec"},
+    full = acoustic_scene(mesh, load_library("sonicspec"),
                           dataclasses.replace(settings, simplify_tolerance_m=0.0))
     np.testing.assert_allclose(scene.face_areas_m2 @ scene.absorption,
                                full.face_areas_m2 @ full.absorption, rtol=1e-9)

@@ -156,13 +156,13 @@ def test_rir_stage_shapes_the_tail_by_the_smoothed_envelope(monkeypatch) -> None
     rays and roulette from 20 dB down (a sparse late histogram) the RIR's 10 ms windows after
     0.3 s are silent far less often than when it is shaped by the raw histogram (2 against 7
     of ~33 here), and its expected figures are those of the smoothed energy."""
+    from sonicspec.acoustics import engine
     from sonicspec.acoustics.bands import default_bands
-    from sonicspec.stages import rir as rir_stage
     from sonicspec.testing.rooms import shoebox, uniform_scene
 
     bands = default_bands(FS)
     scene = uniform_scene(*shoebox(10.0, 7.0, 3.0), alpha=0.2, s=0.5, n_bands=len(bands))
-    settings = rir_stage.RirSettings(
+    settings = engine.SimulationSettings(
         rays=200, sample_rate_hz=FS, bands_hz=bands, image_source_order=2,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True,
         temperature_c=20.0, relative_humidity_pct=50.0, transmission=False, diffuse_rain=True,
@@ -170,7 +170,7 @@ def test_rir_stage_shapes_the_tail_by_the_smoothed_envelope(monkeypatch) -> None
         roulette_db=20.0)  # fmt: skip
 
     def silent_windows() -> tuple[int, dict]:
-        (rir,), (facts,) = rir_stage.simulate_rirs(
+        (rir,), (facts,) = engine.simulate_rirs(
             scene, np.array([7.2, 4.9, 1.6]), np.array([[2.1, 3.3, 1.4]]), settings,
             np.random.default_rng(0), expected_figures=True)
         x = rir[0].astype(np.float64)

@@ -134,3 +134,103 @@ def test_positions_outside_and_unsupported_receivers(spec: Path, tmp_path: Path,
     direct = round(json.loads(out)["distance_m"] / 343 * 16000)
     energy = np.sum(ears[direct - 20: direct + 20] ** 2, axis=0)
     assert energy[1] / energy[0] == pytest.approx(0.25, rel=0.15)
+
+
+def write_room_obj(path: Path, objects: dict[str, list[str]]) -> Path:
+    """A 10 x 7 x 3 m box (normals into the air) as an obj file, one object per key."""
+    v = [(0, 0, 0), (10, 0, 0), (10, 7, 0), (0, 7, 0), (0, 0, 3), (10, 0, 3), (10, 7, 3),
+         (0, 7, 3)]
+    faces = {"floor": [(0, 1, 2), (0, 2, 3)], "ceiling": [(4, 6, 5), (4, 7, 6)],
+             "walls": [(0, 4, 5), (0, 5, 1), (1, 5, 6), (1, 6, 2), (2, 6, 7), (2, 7, 3),
+                       (3, 7, 4), (3, 4, 0)]}
+    lines = [f"v {x} {y} {z}" for x, y, z in v]
+    for name, surfaces in objects.items():
+        lines.append(f"o {name}")
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for s in surfaces for a, b, c in faces[s]]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_mesh_file_without_a_spec(tmp_path: Path, capsys) -> None:
+    """`sonicspec rir --mesh`: materials by label, the spec's acoustics defaults, a WAV."""
+    obj = write_room_obj(tmp_path / "room.obj", {"floor": ["floor"],
+                                                 "shell": ["walls", "ceiling"]})
+    wav = tmp_path / "rir.wav"
+    args = ["rir", "--mesh", str(obj), "--material", "floor=carpet_on_concrete", "--material",
+            "shell=gypsum_board", "--source", "2", "2", "1.5", "--mic", "7", "4.5", "1.6"]
+    code, out, err = run(capsys, *args, "--rays", "2000", "--seed", "3", "-o", str(wav),
+                         "--json")
+    assert code == 0 and err == ""
+    facts = json.loads(out)
+    assert facts["scene_id"] == "room.obj" and facts["warnings"] == []
+    assert facts["materials_m2"] == {"gypsum_board": pytest.approx(172.0),
+                                     "carpet_on_concrete": pytest.approx(70.0)}
+    assert facts["direct"] == "visible" and facts["channels"] == 1
+    rir, rate = sf.read(wav, dtype="float32")
+    assert rate == 16000 and len(rir) == facts["samples"] == 2 * 16000
+    # The same seed, the same bytes; the text report names the materials.
+    code, out, _ = run(capsys, *args, "--rays", "2000", "--seed", "3", "-o",
+                       str(tmp_path / "again.wav"))
+    assert np.array_equal(sf.read(tmp_path / "again.wav", dtype="float32")[0], rir)
+    assert "RIR in room.obj:" in out
+    assert "materials: gypsum_board 172.0 m² (71 %), carpet_on_concrete 70.0 m² (29 %)" in out
+
+
+def test_faces_left_to_the_default_material_are_printed(tmp_path: Path, capsys) -> None:
+    obj = write_room_obj(tmp_path / "room.obj", {"floor": ["floor"],
+                                                 "shell": ["walls", "ceiling"]})
+    code, out, err = run(capsys, "rir", "--mesh", str(obj), "--material",
+                         "floor=carpet_on_concrete", "--rays", "500", "--source", "2", "2",
+                         "1.5", "--mic", "7", "4.5", "1.6", "--json")
+    assert code == 0
+    expected = ("room.obj: expected a material for every face label, got none for 'shell' "
+                "(71.1 % of the area -> plaster_on_concrete)")
+    assert err.startswith(f"sonicspec: warning: {expected}")
+    assert json.loads(out)["warnings"][0].startswith(expected)
+    # A spec's mesh scene says it too (its warnings used to reach only --json).
+    (tmp_path / "spec.yaml").write_text(SPEC.replace(
+        "scenes:\n", "scenes:\n  - {kind: mesh, id: scan, path: room.obj}\n").replace(
+        "scenes: [ell]}", "scenes: [ell, scan]}"))
+    code, out, err = run(capsys, "rir", str(tmp_path / "spec.yaml"), "--scene", "scan",
+                         "--source", "2", "2", "1.5", "--mic", "7", "4.5", "1.6")
+    assert code == 0 and "RIR in scan:" in out
+    assert "sonicspec: warning: scene 'scan': expected a material for every face label, got " \
+           "none for 'shell' (71.1 % of the area -> plaster_on_concrete)" in err
+
+
+def test_mesh_errors_name_the_file_the_label_or_the_material(spec: Path, tmp_path: Path,
+                                                             capsys) -> None:
+    obj = write_room_obj(tmp_path / "room.obj", {"floor": ["floor"],
+                                                 "shell": ["walls", "ceiling"]})
+    where = ["--source", "2", "2", "1.5", "--mic", "7", "4.5", "1.6"]
+    for extra, message in (
+        (["--mesh", str(tmp_path / "nope.obj")], "load_mesh: expected an existing file, got "
+         "missing path"),
+        (["--mesh", str(obj), "--material", "flor=marble"], "materials: expected labels of "
+         "room.obj ('floor', 'shell'), got 'flor'; did you mean 'floor'?"),
+        (["--mesh", str(obj), "--material", "floor=plaster_on_brik"], "materials['floor']: "
+         "expected a material of library 'sonicspec', got 'plaster_on_brik'; did you mean "
+         "'plaster_on_brick'?"),
+        (["--mesh", str(obj), "--library", "sonicset", "--default-material", "marble"],
+         "default_material: expected a material of library 'sonicset', got 'marble'"),
+        (["--mesh", str(obj), "--rays", "5"], "--rays: input should be greater than or equal "
+         "to 100, got 5"),
+        (["--mesh", str(obj), str(spec)], "rir: expected a SPEC or --mesh FILE, got both"),
+        ([], "rir: expected a SPEC or --mesh FILE, got neither"),
+        ([str(spec), "--rays", "100"], "--rays: expected --mesh FILE with it, got a SPEC"),
+        (["--mesh", str(obj), "--scene", "box"], "--scene: expected a SPEC to choose a scene "
+         "from, got --mesh"),
+    ):
+        code, out, err = run(capsys, "rir", *extra, *where)
+        assert code == 2 and out == "", extra
+        assert err.startswith(f"sonicspec: error: {message}"), (extra, err)
+    (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00garbage")
+    code, _, err = run(capsys, "rir", "--mesh", str(tmp_path / "broken.glb"), *where)
+    assert code == 2 and "broken.glb: expected a readable glb mesh" in err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["rir", "--mesh", str(obj), "--material", "floor", *where])
+    assert exit_info.value.code == 2
+    assert "--material: expected LABEL=NAME, got 'floor'" in capsys.readouterr().err
+    code, _, err = run(capsys, "rir", "--mesh", str(obj), "--source", "20", "2", "1", "--mic",
+                       "5", "5", "1")
+    assert code == 1 and "source: [20.0, 2.0, 1.0] is outside scene 'room.obj'" in err

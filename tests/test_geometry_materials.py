@@ -3,20 +3,24 @@
 from __future__ import annotations
 
 import json
+import warnings
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sonicspec.errors import GeometryError
+from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry.materials import (
     Material,
+    assign_materials,
     custom_material,
     load_library,
     mass_law_transmission,
+    material_library,
     material_names,
 )
+from sonicspec.geometry.procedural import shoebox
 from sonicspec.units import OCTAVE_BANDS_HZ
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared/reference/mp3d_material_config.json"
@@ -129,3 +133,73 @@ def test_errors_name_the_problem() -> None:
         Material("x", (125.0,), (1.5,), (0.1,), (0.0,))
     with pytest.raises(GeometryError, match="expected 1 scattering values"):
         Material("x", (125.0,), (0.5,), (0.1, 0.2), (0.0,))
+
+
+def test_custom_materials_join_a_library() -> None:
+    lib = material_library("sonicset", {"panel": {"absorption": [0.2] * 7,
+                                                  "scattering": [0.5] * 7,
+                                                  "transmission": [0.0] * 7}})
+    assert lib.name == "sonicset" and "panel" in lib.names() and "Default" in lib.names()
+    assert lib.get("panel").absorption == (0.2,) * 7
+    assert material_library("sonicspec") is load_library("sonicspec")
+
+
+def labelled_box(*labels: str):
+    """A 4 x 3 x 2.5 m box whose wall, floor and ceiling faces carry ``labels`` (in that
+    order): wall area 35 m², floor and ceiling 12 m² each (59 m² in all)."""
+    room = shoebox([4.0, 3.0, 2.5])
+    order = [labels[("wall", "floor", "ceiling").index(name)] for name in room.labels]
+    return room.replace(labels=tuple(order))
+
+
+def test_labels_map_to_materials_without_a_word() -> None:
+    mesh = labelled_box("walls", "floor", "ceiling")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = assign_materials(mesh, load_library("sonicspec"),
+                               {"walls": "gypsum_board", "ceiling": "acoustic_ceiling_tile"})
+    by_label = dict(zip(out.labels, (out.materials[out.face_material[out.face_label == i][0]]
+                                     for i in range(len(out.labels))), strict=True))
+    # "floor" is an mpcat40 category: the library's table maps it.
+    assert by_label == {"walls": "gypsum_board", "floor": "parquet_on_concrete",
+                        "ceiling": "acoustic_ceiling_tile"}
+
+
+def test_faces_that_fall_back_to_the_default_material_are_named_with_their_area() -> None:
+    """Issue 17: labels the map and the library do not know took the library's default in
+    silence. The warning names each label, its share of the area and what it got."""
+    mesh = labelled_box("walls", "floor", "roof")
+    with pytest.warns(SonicspecWarning) as record:
+        out = assign_materials(mesh, load_library("sonicspec"), {}, where="room.obj")
+    (w,) = record
+    text = str(w.message)
+    assert text.startswith("room.obj: expected a material for every face label, got none for ")
+    assert "'walls' (59.3 % of the area -> plaster_on_concrete)" in text
+    assert "'roof' (20.3 % of the area -> plaster_on_concrete)" in text
+    assert "the fallback of library 'sonicspec' covers 79.7 % of the area in all" in text
+    assert "'floor'" not in text
+    assert set(out.materials) == {"plaster_on_concrete", "parquet_on_concrete"}
+
+
+def test_a_mesh_without_labels_falls_back_whole_unless_given_a_default() -> None:
+    mesh = shoebox([4.0, 3.0, 2.5]).replace(face_label=None, labels=())
+    with pytest.warns(SonicspecWarning, match=r"got none for faces without a label \(100.0 % "
+                      r"of the area -> Default\)"):
+        out = assign_materials(mesh, load_library("sonicset"))
+    assert out.materials == ("Default",)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert assign_materials(mesh, load_library("sonicset"),
+                                default="Carpet").materials == ("Carpet",)
+
+
+def test_unlabelled_faces_and_unmatched_sonicset_labels_fall_back() -> None:
+    mesh = labelled_box("unlabeled", "floor", "zzz")
+    with pytest.warns(SonicspecWarning) as record:
+        assign_materials(mesh, load_library("sonicset"))
+    text = str(record[0].message)
+    assert "faces without a label (59.3 % of the area -> Default)" in text
+    assert "'zzz' (20.3 %" in text and "'floor'" not in text
+    with pytest.warns(SonicspecWarning, match="'zzz'") as record:
+        assign_materials(mesh, load_library("sonicset"), default="Carpet")
+    assert "got none for faces without a label" not in str(record[0].message)

@@ -157,12 +157,23 @@ def _strip_dedupe_suffix(names: list[str]) -> list[str]:
     return out
 
 
+def _obj_object_names(path: Path) -> list[str]:
+    """The distinct names of an obj file's ``o`` lines, in order."""
+    names: dict[str, None] = {}
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if line.startswith("o ") and line[2:].strip():
+                names[line[2:].strip()] = None
+    return list(names)
+
+
 def load_mesh(
     path: str | Path,
     up_axis: str = "auto",
     unit_scale: float = 1.0,
     *,
     material: str = DEFAULT_MATERIAL,
+    obj_labels: bool = False,
 ) -> SceneMesh:
     """Read a glb, gltf, ply or obj file into one :class:`SceneMesh` in the scene frame.
 
@@ -177,6 +188,11 @@ def load_mesh(
         Factor from file units to metres (0.01 for a file in centimetres).
     material : str
         Material name given to every face.
+    obj_labels : bool
+        Label an obj file's faces as a person reads the file: a lone object keeps its name
+        (trimesh drops it), and a file without objects (``o`` lines) is labelled by its
+        groups (``g`` lines). Off by default: the mesh stage reads obj files without it
+        (new labels would change what existing scenes' meshes are made of).
 
     Returns
     -------
@@ -207,6 +223,16 @@ def load_mesh(
     )
     import trimesh
 
+    lone_name = None
+    if is_obj and obj_labels and isinstance(loaded, trimesh.Trimesh):
+        objects = _obj_object_names(path)
+        if len(objects) == 1:
+            lone_name = objects[0]
+        elif not objects:
+            by_group = _trimesh_load(path, split_groups=True, group_material=False)
+            if isinstance(by_group, trimesh.Scene):
+                loaded = by_group
+
     parts: list[tuple[str | None, np.ndarray, np.ndarray, object]] = []
     if isinstance(loaded, trimesh.Scene):
         nodes = sorted(loaded.graph.nodes_geometry)
@@ -224,7 +250,7 @@ def load_mesh(
                 faces = np.asarray(geometry.faces)
             parts.append((label, vertices, faces, geometry))
     elif isinstance(loaded, trimesh.Trimesh) and len(loaded.faces):
-        parts.append((None, np.asarray(loaded.vertices), np.asarray(loaded.faces), loaded))
+        parts.append((lone_name, np.asarray(loaded.vertices), np.asarray(loaded.faces), loaded))
     if not parts:
         raise GeometryError(
             f"{path}: expected a mesh with triangles, got none (an empty mesh, points or lines)"

@@ -28,6 +28,7 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -36,7 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from sonicspec.errors import GeometryError
+from sonicspec.errors import GeometryError, SonicspecWarning
+from sonicspec.geometry.mesh import UNLABELED, SceneMesh
+from sonicspec.units import OCTAVE_BANDS_HZ
 
 LIBRARY_NAMES = ("sonicspec", "sonicset")
 SONICSET_DEFAULT = "Default"
@@ -137,6 +140,15 @@ class MaterialLibrary:
             return best
         return self.label_table.get(str(label), self.default_material)
 
+    def maps_label(self, label: str) -> bool:
+        """Whether the library's rule gives ``label`` a material of its own (False: the label
+        gets the library's default material because nothing matched it)."""
+        if self.label_rule == "substring":
+            category = str(label).lower()
+            return any(x.lower() in category for _, labels in self.substring_labels
+                       for x in labels)
+        return str(label) in self.label_table
+
     def coefficients(self, names: Sequence[str], bands_hz: Sequence[float]
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Absorption, scattering and transmission, each ``(len(names), len(bands_hz))``."""
@@ -210,6 +222,121 @@ def load_library(name: str) -> MaterialLibrary:
         return _sonicset()
     raise GeometryError(f"material library: expected one of {', '.join(LIBRARY_NAMES)}, got "
                         f"{name!r}" + _hint(name, LIBRARY_NAMES))
+
+
+def material_library(name: str = "sonicspec",
+                     custom: Mapping[str, Mapping[str, Any]] | None = None) -> MaterialLibrary:
+    """A built-in library with user materials added (a name equal to a library material
+    replaces it).
+
+    Parameters
+    ----------
+    name : {"sonicspec", "sonicset"}
+        The built-in library.
+    custom : mapping, optional
+        Name -> ``{"absorption": [...], "scattering": [...], "transmission": [...],
+        "description": "..."}``, seven values per coefficient on the octave bands
+        125 Hz–8 kHz (the spec's ``materials.custom``, dumped).
+
+    Raises
+    ------
+    GeometryError
+        An unknown library, or a custom material with the wrong number of values or values
+        outside [0, 1].
+    """
+    library = load_library(name)
+    if not custom:
+        return library
+    return library.with_materials({
+        key: custom_material(key, m["absorption"], m["scattering"], m["transmission"],
+                             OCTAVE_BANDS_HZ, m.get("description", ""))
+        for key, m in custom.items()
+    })
+
+
+def assign_materials(mesh: SceneMesh, library: MaterialLibrary,
+                     label_materials: Mapping[str, str] | None = None,
+                     default: str | None = None, *, where: str = "materials") -> SceneMesh:
+    """Materials of a mesh's faces from their labels.
+
+    A label takes the material ``label_materials`` maps it to, else the library's label rule
+    (SonicSet's substring rule, or sonicspec's mpcat40 table); faces without a label take
+    ``default`` when given. Anything else falls back to the library's default material, and
+    says so.
+
+    Parameters
+    ----------
+    mesh : SceneMesh
+        The mesh, labelled or not (:func:`sonicspec.geometry.io.load_mesh` labels faces by
+        object or group name, or by a PLY face property).
+    library : MaterialLibrary
+        Whose label rule and default apply.
+    label_materials : mapping, optional
+        Label -> material name, before the library's rule.
+    default : str, optional
+        Material of faces without a label.
+    where : str
+        What the warning names (a scene id, a file).
+
+    Returns
+    -------
+    SceneMesh
+        The mesh with ``materials`` and ``face_material`` set; names are not checked against
+        the library here (:meth:`MaterialLibrary.coefficients` does).
+
+    Warns
+    -----
+    SonicspecWarning
+        Faces fell back to the library's default material: the labels (or "faces without a
+        label"), each with its share of the surface area and the material it got. An OBJ
+        whose objects lost their names, or labels the library does not know, would otherwise
+        give every such face one material in silence (4 s of T30 in a room that has 0.6 s).
+    """
+    overrides = dict(label_materials or {})
+    fell_back: dict[str, str] = {}  # label (or UNLABELED) -> the material it fell back to
+
+    def rule(label: str) -> str:
+        if label in overrides:
+            return overrides[label]
+        if label == UNLABELED and default is not None:
+            return default
+        material = library.material_for_label(label)
+        if label == UNLABELED or not library.maps_label(label):
+            fell_back[label] = material
+        return material
+
+    if mesh.face_label is None:
+        if default:
+            return mesh.with_materials(default)
+        fell_back[UNLABELED] = library.material_for_label(UNLABELED)
+        assigned = mesh.with_materials(fell_back[UNLABELED])
+    else:
+        assigned = mesh.with_materials(rule)
+    if fell_back:
+        _warn_fallback(assigned, fell_back, library, where)
+    return assigned
+
+
+def _warn_fallback(mesh: SceneMesh, fell_back: dict[str, str], library: MaterialLibrary,
+                   where: str) -> None:
+    areas = mesh.face_areas
+    total = float(areas.sum()) or 1.0
+    items = []
+    for label, material in fell_back.items():
+        if mesh.face_label is None:
+            share = 1.0
+        else:
+            share = float(areas[mesh.face_label == mesh.labels.index(label)].sum()) / total
+        name = "faces without a label" if label == UNLABELED else repr(label)
+        items.append((share, f"{name} ({100 * share:.1f} % of the area -> {material})"))
+    items.sort(key=lambda item: -item[0])
+    share = sum(s for s, _ in items)
+    warnings.warn(
+        f"{where}: expected a material for every face label, got none for "
+        f"{', '.join(text for _, text in items)}; the fallback of library {library.name!r} "
+        f"covers {100 * share:.1f} % of the area in all; map each label to a material "
+        "(a default material covers faces without a label)",
+        SonicspecWarning, stacklevel=3)
 
 
 def material_names(library: str) -> tuple[str, ...]:

@@ -38,7 +38,9 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import sparse
@@ -102,6 +104,15 @@ class RepairSettings:
     leak_test_rays: int = 0
     max_leak_fraction: float = 1e-4
     if_not_watertight: str = "warn"
+
+    @classmethod
+    def from_spec(cls, repair: Mapping[str, Any]) -> RepairSettings:
+        """The repair steps of a spec's ``repair`` section (as ``model_dump()`` gives it);
+        its leak test is left to the caller (it runs after obstacles are added)."""
+        return cls(merge_distance_m=repair["merge_distance_m"],
+                   min_component_area_m2=repair["min_component_area_m2"],
+                   max_hole_size_m=repair["max_hole_size_m"], orient=repair["orient"],
+                   if_not_watertight=repair["on_leak"])
 
     def __post_init__(self) -> None:
         for name in ("merge_distance_m", "min_component_area_m2", "max_hole_size_m"):

@@ -47,7 +47,7 @@ def build_scene(loaded: LoadedSpec, scene_id: str):
 
 def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
     """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
-    from sonicspec.stages.rir import traced_geometry  # the acoustics stack: only when asked
+    from sonicspec.acoustics.engine import traced_geometry  # the acoustics stack: only when asked
 
     spec = loaded.spec
     mesh, report, _, nav_job, caught = build_scene(loaded, scene_id)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import warnings
 from typing import Any
 
@@ -11,6 +12,8 @@ from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry import procedural as proc
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.stages.context import JobContext
+
+log = logging.getLogger("sonicspec.stages.mesh")
 
 UNIT_SCALE_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
 
@@ -61,30 +64,6 @@ def _obstacle(ob: dict[str, Any], path: str | None) -> SceneMesh:
     )
 
 
-def assign_materials(mesh: SceneMesh, library: str, overrides: dict[str, str],
-                     default: str | None) -> SceneMesh:
-    """Materials of a scan's faces from their semantic labels.
-
-    A label takes the material the spec maps it to, else the library's rule (SonicSet's
-    substring rule, or sonicspec's mpcat40 table); unlabeled faces take ``default`` when given.
-    """
-    from sonicspec.geometry.materials import load_library
-    from sonicspec.geometry.mesh import UNLABELED
-
-    lib = load_library(library)
-
-    def rule(label: str) -> str:
-        if label in overrides:
-            return overrides[label]
-        if label == UNLABELED and default is not None:
-            return default
-        return lib.material_for_label(label)
-
-    if mesh.face_label is None:
-        return mesh.with_materials(default or lib.material_for_label(UNLABELED))
-    return mesh.with_materials(rule)
-
-
 def load_scan(scene: dict[str, Any], paths: dict[str, str]) -> SceneMesh:
     """The file of a ``mesh`` scene read as the mesh stage reads it (before materials and
     repair); ``validate --check-files`` reads meshes through it too."""
@@ -109,6 +88,7 @@ def build_scene_mesh(
     params: dict[str, Any], paths: dict[str, str], rng: np.random.Generator
 ) -> tuple[SceneMesh, dict[str, Any]]:
     """The repaired scene mesh of a ``mesh`` job and a report of what was done."""
+    from sonicspec.geometry.materials import assign_materials, load_library
     from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh
 
     scene = params["scene"]
@@ -123,17 +103,11 @@ def build_scene_mesh(
         return mesh, report
 
     mesh = load_scan(scene, paths)
-    mesh = assign_materials(mesh, params["library"], params["label_materials"],
-                            scene["default_material"])
+    mesh = assign_materials(mesh, load_library(params["library"]), params["label_materials"],
+                            scene["default_material"], where=f"scene {scene_id!r}")
     repair = scene["repair"]
     if repair["enabled"]:
-        settings = RepairSettings(
-            merge_distance_m=repair["merge_distance_m"],
-            min_component_area_m2=repair["min_component_area_m2"],
-            max_hole_size_m=repair["max_hole_size_m"],
-            orient=repair["orient"],
-            if_not_watertight=repair["on_leak"],
-        )
+        settings = RepairSettings.from_spec(repair)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", SonicspecWarning)
             mesh, rep = repair_mesh(mesh, settings)
@@ -163,7 +137,17 @@ def build_scene_mesh(
 
 
 def run(ctx: JobContext) -> None:
-    mesh, report = build_scene_mesh(ctx.params, dict(ctx.job.paths), ctx.rng("mesh", ctx.job.key))
+    # Warnings raised while the mesh is built (faces that fell back to the library's default
+    # material) go to the job's log as WARNING lines, which the build summary collects.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SonicspecWarning)
+        mesh, report = build_scene_mesh(ctx.params, dict(ctx.job.paths),
+                                        ctx.rng("mesh", ctx.job.key))
+    for w in caught:
+        if issubclass(w.category, SonicspecWarning):
+            log.warning("%s", w.message)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     arrays = {"vertices": mesh.vertices, "faces": mesh.faces, "face_material": mesh.face_material}
     if mesh.face_label is not None:
         arrays["face_label"] = mesh.face_label

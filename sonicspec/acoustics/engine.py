@@ -1,0 +1,522 @@
+"""The RIR engine: a scene with materials, a microphone and source positions in, RIRs out.
+
+For one microphone and many source positions (a trajectory), the ray tracer runs once, from
+the microphone, with every position as a receiver (reciprocity: the RIR from A to B equals the
+RIR from B to A for omnidirectional ends). Direct sound and image sources are exact and cheap,
+so they are computed per position. Each position's RIR is then synthesised
+(:mod:`sonicspec.acoustics.synthesis`).
+
+Receivers: mono, linear/circular/custom arrays and ambisonics
+(:mod:`sonicspec.acoustics.receivers`), and binaural through the rigid-sphere head or a
+measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.hrtf`). A receiver is
+described by a mapping with the spec's microphone fields (``{"kind": "ambisonics", "order":
+1, ...}``, what ``MicrophoneSpec.model_dump()`` gives).
+
+This is the one acoustics module that reads the geometry library's types (a
+:class:`~sonicspec.geometry.mesh.SceneMesh` and a
+:class:`~sonicspec.geometry.materials.MaterialLibrary`): it is where a scene's materials become
+per-face coefficients. The rir stage, ``sonicspec rir`` and :func:`sonicspec.compute_rir` all
+call it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sonicspec.acoustics.air import air_energy_coefficient_per_m
+from sonicspec.acoustics.arrivals import Arrivals
+from sonicspec.acoustics.bands import default_bands
+from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.metrics import (
+    RoomAcousticFigures,
+    figures_from_energy,
+    room_acoustic_figures,
+)
+from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.simplify import simplify_flat_areas
+from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.errors import AcousticsError
+
+if TYPE_CHECKING:
+    from sonicspec.acoustics.hrtf import HrirSet
+    from sonicspec.geometry.materials import MaterialLibrary
+    from sonicspec.geometry.mesh import SceneMesh
+
+__all__ = [
+    "LATE_ENVELOPE_RELATIVE_WIDTH",
+    "RENDERED_KINDS",
+    "RirResult",
+    "SimulationSettings",
+    "acoustic_scene",
+    "check_inside",
+    "check_receiver",
+    "load_hrirs",
+    "ray_trace_settings",
+    "receiver_renderer",
+    "rir_results",
+    "simulate_rirs",
+    "traced_geometry",
+]
+
+#: The receiver a call without one gets: one omnidirectional capsule that stays put.
+MONO: Mapping[str, Any] = {"kind": "mono", "trajectory": {"kind": "static"}}
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """What the engine needs to simulate RIRs: the spec's ``acoustics`` section in the
+    tracer's terms, the sample rate and the speed of sound.
+
+    Built from the spec's settings by :meth:`from_spec` (the rir stage, ``sonicspec rir``,
+    :class:`sonicspec.RirSettings`), so the spec's defaults are the only ones a user meets;
+    the defaults below are the tracer's own (roulette, guiding and splitting off), which
+    tests and benches use to measure the tracer alone.
+    """
+
+    sample_rate_hz: int
+    bands_hz: tuple[float, ...]
+    rays: int
+    image_source_order: int
+    max_rir_length_s: float
+    energy_threshold_db: float
+    air_absorption: bool
+    temperature_c: float
+    relative_humidity_pct: float
+    transmission: bool
+    diffuse_rain: bool
+    receiver_radius_m: float
+    histogram_bin_s: float
+    speed_of_sound_m_s: float
+    ray_splitting: float = 0.0
+    free_air_ball_m: float = 0.0
+    roulette_db: float = 0.0
+    horizontal_guiding: float = 0.0
+    simplify_tolerance_m: float = 0.0
+
+    @classmethod
+    def from_spec(cls, acoustics: Mapping[str, Any], sample_rate_hz: int,
+                  speed_of_sound_m_s: float) -> SimulationSettings:
+        """The settings of a spec's ``acoustics`` section (as ``model_dump(mode="json")``
+        gives it), ``bands_hz: auto`` resolved for the sample rate."""
+        bands = acoustics["bands_hz"]
+        bands = default_bands(sample_rate_hz) if bands == "auto" else tuple(
+            float(b) for b in bands)
+        return cls(sample_rate_hz=sample_rate_hz, bands_hz=bands, rays=acoustics["rays"],
+                   image_source_order=acoustics["image_source_order"],
+                   max_rir_length_s=acoustics["max_rir_length_s"],
+                   energy_threshold_db=acoustics["energy_threshold_db"],
+                   air_absorption=acoustics["air_absorption"],
+                   temperature_c=acoustics["temperature_c"],
+                   relative_humidity_pct=acoustics["relative_humidity_pct"],
+                   transmission=acoustics["transmission"],
+                   diffuse_rain=acoustics["detection"] == "diffuse_rain",
+                   receiver_radius_m=acoustics["receiver_radius_m"],
+                   ray_splitting=acoustics["ray_splitting"],
+                   free_air_ball_m=acoustics["free_air_ball_m"],
+                   roulette_db=acoustics["roulette_db"],
+                   horizontal_guiding=acoustics["horizontal_guiding"],
+                   simplify_tolerance_m=acoustics["simplify_tolerance_m"],
+                   histogram_bin_s=acoustics["histogram_bin_s"],
+                   speed_of_sound_m_s=speed_of_sound_m_s)
+
+    def air(self) -> np.ndarray | None:
+        """Air's energy attenuation per metre and band (ISO 9613-1), or None without it."""
+        if not self.air_absorption:
+            return None
+        return air_energy_coefficient_per_m(self.bands_hz, self.temperature_c,
+                                            self.relative_humidity_pct)
+
+
+def acoustic_scene(mesh: SceneMesh, library: MaterialLibrary, settings: SimulationSettings
+                   ) -> AcousticScene:
+    """The mesh in the tracer, each face with its material's coefficients.
+
+    Parameters
+    ----------
+    mesh : SceneMesh
+        The scene; its ``materials`` are names in ``library``.
+    library : MaterialLibrary
+        Where the names resolve (a built-in library, with the user's own materials added by
+        :meth:`~sonicspec.geometry.materials.MaterialLibrary.with_materials`).
+    settings : SimulationSettings
+        The bands, whether surfaces transmit, and the flat-area tolerance
+        (``simplify_tolerance_m``; 0 traces the mesh as given).
+
+    Returns
+    -------
+    AcousticScene
+        Absorption, scattering and transmission per face and band.
+
+    Raises
+    ------
+    GeometryError
+        A material name is not in the library (with a did-you-mean hint).
+    """
+    a, s, t = library.coefficients(mesh.materials, settings.bands_hz)
+    if not settings.transmission:
+        t = np.zeros_like(t)
+    vertices, faces, kept = traced_geometry(mesh, settings.simplify_tolerance_m)
+    index = np.asarray(mesh.face_material)[kept]
+    return AcousticScene(vertices, faces, a[index], s[index], t[index])
+
+
+def traced_geometry(mesh: SceneMesh, tolerance_m: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The vertices and faces the engine traces, and for each face its index in ``mesh``:
+    flat areas merged within ``tolerance_m`` (0: the mesh as given), the materials being the
+    classes whose boundaries stay."""
+    if tolerance_m <= 0:
+        return mesh.vertices, mesh.faces, np.arange(mesh.n_faces)
+    return simplify_flat_areas(mesh.vertices, mesh.faces, mesh.face_material, tolerance_m)
+
+
+def ray_trace_settings(settings: SimulationSettings, specular_order: int) -> RayTraceSettings:
+    """The tracer's settings for one simulation; ``specular_order`` is the image-source order
+    completed (those purely specular paths are left out of the trace)."""
+    ball = settings.free_air_ball_m
+    return RayTraceSettings(
+        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
+        energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
+        receiver_radius_m=settings.receiver_radius_m,
+        specular_order_excluded=specular_order, speed_of_sound_m_s=settings.speed_of_sound_m_s,
+        diffuse_rain=settings.diffuse_rain, splitting=settings.ray_splitting,
+        roulette_db=settings.roulette_db, free_air_volume=ball > 0,
+        guiding=settings.horizontal_guiding,
+        max_receiver_radius_m=(max(ball, settings.receiver_radius_m) if ball > 0
+                               else RayTraceSettings.max_receiver_radius_m),
+        # No renderer reads the late field's directions (the tails are diffuse): skip them.
+        directions=False)
+
+
+# The late envelope a RIR is synthesised from is the tracer's histogram averaged over ±2.5 %
+# of the time (``EnergyHistogram.smoothed``): late in the decay few rays remain and 1 ms bins
+# come in bursts of Monte-Carlo noise. In the bench apartment with the `sonicset` preset a
+# third of the 10 ms windows between 0.3 and 1.5 s were empty at 1 kHz; T30 moves by <= 0.3 %.
+LATE_ENVELOPE_RELATIVE_WIDTH = 0.05
+
+
+def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                  settings: SimulationSettings, rng: np.random.Generator,
+                  regions=None, microphone: Mapping[str, Any] | None = None,
+                  hrirs: HrirSet | None = None, n_threads: int = 1,
+                  expected_figures: bool = False, progress=None,
+                  ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """RIRs from every source position to the microphone, and facts about each.
+
+    Parameters
+    ----------
+    scene : AcousticScene
+        The scene with its coefficients (:func:`acoustic_scene`).
+    mic_m : (3,) float
+        Microphone position (the array or head centre), metres.
+    sources_m : (N, 3) float
+        Source positions, metres; one trace serves them all.
+    settings : SimulationSettings
+        The simulation's settings.
+    rng : numpy.random.Generator
+        The only randomness used (rays and the late noise's draw).
+    regions
+        The scene's planar regions (:func:`~sonicspec.acoustics.image_sources.planar_regions`),
+        when the caller reuses them over many calls.
+    microphone : mapping, optional
+        The receiver, with the spec's microphone fields (default: mono). For directional
+        receivers the early arrivals are traced from each source to the microphone, so their
+        directions are directions of arrival at the microphone.
+    hrirs : HrirSet, optional
+        The measured set of a binaural microphone with a SOFA HRTF (:func:`load_hrirs`).
+    n_threads : int
+        Threads for the trace; changes how fast rays are traced, never the bytes.
+    expected_figures : bool
+        Add each RIR's figures without the late noise's draw
+        (:func:`~sonicspec.acoustics.metrics.figures_from_energy`) to its facts as
+        ``"expected"``.
+    progress : callable, optional
+        ``progress(rays_done, rays_total)``, called as the trace goes.
+
+    Returns
+    -------
+    rirs : list of (channels, samples) float32 arrays
+        One per source position.
+    facts : list of dict
+        Per position: ``arrivals`` (early arrivals: direct sound and image sources),
+        ``direct`` (``"visible"``, ``"through walls"`` or ``"blocked"``),
+        ``image_source_order`` (completed), ``escaped_ray_fraction``.
+
+    Raises
+    ------
+    AcousticsError
+        A receiver this version cannot render (:func:`check_receiver`).
+    """
+    microphone = microphone or MONO
+    check_receiver(microphone, hrirs)
+    mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    air = settings.air()
+    c = settings.speed_of_sound_m_s
+    regions = regions if regions is not None else planar_regions(scene)
+    direct = direct_sound(scene, mic, points, air, c)
+    ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
+                        max_path_length_m=c * settings.max_rir_length_s)
+    traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
+                        air, n_threads=n_threads, progress=progress)
+    blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    render = receiver_renderer(microphone, settings, hrirs)
+    rirs, facts = [], []
+    for k in range(len(points)):
+        if microphone["kind"] == "mono":
+            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+        else:  # the same paths, traced towards the mic: directions of arrival at the mic
+            (d,) = direct_sound(scene, points[k], mic[None], air, c)
+            early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
+                                  max_path_length_m=c * settings.max_rir_length_s)
+            arrivals = Arrivals.concatenate([d, early.arrivals[0]])
+        late = traces[k].histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
+        rirs.append(render(arrivals, late, rng).astype(np.float32))
+        path = "visible" if not blocked[k] else (
+            "through walls" if len(direct[k]) else "blocked")
+        facts.append({"arrivals": len(arrivals), "direct": path,
+                      "image_source_order": ism.max_order,
+                      "escaped_ray_fraction": traces[k].escaped_ray_fraction})
+        if expected_figures:
+            energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
+            facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
+    return rirs, facts
+
+
+@dataclass(frozen=True, eq=False)
+class RirResult:
+    """One RIR and the facts about it.
+
+    Attributes
+    ----------
+    rir : (channels, samples) float32
+        Sound pressure for a unit point source (free-field direct sound 1/(4πr) at r/c);
+        channels as the receiver renders them (ACN/SN3D for ambisonics, left/right ears).
+    sample_rate_hz : int
+    bands_hz : tuple of float
+        The octave bands simulated (and of the per-band figures).
+    source_m, mic_m : tuple of float
+        The positions, metres.
+    arrivals : int
+        Early arrivals rendered exactly: the direct sound and the image sources.
+    direct : {"visible", "through walls", "blocked"}
+        The direct path: in sight, heard through transmitting surfaces, or absent.
+    image_source_order : int
+        The image-source order completed (lower than asked when a scene has too many).
+    escaped_ray_fraction : float
+        Share of the traced energy that left the scene (a leaking mesh shows here).
+    expected : dict
+        T30, EDT and C50 per band of the energy the RIR was synthesised to have, without the
+        late noise's draw (:func:`~sonicspec.acoustics.metrics.figures_from_energy`).
+    traced_faces : int
+        Triangles traced (after flat areas were merged).
+    """
+
+    rir: np.ndarray
+    sample_rate_hz: int
+    bands_hz: tuple[float, ...]
+    source_m: tuple[float, ...]
+    mic_m: tuple[float, ...]
+    arrivals: int
+    direct: str
+    image_source_order: int
+    escaped_ray_fraction: float
+    expected: dict[str, Any]
+    traced_faces: int
+
+    @cached_property
+    def figures(self) -> RoomAcousticFigures:
+        """ISO 3382-1 figures of the first channel (the omni W channel for ambisonics, the
+        left ear for binaural), per band and broadband."""
+        return room_acoustic_figures(self.rir[0], self.sample_rate_hz, self.bands_hz)
+
+    @property
+    def t30_s(self) -> np.ndarray:
+        """T30 per band, seconds (NaN where the decay does not reach -35 dB)."""
+        return self.figures.t30_s
+
+    @property
+    def edt_s(self) -> np.ndarray:
+        """Early decay time per band, seconds."""
+        return self.figures.edt_s
+
+    @property
+    def c50_db(self) -> np.ndarray:
+        """Clarity C50 per band, dB."""
+        return self.figures.c50_db
+
+    @property
+    def drr_db(self) -> float:
+        """Direct-to-reverberant ratio, dB (broadband)."""
+        return self.figures.drr_db
+
+    @property
+    def direct_visible(self) -> bool:
+        """Whether the source is in sight of the microphone."""
+        return self.direct == "visible"
+
+    @property
+    def distance_m(self) -> float:
+        return float(np.linalg.norm(np.subtract(self.source_m, self.mic_m)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The facts, JSON-ready (what ``sonicspec rir --json`` prints, without the RIR)."""
+        return {"arrivals": self.arrivals, "direct": self.direct,
+                "image_source_order": self.image_source_order,
+                "escaped_ray_fraction": self.escaped_ray_fraction, "expected": self.expected,
+                "source_m": list(self.source_m), "mic_m": list(self.mic_m),
+                "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
+                "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
+                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict()}
+
+
+def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                settings: SimulationSettings, rng: np.random.Generator,
+                microphone: Mapping[str, Any] | None = None, hrirs: HrirSet | None = None,
+                n_threads: int = 1) -> list[RirResult]:
+    """:func:`simulate_rirs` for a few positions, each RIR with its facts and figures.
+
+    Parameters and randomness as :func:`simulate_rirs` (with ``expected_figures``), whose
+    RIRs these are, byte for byte.
+
+    Returns
+    -------
+    list of RirResult
+        One per source position.
+    """
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    rirs, facts = simulate_rirs(scene, mic_m, points, settings, rng, microphone=microphone,
+                                hrirs=hrirs, n_threads=n_threads, expected_figures=True)
+    mic = tuple(float(v) for v in np.asarray(mic_m, dtype=np.float64).reshape(3))
+    return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
+                      bands_hz=tuple(settings.bands_hz),
+                      source_m=tuple(float(v) for v in point), mic_m=mic,
+                      arrivals=f["arrivals"], direct=f["direct"],
+                      image_source_order=f["image_source_order"],
+                      escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
+                      traced_faces=scene.n_faces)
+            for rir, f, point in zip(rirs, facts, points, strict=True)]
+
+
+Renderer = Callable[[Arrivals, Any, np.random.Generator], np.ndarray]
+
+
+def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSettings,
+                      hrirs: HrirSet | None = None) -> Renderer:
+    """A function ``(arrivals, late histogram, rng) -> (channels, samples)`` for the
+    receiver kind of ``microphone`` (the spec's microphone fields)."""
+    from sonicspec.acoustics.receivers import (
+        capsule_offsets,
+        synthesize_ambisonic_rir,
+        synthesize_array_rir,
+    )
+
+    common = {"max_length_s": settings.max_rir_length_s, "bands_hz": settings.bands_hz}
+    fs = settings.sample_rate_hz
+    kind = microphone["kind"]
+    if kind == "mono":
+        return lambda a, h, rng: synthesize_rir(a, h, fs, rng, **common)[None, :]
+    if kind == "ambisonics":
+        return lambda a, h, rng: synthesize_ambisonic_rir(a, h, microphone["order"], fs, rng,
+                                                          **common)
+    if kind == "binaural":
+        from sonicspec.acoustics.hrtf import (
+            SphereHead,
+            synthesize_hrir_binaural_rir,
+            synthesize_sphere_binaural_rir,
+        )
+
+        hrtf = microphone["hrtf"]
+        orientation = {"yaw_deg": microphone["yaw_deg"], "pitch_deg": microphone["pitch_deg"]}
+        if hrtf["kind"] == "sofa":
+            return lambda a, h, rng: synthesize_hrir_binaural_rir(
+                a, h, hrirs, fs, rng, **orientation, **common)
+        head = SphereHead(head_radius_m=hrtf["head_radius_m"],
+                          ear_angle_deg=hrtf["ear_angle_deg"])
+        return lambda a, h, rng: synthesize_sphere_binaural_rir(
+            a, h, head, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **orientation,
+            **common)
+    offsets = capsule_offsets(
+        kind, n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
+        radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
+        yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
+    return lambda a, h, rng: synthesize_array_rir(
+        a, h, offsets, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **common)
+
+
+RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
+                  "binaural")
+
+
+def load_hrirs(path: str | Path) -> HrirSet:
+    """The measured HRIR set of a SOFA file (SimpleFreeFieldHRIR), read with ``sofar``.
+
+    Raises
+    ------
+    AcousticsError
+        ``sofar`` is not installed, the file is missing or unreadable, or it holds no
+        usable HRIR set; the message names the file.
+    """
+    from sonicspec.acoustics.hrtf import hrir_set_from_sofa
+
+    try:
+        import sofar
+    except ImportError:
+        raise AcousticsError("microphone.hrtf: reading SOFA files needs the 'sofar' package; "
+                             "install it with pip install 'sonicspec[sofa]'") from None
+    if not Path(path).is_file():
+        raise AcousticsError(f"microphone.hrtf.path: SOFA file {path} does not exist")
+    try:
+        sofa = sofar.read_sofa(str(path), verify=False, verbose=False)
+    except Exception as exc:  # sofar/netCDF raise many kinds
+        raise AcousticsError(f"microphone.hrtf.path: cannot read SOFA file {path}: "
+                             f"{type(exc).__name__}: {exc}") from exc
+    try:
+        return hrir_set_from_sofa(sofa)
+    except AcousticsError as exc:
+        raise AcousticsError(f"microphone.hrtf.path: {path}: {exc}") from exc
+
+
+def check_inside(vertices: np.ndarray, where: str, **points: Any) -> None:
+    """Refuse positions outside the bounding box of a scene's ``vertices``.
+
+    Raises
+    ------
+    AcousticsError
+        Naming the position (the keyword it came as), the scene (``where``) and its bounds.
+    """
+    lo, hi = np.min(vertices, axis=0), np.max(vertices, axis=0)
+    for name, p in points.items():
+        if np.any(np.asarray(p) < lo) or np.any(np.asarray(p) > hi):
+            raise AcousticsError(f"{name}: {list(p)} is outside {where} "
+                                 f"(bounds {lo.round(2).tolist()} .. {hi.round(2).tolist()})")
+
+
+def check_receiver(microphone: Mapping[str, Any], hrirs: HrirSet | None = None) -> None:
+    """Refuse receivers this version cannot render (or that lack their HRIR set).
+
+    Raises
+    ------
+    AcousticsError
+        A SOFA HRTF without its loaded set, a kind outside :data:`RENDERED_KINDS`, or a
+        moving microphone.
+    """
+    if (microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa"
+            and hrirs is None):
+        raise AcousticsError("microphone.hrtf: a SOFA HRTF needs its HRIR set loaded "
+                             "(load_hrirs) before RIRs can be rendered")
+    if microphone["kind"] not in RENDERED_KINDS:
+        raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are "
+                             "not in this version of sonicspec; use one of "
+                             f"{', '.join(RENDERED_KINDS)}")
+    if microphone["trajectory"]["kind"] != "static":
+        raise AcousticsError("microphone.trajectory: a moving microphone is not in this version "
+                             "of sonicspec; use kind: static")
