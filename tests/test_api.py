@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -324,3 +325,31 @@ def test_the_mesh_step_logs_the_fallback_and_the_build_summary_lists_it(tmp_path
     assert line.startswith("mesh room: ")
     assert " WARNING scene 'room': expected a material for every face label" in line
     assert "got none for 'shell' (76.2 % of the area -> plaster_on_concrete)" in line
+
+
+def test_a_spec_scene_from_an_obj_with_one_object_gets_its_materials(tmp_path) -> None:
+    """Issue 17: an obj whose single object lost its name (trimesh drops a lone object's
+    name) made every face the default material in a build, silently. The plan now reads obj
+    scenes as the API does; only obj scenes' mesh keys carry the flag."""
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import validate_text
+    from sonicspec.stages.mesh import build_scene_mesh
+
+    write_obj(tmp_path / "lone.obj", {"room": ["floor", "walls", "ceiling"]})
+    text = (ROOT / "specs" / "demo.yaml").read_text().replace(
+        "  - kind: shoebox\n    id: living_room",
+        "  - kind: mesh\n    id: scan\n    path: lone.obj\n    label_materials: {room: "
+        "concrete_painted}\n    repair: {leak_test_rays: 0}\n  - kind: shoebox\n    id: "
+        "living_room", 1)
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is not None, [p.format("s.yaml") for p in problems]
+    plan = compile_spec(loaded, cache=False)
+    meshes = {j.params["scene_id"]: j for j in plan.by_step()["mesh"]}
+    assert meshes["scan"].params["obj_labels"] is True
+    assert "obj_labels" not in meshes["living_room"].params  # procedural keys unchanged
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SonicspecWarning)  # no fallback warning
+        mesh, _ = build_scene_mesh(dict(meshes["scan"].params), dict(meshes["scan"].paths),
+                                   np.random.default_rng(0))
+    assert set(np.asarray(mesh.materials)[np.unique(mesh.face_material)]) == {
+        "concrete_painted"}

@@ -203,6 +203,11 @@ def _mesh_params(
         # the spec's global map and then by the scene's own.
         params["library"] = spec.materials.library
         params["label_materials"] = {**spec.materials.label_materials, **scene.label_materials}
+        if entry.file is not None and entry.file.suffix.lower() == ".obj":
+            # An obj file's lone object keeps its name and group-only files are labelled by
+            # group (trimesh drops both): only obj scenes' keys carry the flag, so only their
+            # meshes are made again.
+            params["obj_labels"] = True
     return params, paths
 
 

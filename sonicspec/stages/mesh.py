@@ -64,9 +64,12 @@ def _obstacle(ob: dict[str, Any], path: str | None) -> SceneMesh:
     )
 
 
-def load_scan(scene: dict[str, Any], paths: dict[str, str]) -> SceneMesh:
+def load_scan(scene: dict[str, Any], paths: dict[str, str], *, obj_labels: bool = False
+              ) -> SceneMesh:
     """The file of a ``mesh`` scene read as the mesh stage reads it (before materials and
-    repair); ``validate --check-files`` reads meshes through it too."""
+    repair); ``validate --check-files`` reads meshes through it too. ``obj_labels``: an obj
+    file's lone object keeps its name and a file without objects is labelled by its groups
+    (``geometry.io.load_mesh``; the plan sets it for obj scenes)."""
     from sonicspec.geometry.io import load_matterport, load_mesh
 
     scale = UNIT_SCALE_M[scene["unit"]]
@@ -81,7 +84,8 @@ def load_scan(scene: dict[str, Any], paths: dict[str, str]) -> SceneMesh:
             unit_scale=scale,
             material=default,
         )
-    return load_mesh(paths["mesh"], scene["up_axis"], scale, material=default)
+    return load_mesh(paths["mesh"], scene["up_axis"], scale, material=default,
+                     obj_labels=obj_labels)
 
 
 def build_scene_mesh(
@@ -102,7 +106,7 @@ def build_scene_mesh(
         report["repair"] = None
         return mesh, report
 
-    mesh = load_scan(scene, paths)
+    mesh = load_scan(scene, paths, obj_labels=params.get("obj_labels", False))
     mesh = assign_materials(mesh, load_library(params["library"]), params["label_materials"],
                             scene["default_material"], where=f"scene {scene_id!r}")
     repair = scene["repair"]

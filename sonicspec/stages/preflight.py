@@ -154,7 +154,9 @@ def _meshes(spec: DatasetSpec, base: Path, missing: set[tuple]) -> list[Problem]
                 out.append(_err(where, str(exc).removeprefix(f"scenes[{i}]: ")))
                 continue
             out += _read(where, str(file),
-                         lambda job=job: load_scan(job.params["scene"], dict(job.paths)))
+                         lambda job=job: load_scan(
+                             job.params["scene"], dict(job.paths),
+                             obj_labels=job.params.get("obj_labels", False)))
     return out
 
 
