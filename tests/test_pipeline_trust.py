@@ -432,3 +432,18 @@ def test_the_readme_spec_builds(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "dataset written to" in done.stderr
     assert cli("verify", str(tmp_path / "out")).returncode == 0
+
+
+def test_a_running_job_shows_how_far_it_is_on_the_progress_line(tmp_path: Path) -> None:
+    from sonicspec.stages.context import JobContext, progress_path
+    from sonicspec.stages.workflow import _job_progress
+
+    plan = plan_for(write_spec(tmp_path))
+    rir = plan.by_step()["rir"][0]
+    ctx = JobContext(rir, plan, ArtifactStore(plan.store_dir))
+    ctx.progress("group 1/2: 15 points, 8,192/600 rays")
+    ctx.progress("never shown: within a second of the last")
+    line = _job_progress(plan, [rir])
+    assert line == f" | {rir.label}: group 1/2: 15 points, 8,192/600 rays"
+    progress_path(plan.store_dir, rir.key).unlink()
+    assert _job_progress(plan, [rir]) == ""
