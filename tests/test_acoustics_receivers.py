@@ -150,3 +150,17 @@ def test_array_coherence_filters_are_compact_in_time() -> None:
     assert share > 0.995, share
     # And the mixing keeps the input's energy in total over the outputs (white input).
     assert np.sum(y**2) == pytest.approx(1.0, rel=0.05)
+
+
+def test_local_directions_are_in_the_microphone_frame() -> None:
+    from sonicspec.acoustics.receivers import local_directions
+
+    # Facing +y (yaw 90): +y is straight ahead, +x to the right (azimuth -90), up is up.
+    az, el, d = local_directions(np.array([[0, 2, 0], [3, 0, 0], [0, 0, 1]], float), 90, 0)
+    np.testing.assert_allclose(az[:2], [0, -90], atol=1e-9)
+    np.testing.assert_allclose(el, [0, 0, 90], atol=1e-9)
+    np.testing.assert_allclose(d, [2, 3, 1])
+    # Pitched up 30 degrees: a direction 30 degrees above the horizon is straight ahead.
+    up30 = [[np.cos(np.radians(30)), 0, np.sin(np.radians(30))]]
+    az, el, _ = local_directions(np.array(up30), 0, 30)
+    np.testing.assert_allclose([az[0], el[0]], [0, 0], atol=1e-9)

@@ -311,3 +311,48 @@ def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -
     dry = assemble(segments, track_audio(track, segments, _AudioCache(fs), tmp_path), 10 * fs)
     for s in segments:
         np.testing.assert_allclose(dry[s.start:s.end], clip[:s.end - s.start], atol=1e-7)
+
+
+def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> None:
+    """Issue 18: every source (and the microphone) has its position every 10 ms over the
+    whole clip, from the walk the renderer read, with azimuth, elevation and distance in the
+    microphone's frame; the Lhotse recording of a source carries the same track."""
+    from sonicspec.audio.arrange import Segment, speech_span
+    from sonicspec.audio.render import walk_index
+
+    meta = json.loads((group_folder(built) / "metadata.json").read_text())
+    store = ArtifactStore(built.store_dir)
+    jobs = built.by_step()
+    placement = store.read_data("placement", jobs["placement"][0].key)["groups"][0]
+    arranged = {t["name"]: t for t in
+                store.read_data("arrange", jobs["arrange"][0].key)["groups"][0]["tracks"]}
+    clip = meta["num_samples"]
+    mic = np.asarray(meta["mic_m"])
+    hops = -(-clip // 160)
+    for name in ("source1", "source2", "noise", "music"):
+        track = meta[name]["track"]
+        assert track["hop_s"] == 0.01 and len(track["positions_m"]) == hops
+        geometry = (placement["speech"][int(name[6:]) - 1] if name.startswith("source")
+                    else placement[name])
+        segments = [Segment.from_dict(s) for s in arranged[name]["segments"]]
+        index = walk_index(geometry["rir_points_distance_m"], clip, speech_span(segments),
+                           None, 16000)
+        points = np.asarray(geometry["rir_points_m"])
+        used = np.stack([np.interp(index, np.arange(len(points)), points[:, i])
+                         for i in range(3)], axis=1)[::160]
+        positions = np.asarray(track["positions_m"])
+        np.testing.assert_allclose(positions, used, atol=1e-4)
+        np.testing.assert_allclose(positions[0], points[0], atol=1e-4)  # held before
+        np.testing.assert_allclose(positions[-1], points[-1], atol=1e-4)  # and after
+        offset = positions - mic
+        np.testing.assert_allclose(track["distance_m"], np.linalg.norm(offset, axis=1),
+                                   atol=2e-4)
+        # The mono microphone faces +x (yaw 0): azimuth is the bearing from +x.
+        np.testing.assert_allclose(track["azimuth_deg"],
+                                   np.degrees(np.arctan2(offset[:, 1], offset[:, 0])), atol=0.02)
+    assert meta["microphone_track"]["positions_m"] == [meta["mic_m"]] * hops
+    recordings = {json.loads(x)["id"]: json.loads(x) for x in
+                  (Path(built.output_dir) / "manifests" / "train_recordings.jsonl")
+                  .read_text().splitlines()}
+    assert recordings["train_000000_source1"]["custom"]["track"] == meta["source1"]["track"]
+    assert "custom" not in recordings["train_000000_mixtures_sep_s1s2_music"]

@@ -48,6 +48,19 @@ def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     return rz @ ry
 
 
+def local_directions(vectors_m: np.ndarray, yaw_deg: float, pitch_deg: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Azimuth and elevation (degrees) and length (m) of vectors from the microphone, in its
+    own frame (:func:`rotation`): azimuth 0 along the look direction, positive to the left
+    (counter-clockwise seen from above), elevation positive upwards."""
+    v = np.asarray(vectors_m, dtype=np.float64).reshape(-1, 3)
+    local = v @ rotation(yaw_deg, pitch_deg)
+    distance = np.linalg.norm(local, axis=1)
+    azimuth = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+    elevation = np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
+    return azimuth, elevation, distance
+
+
 def capsule_offsets(kind: str, *, n: int = 0, spacing_m: float = 0.0, radius_m: float = 0.0,
                     positions_m: Sequence[Sequence[float]] = (), yaw_deg: float = 0.0,
                     pitch_deg: float = 0.0) -> np.ndarray:

@@ -123,6 +123,11 @@ def arrange_background(clips: Sequence[Clip], clip_samples: int, count: Sequence
     return out
 
 
+def speech_span(segments: Sequence[Segment]) -> tuple[int, int] | None:
+    """Samples from the first segment's start to the last one's end (None without any)."""
+    return (segments[0].start, segments[-1].end) if segments else None
+
+
 def assemble(segments: Sequence[Segment], audio: dict[str, np.ndarray], clip_samples: int
              ) -> np.ndarray:
     """The dry track ``(clip_samples,)`` of placed segments, from each clip's audio by id."""

@@ -175,6 +175,16 @@ def path_position_from_distances(rir_distances_m: np.ndarray, n_samples: int,
     return np.interp(travelled, d, np.arange(d.size, dtype=np.float64))
 
 
+def walk_index(rir_distances_m, n_samples: int, active: tuple[int, int] | None,
+               speed_m_s: float | None, sample_rate_hz: float) -> np.ndarray:
+    """Where a source is at each sample: a fractional index into its RIR points, as every
+    renderer and the exported position track read it (one point: 0 throughout)."""
+    d = np.asarray(rir_distances_m, dtype=np.float64)
+    if d.size < 2:
+        return np.zeros(n_samples)
+    return path_position_from_distances(d, n_samples, active, speed_m_s, sample_rate_hz)
+
+
 def _first_last(index: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """First and last position in ``index`` (values in [0, n)) of each value; (n, -1) if absent."""
     at = np.arange(index.size)

@@ -4,7 +4,8 @@ Lhotse reads ``RecordingSet`` and ``SupervisionSet`` from JSONL files of dicts i
 its ``to_dict`` writes; sonicspec writes that shape without importing Lhotse:
 
 * recording: ``{id, sources: [{type: "file", channels: [0..C-1], source: path}],
-  sampling_rate, num_samples, duration, channel_ids}``
+  sampling_rate, num_samples, duration, channel_ids}``, and for a source's own file
+  ``custom: {track: {hop_s, positions_m, azimuth_deg, elevation_deg, distance_m}}``
 * supervision: ``{id, recording_id, start, duration, channel, text, speaker}``
 """
 
@@ -27,9 +28,13 @@ class RecordingEntry:
     sample_rate_hz: int
     num_samples: int
     channels: int
+    custom: Mapping[str, Any] | None = None
+    """Extra fields (Lhotse's ``custom``): a source's position ``track``."""
 
     def to_lhotse(self) -> dict[str, Any]:
+        extra = {"custom": dict(self.custom)} if self.custom else {}
         return {
+            **extra,
             "id": self.id,
             "sources": [{"type": "file", "channels": list(range(self.channels)),
                          "source": self.path}],

@@ -17,6 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.acoustics.receivers import local_directions
+from sonicspec.audio.arrange import Segment, speech_span
+from sonicspec.audio.render import walk_index
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -34,7 +37,8 @@ class _GroupWriter:
         self.recordings: list[dict[str, Any]] = []
         self.rec_ids: dict[str, str] = {}
 
-    def audio(self, kind: str, name: str, x: np.ndarray, *, float_wav: bool = False) -> str:
+    def audio(self, kind: str, name: str, x: np.ndarray, *, float_wav: bool = False,
+              custom: dict[str, Any] | None = None) -> str:
         ext = "wav" if float_wav else self.outputs["audio_format"]
         path = self.folder / f"{name}.{ext}"
         write_audio(path, x, self.rate, audio_format=ext,
@@ -49,15 +53,40 @@ class _GroupWriter:
             rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
             self.rec_ids[name] = rec_id
             self.recordings.append(RecordingEntry(rec_id, rel, self.rate, entry["num_samples"],
-                                                  entry["channels"]).to_lhotse())
+                                                  entry["channels"], custom).to_lhotse())
         return rel
+
+
+# Position labels every 10 ms (issue 18: localisation, tracking and activity need <= 10 ms).
+TRACK_HOP_S = 0.01
+
+
+def position_track(source: dict[str, Any], segments: list[dict[str, Any]], clip_samples: int,
+                   rate: int, motion: dict[str, Any], mic_m) -> dict[str, Any]:
+    """Where a source is every ``TRACK_HOP_S`` from t = 0 over the whole clip (held before and
+    after its walk), read from the same walk the renderer used, with its azimuth, elevation
+    and distance in the microphone's frame."""
+    hop = max(1, round(TRACK_HOP_S * rate))
+    spans = speech_span([Segment.from_dict(s) for s in segments])
+    index = walk_index(source["rir_points_distance_m"], clip_samples, spans,
+                       motion["speed_m_s"], rate)[::hop]
+    points = np.asarray(source["rir_points_m"], dtype=np.float64)
+    at = np.arange(len(points), dtype=np.float64)
+    positions = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
+    azimuth, elevation, distance = local_directions(positions - np.asarray(mic_m),
+                                                    motion["yaw_deg"], motion["pitch_deg"])
+    return {"hop_s": hop / rate, "positions_m": np.round(positions, 4).tolist(),
+            "azimuth_deg": np.round(azimuth, 2).tolist(),
+            "elevation_deg": np.round(elevation, 2).tolist(),
+            "distance_m": np.round(distance, 4).tolist()}
 
 
 def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray],
                  render: dict[str, Any], mix: dict[str, Any], arrange: dict[str, Any],
                  placement: dict[str, Any], rir: dict[str, Any], rir_arrays: dict[str, Any],
-                 keys: dict[str, str]) -> dict[str, Any]:
-    """Write one group's folder; its record for ``dataset``."""
+                 keys: dict[str, str], motion: dict[str, Any]) -> dict[str, Any]:
+    """Write one group's folder; its record for ``dataset``. ``motion``: the walk's speed
+    (``speed_m_s``, None: the walk spans the speech) and the microphone's orientation."""
     group = render["group"]
     split, index = group.split("/")
     w = _GroupWriter(out, out / split / index, group, params)
@@ -73,9 +102,14 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
         a = arranged[name]
         signal = gains[name] * np.asarray(arrays[track["arrays"]["reverberant"]],
                                           dtype=np.float64)
+        geometry = (placement["speech"][int(name[6:]) - 1] if role == "speech"
+                    else placement[name])
+        track_labels = position_track(geometry, arranged[name]["segments"],
+                                      render["clip_samples"], w.rate, motion,
+                                      placement["mic_m"])
         if (outputs["sources"] and role == "speech") or (outputs["background"]
                                                          and role != "speech"):
-            audio_rel = w.audio(role, name, signal)
+            audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
         else:
             audio_rel = None
         for kind in ("dry", "direct", "early"):
@@ -87,8 +121,6 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             stack = np.asarray(rir_arrays[rir_sources[name]["array"]])
             for j in range(stack.shape[0]):
                 w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
-        geometry = (placement["speech"][int(name[6:]) - 1] if role == "speech"
-                    else placement[name])
         segs = a["segments"]
         entry: dict[str, Any] = {
             "audio": [a["files"][s["id"]]["path"] for s in segs],
@@ -98,6 +130,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             "t30_s": rir_sources[name]["t30_s"], "drr_db": rir_sources[name]["drr_db"],
             "direct_path": rir_sources[name]["direct"],
             "loudness": mix["components"][name],
+            "track": track_labels,
         }
         if role == "speech":
             entry.update(words=[s["text"] for s in segs], speaker=a["speaker"],
@@ -118,7 +151,9 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
         group=group, split=split, scene_id=params["scene_id"], mic_m=placement["mic_m"],
         floor=placement.get("floor_index"), sample_rate_hz=w.rate,
         num_samples=render["clip_samples"], mixtures=mixtures,
-        group_gain_db=mix["group_gain_db"], keys=keys)
+        group_gain_db=mix["group_gain_db"], keys=keys,
+        microphone_track={"hop_s": TRACK_HOP_S,
+                          "positions_m": [placement["mic_m"]] * len(track_labels["distance_m"])})
     if outputs["metadata"]:
         write_json(w.folder / "metadata.json", metadata)
         w.files.append({"kind": "metadata", "name": "metadata",
@@ -155,11 +190,16 @@ def run(ctx: JobContext) -> None:
     placements = ctx.input_data("placement")[0]["groups"]
     keys = {step: ctx.input_keys(step)[0]
             for step in ("placement", "arrange", "rir", "render", "mix")}
+    jobs = ctx.plan.by_key()
+    microphone = jobs[keys["rir"]].params["microphone"]
+    motion = {"speed_m_s": jobs[keys["render"]].params["speed_m_s"],
+              "yaw_deg": microphone["yaw_deg"], "pitch_deg": microphone["pitch_deg"]}
     groups = []
     for render, m, arr, placement, rir in zip(render_art.data["groups"], mix,
                                               arrange_data["groups"], placements,
                                               rir_art.data["groups"], strict=True):
         groups.append(export_group(out, params, render_art.arrays, render, m, arr, placement,
-                                   rir, rir_art.arrays, {**keys, "export": ctx.job.key}))
+                                   rir, rir_art.arrays, {**keys, "export": ctx.job.key},
+                                   motion))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})

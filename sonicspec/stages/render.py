@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from sonicspec.audio.arrange import Segment, assemble
+from sonicspec.audio.arrange import Segment, assemble, speech_span
 from sonicspec.audio.corpora import load_audio
-from sonicspec.audio.render import path_position_from_distances, render_moving, split_rir
+from sonicspec.audio.render import render_moving, split_rir, walk_index
 from sonicspec.errors import StageError
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
@@ -72,13 +72,8 @@ def render_track(track: dict[str, Any], rirs: np.ndarray, source: dict[str, Any]
     if len(points) != rirs.shape[0]:
         raise StageError(f"track {track['name']}: {len(points)} RIR points in the placement but "
                          f"{rirs.shape[0]} RIRs")
-    if len(points) > 1:
-        active = (segments[0].start, segments[-1].end)
-        position = path_position_from_distances(
-            np.asarray(source["rir_points_distance_m"]), clip_samples, active,
-            params["speed_m_s"], rate)
-    else:
-        position = np.zeros(clip_samples)
+    position = walk_index(source["rir_points_distance_m"], clip_samples, speech_span(segments),
+                          params["speed_m_s"], rate)
     method = params["interpolation"]
     out = {"dry": dry[None, :].astype(np.float32),
            "reverberant": render_moving(dry, rirs, position, method)[:, :clip_samples]
