@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import fnmatch
 import glob
-import hashlib
 import json
 import os
 from collections.abc import Mapping
@@ -23,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, rng_for, sha256_hex, shared
+from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
@@ -63,11 +62,7 @@ class FileDigests:
             raise CompileError(f"{path}: file does not exist") from None
         token = f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}"
         if token not in self._cache:
-            h = hashlib.sha256()
-            with open(path, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(block)
-            self._cache[token] = h.hexdigest()
+            self._cache[token] = file_sha256(path)
             self._dirty = True
         return self._cache[token]
 

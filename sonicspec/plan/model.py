@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import (
+from sonicspec.hashing import (
     KEY_LENGTH,
     canonical_json,
     normalised_params_and_key,
