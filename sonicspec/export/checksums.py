@@ -18,8 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import SpecError, StoreError
-from sonicspec.export.files import write_json, write_text
+from sonicspec.export.files import write_json
 from sonicspec.hashing import file_sha256
 
 CHECKSUMS_NAME = "checksums.sha256"

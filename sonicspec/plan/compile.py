@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import CompileError
 from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
@@ -82,10 +83,7 @@ class FileDigests:
     def save(self) -> None:
         if self.cache_file is None or not self._dirty:
             return
-        self.cache_file.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.cache_file.with_name(f".{self.cache_file.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps(self._cache, sort_keys=True))
-        os.replace(tmp, self.cache_file)
+        write_text(self.cache_file, json.dumps(self._cache, sort_keys=True))
 
 
 def expand_scenes(spec: DatasetSpec, base_dir: Path) -> list[SceneEntry]:

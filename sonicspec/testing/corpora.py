@@ -30,7 +30,8 @@ import numpy as np
 import soundfile as sf
 from scipy.signal import lfilter
 
-from sonicspec.audio.corpora import FMA_INSTRUMENTAL_GENRE_ID, resample, write_atomic
+from sonicspec.atomic import atomic_path, write_text
+from sonicspec.audio.corpora import FMA_INSTRUMENTAL_GENRE_ID, resample
 from sonicspec.errors import CorpusError
 
 GENERATOR_VERSION = 1
@@ -169,7 +170,7 @@ def _generate_once(root: Path, params: Mapping[str, Any],
             if rel not in written:
                 _remove_generated(root, Path(rel))
     text = json.dumps({"params": params, "files": sorted(written)}, indent=1, sort_keys=True)
-    write_atomic(marker, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    write_text(marker, text)
     return root
 
 
@@ -190,12 +191,8 @@ def _remove_generated(root: Path, rel: Path) -> None:
 def _write_audio(path: Path, x: np.ndarray, sample_rate_hz: int, fmt: str,
                  subtype: str) -> None:
     """Atomic soundfile write (x is (T,) or (T, C))."""
-    write_atomic(path, lambda tmp: sf.write(str(tmp), x, sample_rate_hz, format=fmt,
-                                            subtype=subtype))
-
-
-def _write_text(path: Path, text: str) -> None:
-    write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    with atomic_path(path) as tmp:
+        sf.write(str(tmp), x, sample_rate_hz, format=fmt, subtype=subtype)
 
 
 def _normalise(x: np.ndarray, peak: float) -> np.ndarray:
@@ -301,7 +298,7 @@ def _write_speaker(root: Path, subset: str, speaker: int, chapters: list[int],
             written.append(path.relative_to(root).as_posix())
             lines.append(f"{uid} {transcript_words(sentence)}\n")
         trans = folder / f"{speaker}-{chapter}.trans.txt"
-        _write_text(trans, "".join(lines))
+        write_text(trans, "".join(lines))
         written.append(trans.relative_to(root).as_posix())
     return written
 
@@ -527,7 +524,7 @@ def write_fsd50k(root: Path, dev_clips: int, eval_clips: int, *, clip_duration_s
             writer.writerow(header)
             writer.writerows(rows[part])
             path = root / "FSD50K.ground_truth" / f"{part}.csv"
-            _write_text(path, buf.getvalue())
+            write_text(path, buf.getvalue())
             written.append(path.relative_to(root).as_posix())
         return written
 
@@ -615,7 +612,7 @@ def write_fma(root: Path, tracks: int, *, size: str = "small", clip_duration_s: 
         writer.writerow(["track_id"] + [""] * len(_FMA_COLUMNS))
         writer.writerows(rows)
         path = root / "fma_metadata" / "tracks.csv"
-        _write_text(path, buf.getvalue())
+        write_text(path, buf.getvalue())
         written.append(path.relative_to(root).as_posix())
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
@@ -623,7 +620,7 @@ def write_fma(root: Path, tracks: int, *, size: str = "small", clip_duration_s: 
         for genre, parent, title, top_level in _FMA_GENRES:
             writer.writerow([genre, counts.get(genre, 0), parent, title, top_level])
         path = root / "fma_metadata" / "genres.csv"
-        _write_text(path, buf.getvalue())
+        write_text(path, buf.getvalue())
         written.append(path.relative_to(root).as_posix())
         return written
 
@@ -658,7 +655,7 @@ def write_folder(root: Path, speakers: int, files_per_speaker: int, *, seed: int
                 _write_audio(path, x, rate, fmt, "PCM_16")
                 written.append(path.relative_to(root).as_posix())
         path = root / "README.txt"
-        _write_text(path, "Generated speech-like test corpus; one folder per speaker.\n")
+        write_text(path, "Generated speech-like test corpus; one folder per speaker.\n")
         written.append(path.relative_to(root).as_posix())
         return written
 
