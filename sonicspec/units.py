@@ -14,6 +14,9 @@ Decibels: TypeAlias = float
 Lufs: TypeAlias = float
 Hertz: TypeAlias = float
 
+SPEED_OF_SOUND_M_S: float = 343.0
+"""Speed of sound in air (about 20 °C), m/s: the spec's default and every library default."""
+
 OCTAVE_BANDS_HZ: tuple[float, ...] = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0)
 """Octave-band centre frequencies used for every per-band quantity (DESIGN.md §5)."""
 

@@ -116,10 +116,11 @@ import numpy as np
 
 from sonicspec.acoustics import _trace_kernels as K
 from sonicspec.acoustics.arrivals import EnergyHistogram, TraceResult
-from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
+from sonicspec.acoustics.direct import check_air, check_points
 from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 __all__ = ["RayTraceSettings", "receiver_clearance_m", "trace_rays"]
 
@@ -223,7 +224,7 @@ class RayTraceSettings:
     radius_growth: float = 0.05
     max_receiver_radius_m: float = 1.0
     specular_order_excluded: int = 3
-    speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
     batch_size: int = 8192
     diffuse_rain: bool = True
     rain_receivers_per_hit: int = 8
