@@ -668,7 +668,7 @@ def index_split_folders(root: Path, splits: Sequence[str],
                         extensions: Sequence[str] = (".flac", ".wav")) -> CorpusIndex:
     """Index a folder already divided by split: ``<root>/<split>/**/<file>``.
 
-    The layout :func:`sonicspec.testing.corpora.generate_background_corpus` writes. Ids are
+    The layout :func:`sonicspec.audio.generated.generate_background_corpus` writes. Ids are
     paths below ``root`` without the ending (``train/noise-0003``); no speakers.
     """
     root = Path(root)
