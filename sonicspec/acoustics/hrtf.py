@@ -60,7 +60,7 @@ from sonicspec.acoustics.synthesis import (
     synthesize_late,
 )
 from sonicspec.errors import AcousticsError
-from sonicspec.units import SPEED_OF_SOUND_M_S
+from sonicspec.units import SPEED_OF_SOUND_M_S, seconds_to_samples_ceil
 
 ALPHA_MIN = 0.1
 THETA_MIN_DEG = 150.0
@@ -479,7 +479,7 @@ def diffuse_binaural_tails(tails: np.ndarray, model: SphereHead | HrirSet,
     if isinstance(model, SphereHead):
         # Filters span the largest interaural delay, the Woodworth one of a lateral source.
         itd_s = model.head_radius_m / speed_of_sound_m_s * (math.pi / 2 + 1)
-        pad = math.ceil(4 * itd_s * sample_rate_hz) + 16
+        pad = seconds_to_samples_ceil(4 * itd_s, sample_rate_hz) + 16
     else:
         # Γ of a measured set has no structure finer than its HRIRs' length.
         pad = 2 * math.ceil(model.hrirs.shape[-1] * sample_rate_hz / model.sample_rate_hz) + 16

@@ -38,7 +38,7 @@ from sonicspec.acoustics.synthesis import (
     synthesize_late,
 )
 from sonicspec.errors import AcousticsError
-from sonicspec.units import SPEED_OF_SOUND_M_S
+from sonicspec.units import SPEED_OF_SOUND_M_S, seconds_to_samples_ceil
 
 
 def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
@@ -148,7 +148,7 @@ def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_
         root = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
         return root @ np.swapaxes(vec, 1, 2)  # C = V √Λ Vᵀ, symmetric
 
-    pad = math.ceil(4 * d.max() / speed_of_sound_m_s * sample_rate_hz) + 16
+    pad = seconds_to_samples_ceil(4 * d.max() / speed_of_sound_m_s, sample_rate_hz) + 16
     return mix_per_frequency(x, mixing, sample_rate_hz, pad)
 
 

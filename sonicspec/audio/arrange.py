@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.errors import AudioError
+from sonicspec.units import seconds_to_samples
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,8 @@ def _draw_int(rng: np.random.Generator, bounds: Sequence[int]) -> int:
 
 def _draw_samples(rng: np.random.Generator, bounds_s: Sequence[float], rate: int) -> int:
     lo, hi = float(bounds_s[0]), float(bounds_s[1])
-    return round(rng.uniform(lo, hi) * rate) if hi > lo else round(lo * rate)
+    return (seconds_to_samples(rng.uniform(lo, hi), rate) if hi > lo
+            else seconds_to_samples(lo, rate))
 
 
 def arrange_speech(utterances: Sequence[Clip], clip_samples: int, count: Sequence[int],

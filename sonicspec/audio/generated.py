@@ -36,6 +36,7 @@ from scipy.signal import lfilter
 from sonicspec.atomic import atomic_path, write_text
 from sonicspec.audio.corpora import resample
 from sonicspec.errors import CorpusError
+from sonicspec.units import seconds_to_samples, seconds_to_samples_floor
 
 GENERATOR_VERSION = 1
 """Bump when a writer's output changes, so existing generated roots are written again."""
@@ -331,11 +332,11 @@ def voiced(n: int, fs: int, rng: np.random.Generator) -> np.ndarray:
     voice = (_resonator(buzz, fs, rng.uniform(400, 800), 80)
              + 0.6 * _resonator(buzz, fs, rng.uniform(1000, 2200), 120))
     env = np.zeros(n)
-    pos = int(rng.uniform(0.02, 0.1) * fs)
+    pos = seconds_to_samples_floor(rng.uniform(0.02, 0.1), fs)
     while pos < n:
-        length = int(rng.uniform(0.12, 0.3) * fs)
+        length = seconds_to_samples_floor(rng.uniform(0.12, 0.3), fs)
         _add_at(env, pos, np.hanning(length))
-        pos += length + int(rng.uniform(0.02, 0.15) * fs)
+        pos += length + seconds_to_samples_floor(rng.uniform(0.02, 0.15), fs)
     return voice * env
 
 
@@ -348,7 +349,7 @@ def noise_clip(kind: str, n: int, fs: int, rng: np.random.Generator) -> np.ndarr
         drops = np.zeros(n)
         for start in rng.integers(0, n, size=int(rng.uniform(20, 60) * n / fs)):
             _add_at(drops, int(start),
-                    rng.uniform(0.2, 1) * _decaying_tone(int(0.02 * fs), fs,
+                    rng.uniform(0.2, 1) * _decaying_tone(seconds_to_samples_floor(0.02, fs), fs,
                                                          rng.uniform(2000, 6000), 0.003))
         return x + drops
     if kind == "wind":
@@ -368,17 +369,19 @@ def noise_clip(kind: str, n: int, fs: int, rng: np.random.Generator) -> np.ndarr
         period = rng.choice([0.5, 1.0])
         freq = rng.uniform(2500, 4500)
         for i, start in enumerate(np.arange(rng.uniform(0, period), n / fs, period)):
-            _add_at(x, int(start * fs),
-                    _decaying_tone(int(0.03 * fs), fs, freq * (1.0 if i % 2 else 0.8), 0.004))
+            tick = _decaying_tone(seconds_to_samples_floor(0.03, fs), fs,
+                                  freq * (1.0 if i % 2 else 0.8), 0.004)
+            _add_at(x, seconds_to_samples_floor(start, fs), tick)
         return x
     if kind == "knock":
         x = 0.002 * rng.standard_normal(n)
         mode = rng.uniform(120, 300)
         for group in np.arange(rng.uniform(0.1, 0.5), n / fs - 0.5, rng.uniform(1.2, 2.0)):
             for k in range(int(rng.integers(2, 5))):
-                hit = _decaying_tone(int(0.15 * fs), fs, mode, 0.03)
-                hit[: int(0.003 * fs)] += rng.standard_normal(int(0.003 * fs))
-                _add_at(x, int((group + 0.18 * k) * fs), hit)
+                hit = _decaying_tone(seconds_to_samples_floor(0.15, fs), fs, mode, 0.03)
+                click = seconds_to_samples_floor(0.003, fs)
+                hit[:click] += rng.standard_normal(click)
+                _add_at(x, seconds_to_samples_floor(group + 0.18 * k, fs), hit)
         return x
     if kind == "speech":
         return voiced(n, fs, rng)
@@ -404,7 +407,8 @@ def _note(freq: float, length: int, fs: int, attack_s: float, decay_s: float, ti
           ) -> np.ndarray:
     t = np.arange(length) / fs
     env = np.minimum(1.0, t / attack_s) * np.exp(-t / decay_s)
-    env[-min(length, int(0.01 * fs)):] *= np.linspace(1, 0, min(length, int(0.01 * fs)))
+    fade = min(length, seconds_to_samples_floor(0.01, fs))
+    env[-fade:] *= np.linspace(1, 0, fade)
     return _harmonics(freq, length, fs, 8, tilt) * env
 
 
@@ -414,7 +418,7 @@ def music(n: int, fs: int, rng: np.random.Generator, *, vocals: bool) -> np.ndar
     tonic = 48 + int(rng.integers(0, 12))
     scale = _MAJOR if rng.random() < 0.5 else _MINOR
     out = np.zeros(n)
-    bar = int(4 * beat * fs)
+    bar = seconds_to_samples_floor(4 * beat, fs)
     for start in range(0, n, bar):
         degree = int(rng.choice([0, 3, 4, 5]))
         for step in (0, 2, 4):  # triad on the degree
@@ -422,10 +426,10 @@ def music(n: int, fs: int, rng: np.random.Generator, *, vocals: bool) -> np.ndar
             note = tonic + 12 + scale[idx % 7] + 12 * (idx // 7)
             _add_at(out, start, 0.25 * _note(_midi_hz(note), bar, fs, 0.08, 3.0, 2.0))
         for b in range(4):
-            _add_at(out, start + int(b * beat * fs),
-                    0.4 * _note(_midi_hz(tonic - 12 + scale[degree]), int(beat * fs), fs,
-                                0.005, 0.4, 1.5))
-    half = int(beat * fs / 2)
+            bass = _note(_midi_hz(tonic - 12 + scale[degree]),
+                         seconds_to_samples_floor(beat, fs), fs, 0.005, 0.4, 1.5)
+            _add_at(out, start + seconds_to_samples_floor(b * beat, fs), 0.4 * bass)
+    half = seconds_to_samples_floor(beat / 2, fs)  # beat / 2 is exact: the same as beat * fs / 2
     melody = []
     for start in range(0, n, half):
         if rng.random() < 0.75:
@@ -488,7 +492,7 @@ def generate_background_corpus(root: Path, role: str, splits: Sequence[str],
               "sample_rate_hz": int(sample_rate_hz)}
 
     def generate(root: Path) -> list[str]:
-        n = round(clip_duration_s * sample_rate_hz)
+        n = seconds_to_samples(clip_duration_s, sample_rate_hz)
         written: list[str] = []
         for split in names:
             for i, uid in enumerate(ids[split]):

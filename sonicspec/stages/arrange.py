@@ -16,6 +16,7 @@ from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import read_index
+from sonicspec.units import seconds_to_samples
 
 
 def resampled_length(num_samples: int, from_hz: int, to_hz: int) -> int:
@@ -42,7 +43,7 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group
     mix = params["mixture"]
     rate = params["sample_rate_hz"]
     split = params["split"]
-    clip_samples = round(mix["duration_s"] * rate)
+    clip_samples = seconds_to_samples(mix["duration_s"], rate)
     speech = indexes["speech"]
     speech.require_speakers(split, mix["speakers"], "corpora.speech")
     by_speaker = speech.speakers(split)

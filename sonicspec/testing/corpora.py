@@ -27,6 +27,7 @@ from sonicspec.audio.generated import (
     write_audio_file,
 )
 from sonicspec.errors import CorpusError
+from sonicspec.units import seconds_to_samples, seconds_to_samples_floor
 
 # Synthesised noise kinds and the FSD50K labels (with AudioSet mids) they stand in for. The
 # speech- and music-labelled kinds exist so the label filter has something to remove.
@@ -100,7 +101,7 @@ def write_fsd50k(root: Path, dev_clips: int, eval_clips: int, *, clip_duration_s
         fnames = rng.choice(np.arange(1, 450000), size=total, replace=False)
         kinds = list(_NOISE_LABELS)
         cycle = [kinds[i] for i in rng.permutation(len(kinds))]
-        n = round(clip_duration_s * sample_rate_hz)
+        n = seconds_to_samples(clip_duration_s, sample_rate_hz)
         written: list[str] = []
         rows = {"dev": [], "eval": []}
         for i, fname in enumerate(int(f) for f in fnames):
@@ -159,7 +160,7 @@ def write_fma(root: Path, tracks: int, *, size: str = "small", clip_duration_s: 
         rng = file_rng(seed, "fma")
         ids = sorted(int(t) for t in rng.choice(np.arange(2, 155000), size=tracks,
                                                  replace=False))
-        n = round(clip_duration_s * sample_rate_hz)
+        n = seconds_to_samples(clip_duration_s, sample_rate_hz)
         written: list[str] = []
         rows = []
         counts: dict[int, int] = {}
@@ -185,7 +186,8 @@ def write_fma(root: Path, tracks: int, *, size: str = "small", clip_duration_s: 
                 counts[g] = counts.get(g, 0) + 1
             vocals = FMA_INSTRUMENTAL_GENRE_ID not in genres_all
             left = music(n, sample_rate_hz, track_rng, vocals=vocals)
-            right = np.roll(left, int(0.0004 * sample_rate_hz)) * track_rng.uniform(0.8, 1.0)
+            right = (np.roll(left, seconds_to_samples_floor(0.0004, sample_rate_hz))
+                     * track_rng.uniform(0.8, 1.0))
             x = normalise(np.stack([left, right], axis=1), float(track_rng.uniform(0.4, 0.8)))
             path = root / f"fma_{size}" / f"{track // 1000:03d}" / f"{track:06d}.mp3"
             write_audio_file(path, x, sample_rate_hz, "MP3", "MPEG_LAYER_III")
@@ -248,7 +250,7 @@ def write_folder(root: Path, speakers: int, files_per_speaker: int, *, seed: int
             rate = (16000, 22050, 48000)[s % 3]
             for f in range(files_per_speaker):
                 rng = file_rng(seed, "folder", s, f)
-                x = normalise(voiced(round(rng.uniform(1.0, 2.0) * rate), rate, rng),
+                x = normalise(voiced(seconds_to_samples(rng.uniform(1.0, 2.0), rate), rate, rng),
                               float(rng.uniform(0.3, 0.7)))
                 ext, fmt = ((".flac", "FLAC"), (".wav", "WAV"))[f % 2]
                 path = root / f"spk{s + 1:02d}" / f"take{f + 1:02d}{ext}"
