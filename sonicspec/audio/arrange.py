@@ -93,7 +93,7 @@ def arrange_speech(utterances: Sequence[Clip], clip_samples: int, count: Sequenc
         raise AudioError(
             f"{where}: no utterance fits in the {clip_samples / sample_rate_hz:g} s clip "
             f"(shortest {shortest:.2f} s after a gap drawn in {list(gap_s)} s); lengthen "
-            "mixture.duration_s or shorten mixture.utterance_gap_s")
+            "the clip or shorten the gaps")
     return out
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
+from sonicspec.errors import AudioError
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import read_index
 from sonicspec.units import seconds_to_samples
@@ -52,9 +53,14 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group
     tracks = []
     for k, speaker in enumerate(chosen):
         items = by_speaker[speaker]
-        segments = arrange_speech([_clip(i, rate) for i in items], clip_samples,
-                                  mix["utterances_per_speaker"], mix["utterance_gap_s"], rate,
-                                  rng, where=f"group {group} source{k + 1} (speaker {speaker})")
+        try:
+            segments = arrange_speech(
+                [_clip(i, rate) for i in items], clip_samples, mix["utterances_per_speaker"],
+                mix["utterance_gap_s"], rate, rng,
+                where=f"group {group} source{k + 1} (speaker {speaker})")
+        except AudioError as err:
+            raise AudioError(f"{err} (the clip is mixture.duration_s, the gaps "
+                             "mixture.utterance_gap_s)") from None
         tracks.append({"name": f"source{k + 1}", "role": "speech", "speaker": speaker,
                        "segments": [s.to_dict() for s in segments],
                        "files": _files(items, segments)})
