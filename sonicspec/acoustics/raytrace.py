@@ -595,18 +595,18 @@ def _trace_batch(
         req = _RainQueue.empty(m, scene.n_bands, st.directions)
         kids = _Children.empty(n if split else 0, scene.n_bands)
         n, n_req, esc, hits, n_kids = K.bounce(
-            pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref,
-            face, tfar, u, offsets,
-            ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
-            ev.ps_t, ev.split_gain,
-            rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
-            rcv.volume, rcv.depth,
+            (pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref),
+            (face, tfar, u, offsets),
+            (ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
+             ev.ps_t, ev.split_gain),
+            (rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
+             rcv.volume, rcv.depth),
             air, fp, ip, widths,
-            acc.energy, acc.directions,
-            req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
-            req.departure,
-            kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
-            kids.ref,
+            (acc.energy, acc.directions),
+            (req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
+             req.departure),
+            (kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
+             kids.ref),
         )  # fmt: skip
         escaped += esc
         interactions += hits
