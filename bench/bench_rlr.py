@@ -91,12 +91,12 @@ from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 BANDS_HZ = (125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0)
 SOURCE_M = np.array([12.5, 9.0, 1.5])  # the 10 × 7 m room at x 10..20, y 7..14
 MIC_M = np.array([17.5, 12.0, 1.5])
 SAMPLE_RATE_HZ = 16_000  # the spec's default sample rate (and SonicSim's)
-SPEED_OF_SOUND_M_S = 343.0
 # ISO 3382-1 Annex A just-noticeable differences: EDT 5 %, reverberation time 5 %, clarity 1 dB.
 JND = {"t30": 0.05, "edt": 0.05, "c50_db": 1.0}
 # sonicspec's converged reference: the mean of REF_RUNS traces (seeds disjoint from the

@@ -39,6 +39,7 @@ from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplified_scene
 from sonicspec.acoustics.theory import shoebox_decay_t60
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.units import SPEED_OF_SOUND_M_S as C_M_S
 
 BANDS_HZ = np.array([125.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0])
 SIZE = (10.0, 7.0, 3.0)
@@ -215,7 +216,7 @@ def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
         sample_rate_hz=fs, bands_hz=bands, rays=n_rays, image_source_order=3,
         max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True, temperature_c=20.0,
         relative_humidity_pct=50.0, transmission=False, diffuse_rain=True,
-        receiver_radius_m=0.1, histogram_bin_s=0.001, speed_of_sound_m_s=343.0,
+        receiver_radius_m=0.1, histogram_bin_s=0.001, speed_of_sound_m_s=C_M_S,
     )  # fmt: skip
     v, f = shoebox(*SIZE)
     n, b = len(f), len(bands)
@@ -223,7 +224,7 @@ def trajectory(n_points: int = 100, n_rays: int = 2_000) -> None:
     a, z = TRAJ_LINE
     points = a + np.linspace(0.0, 1.0, n_points)[:, None] * (z - a)
     air = iso9613_energy_per_m(np.array(bands))
-    eyring = 24 * math.log(10) * 210.0 / (343.0 * (-242.0 * math.log(0.8) + 4 * air * 210.0))
+    eyring = 24 * math.log(10) * 210.0 / (C_M_S * (-242.0 * math.log(0.8) + 4 * air * 210.0))
     print(f"\n## trajectory: {n_points} source points on a 5 m line, static mic, 10 x 7 x 3 m, "
           f"alpha 0.2, s 0.5, {n_rays} rays, ISM order 3, {fs} Hz, bands {list(bands)}")
     print("Eyring T30 [s]:", np.round(eyring, 3))
@@ -316,13 +317,13 @@ def equal_accuracy(seeds: int = 6) -> None:
     air = iso9613_energy_per_m(np.array(bands))
     s_eff = 2 * (70 + 30 + 21)
     # Broadband reference: Eyring at 500 Hz-1 kHz (ISO 3382-1's single number bands).
-    eyring = np.mean([24 * math.log(10) * 210.0 / (343.0 * (-s_eff * math.log(0.8)
+    eyring = np.mean([24 * math.log(10) * 210.0 / (C_M_S * (-s_eff * math.log(0.8)
                                                             + 4 * a * 210.0)) for a in air[2:4]])
     settings = dict(sample_rate_hz=fs, bands_hz=bands, image_source_order=3,
                     max_rir_length_s=1.5, energy_threshold_db=80.0, air_absorption=True,
                     temperature_c=20.0, relative_humidity_pct=50.0, transmission=False,
                     diffuse_rain=True, receiver_radius_m=0.1, histogram_bin_s=0.001,
-                    speed_of_sound_m_s=343.0)
+                    speed_of_sound_m_s=C_M_S)
     v, f = shoebox(*SIZE)
     n, b = len(f), len(bands)
     scene = AcousticScene(v, f, np.full((n, b), 0.2), np.full((n, b), 0.5), np.zeros((n, b)))
@@ -411,7 +412,7 @@ def main() -> None:
     air = iso9613_energy_per_m(BANDS_HZ)
     scene = scene_for(0.2, 0.5)
     raw_embree(scene)
-    eyring = 24 * math.log(10) * 210.0 / (343.0 * (-242.0 * math.log(0.8) + 4 * air * 210.0))
+    eyring = 24 * math.log(10) * 210.0 / (C_M_S * (-242.0 * math.log(0.8) + 4 * air * 210.0))
     print("\n## one RIR, 10 x 7 x 3 m, alpha 0.2, s 0.5, ISM order 3 + rays, 1.5 s, 7 bands")
     print("Eyring T30 [s]:", np.round(eyring, 3))
     for n_rays, rain in ((500, True), (2_000, True), (20_000, True), (2_000, False)):

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from sonicspec import __version__
+from sonicspec.atomic import write_text
 
 EXIT_OK, EXIT_FAILURE, EXIT_INVALID = 0, 1, 2
 
@@ -92,7 +93,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
     text = schema_text()
     if args.output:
-        _write_atomic(Path(args.output), text)
+        write_text(Path(args.output), text)
         print(f"wrote {args.output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
@@ -110,7 +111,7 @@ def cmd_init(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         print(f"sonicspec: error: {out} exists; pass --force to overwrite it", file=sys.stderr)
         return EXIT_FAILURE
-    _write_atomic(out, text)
+    write_text(out, text)
     print(
         f"wrote {out} (preset {args.preset}); check it with: sonicspec validate {out}",
         file=sys.stderr,
@@ -419,13 +420,6 @@ def _label_material(text: str) -> tuple[str, str]:
     if not sep or not label or not name:
         raise argparse.ArgumentTypeError(f"expected LABEL=NAME, got {text!r}")
     return label, name
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temp file and a rename: never a half-written file."""
-    from sonicspec.export.files import write_text
-
-    write_text(path, text)
 
 
 def _output_options(p: argparse.ArgumentParser) -> None:

@@ -257,7 +257,7 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     and generator give the same bytes for every point of a group's trajectories; and
     ``sonicspec rir SPEC`` is compute_rir with its own seed."""
     from sonicspec.plan.compile import compile_spec
-    from sonicspec.plan.hashing import rng_for
+    from sonicspec.hashing import rng_for
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
     from sonicspec.stages.mesh import load_scene_mesh

@@ -152,7 +152,7 @@ def test_task_mixtures_cover_every_combination() -> None:
     assert mixes[3].components == ("source1", "noise", "music") and mixes[3].targets == (
         "source1",)
     with pytest.raises(AudioError, match=r"mixture.tasks\[1\]: background 'both' needs music"):
-        task_mixtures(tasks, speakers, ["noise"])
+        task_mixtures(tasks, speakers, ["noise"], where="mixture.tasks")  # the caller's field
     with pytest.raises(AudioError, match="separation of 4 speakers, but a group has 3"):
         task_mixtures([{"kind": "separation", "speakers": 4, "background": "none"}], speakers,
                       [])

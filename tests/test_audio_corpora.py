@@ -1,7 +1,8 @@
 """Corpus readers on tiny corpora in the real layouts, resampling and loading.
 
-The corpora are written by sonicspec.testing.corpora (espeak-ng speech, synthesised noise and
-music) into temporary folders; the tests then break them the way real corpora break.
+The corpora are written by sonicspec.audio.generated and sonicspec.testing.corpora (espeak-ng
+speech, synthesised noise and music) into temporary folders; the tests then break them the way
+real corpora break.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
+from sonicspec.audio import generated as gen
 from sonicspec.audio.corpora import (
     CorpusIndex,
     CorpusItem,
@@ -36,7 +38,7 @@ RATIOS = {"train": 0.7, "val": 0.2, "test": 0.1}
 LS_SUBSETS = {"train": ["train-clean-360"], "val": ["dev-clean"], "test": ["test-clean"]}
 NO_SPEECH = ["Speech", "Human_voice", "Singing", "Music"]
 
-needs_espeak = pytest.mark.skipif(not tc.espeak_available(), reason="espeak-ng not installed")
+needs_espeak = pytest.mark.skipif(not gen.espeak_available(), reason="espeak-ng not installed")
 needs_mp3 = pytest.mark.skipif(not tc.mp3_writable(), reason="libsndfile cannot write MP3")
 
 
@@ -46,16 +48,16 @@ def rng(seed: int = 0) -> np.random.Generator:
 
 def copy(src: Path, dst: Path) -> Path:
     shutil.copytree(src, dst)
-    (dst / tc.MARKER).unlink(missing_ok=True)
+    (dst / gen.MARKER).unlink(missing_ok=True)
     return dst
 
 
 @pytest.fixture(scope="module")
 def librispeech(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    if not tc.espeak_available():
+    if not gen.espeak_available():
         pytest.skip("espeak-ng not installed")
     root = tmp_path_factory.mktemp("corpora") / "LibriSpeech"
-    return tc.write_librispeech(root, {"train-clean-360": 3, "dev-clean": 2, "test-clean": 2},
+    return gen.write_librispeech(root, {"train-clean-360": 3, "dev-clean": 2, "test-clean": 2},
                                 3, seed=0)
 
 
@@ -93,7 +95,7 @@ def test_librispeech_index_reads_layout_and_transcripts(librispeech: Path) -> No
     assert index.kind == "librispeech" and index.problems == ()
     assert split_sizes(index) == {"train": 9, "val": 6, "test": 6}
     assert [len(index.speakers(s)) for s in ("train", "val", "test")] == [3, 2, 2]
-    sentences = {tc.transcript_words(s) for s in tc.SENTENCES}
+    sentences = {gen.transcript_words(s) for s in gen.SENTENCES}
     for item in index.items:
         path = Path(item.path)
         assert path.is_absolute() and path.is_file()
@@ -544,7 +546,7 @@ def test_load_audio_averages_channels_and_resamples(tmp_path: Path) -> None:
 
 def file_bytes(root: Path) -> dict[str, bytes]:
     return {p.relative_to(root).as_posix(): p.read_bytes()
-            for p in sorted(root.rglob("*")) if p.is_file() and p.name != tc.MARKER}
+            for p in sorted(root.rglob("*")) if p.is_file() and p.name != gen.MARKER}
 
 
 def test_writers_are_deterministic_and_atomic(tmp_path: Path) -> None:
@@ -552,8 +554,8 @@ def test_writers_are_deterministic_and_atomic(tmp_path: Path) -> None:
     b = tc.write_fsd50k(tmp_path / "b", 4, 2, clip_duration_s=0.2, seed=5)
     c = tc.write_fsd50k(tmp_path / "c", 4, 2, clip_duration_s=0.2, seed=6)
     assert file_bytes(a) == file_bytes(b) != file_bytes(c)
-    assert not [p for p in a.rglob(".*") if p.name != tc.MARKER]  # no temporaries left
-    marker = json.loads((a / tc.MARKER).read_text())
+    assert not [p for p in a.rglob(".*") if p.name != gen.MARKER]  # no temporaries left
+    marker = json.loads((a / gen.MARKER).read_text())
     assert sorted(marker["files"]) == sorted(file_bytes(a))
     # A finished root is not written again ...
     wav = next((a / "FSD50K.dev_audio").glob("*.wav"))
@@ -561,7 +563,7 @@ def test_writers_are_deterministic_and_atomic(tmp_path: Path) -> None:
     tc.write_fsd50k(a, 4, 2, clip_duration_s=0.2, seed=5)
     assert wav.read_bytes() == b"edited"
     # ... an unfinished one (no marker: interrupted) is, with the same bytes ...
-    (a / tc.MARKER).unlink()
+    (a / gen.MARKER).unlink()
     tc.write_fsd50k(a, 4, 2, clip_duration_s=0.2, seed=5)
     assert file_bytes(a) == file_bytes(b)
     # ... and other parameters replace the files the old run wrote.
@@ -586,7 +588,7 @@ def test_interrupted_generation_leaves_no_half_file_and_no_marker(
     with pytest.raises(KeyboardInterrupt):
         tc.write_fsd50k(root, 4, 2, clip_duration_s=0.2, seed=5)
     monkeypatch.undo()
-    assert not (root / tc.MARKER).exists()
+    assert not (root / gen.MARKER).exists()
     assert not [p for p in root.rglob(".*")]  # the temporary was removed
     assert len(list(root.rglob("*.wav"))) == 2  # two finished files, the third never renamed
     for wav in root.rglob("*.wav"):
@@ -599,7 +601,7 @@ def test_interrupted_generation_leaves_no_half_file_and_no_marker(
 @needs_espeak
 def test_speech_and_music_writers_are_deterministic(tmp_path: Path) -> None:
     for name in ("a", "b"):
-        tc.write_librispeech(tmp_path / name / "ls", {"dev-clean": 1}, 2, seed=3)
+        gen.write_librispeech(tmp_path / name / "ls", {"dev-clean": 1}, 2, seed=3)
         if tc.mp3_writable():
             tc.write_fma(tmp_path / name / "fma", 2, clip_duration_s=0.5, seed=3)
     assert file_bytes(tmp_path / "a") == file_bytes(tmp_path / "b")
@@ -613,21 +615,21 @@ def test_writer_argument_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
     with pytest.raises(CorpusError, match=r"tracks: expected >= 1, got 0"):
         tc.write_fma(tmp_path, 0)
     with pytest.raises(CorpusError, match=r"role: expected noise or music, got 'speech'"):
-        tc.generate_background_corpus(tmp_path, "speech", ["train"], 1, 1.0, seed=0)
+        gen.generate_background_corpus(tmp_path, "speech", ["train"], 1, 1.0, seed=0)
     with pytest.raises(CorpusError, match=r"splits: expected distinct non-empty names"):
-        tc.generate_background_corpus(tmp_path, "noise", ["train", "train"], 1, 1.0, seed=0)
+        gen.generate_background_corpus(tmp_path, "noise", ["train", "train"], 1, 1.0, seed=0)
     with pytest.raises(CorpusError, match=r"subsets: expected subset names with >= 1 speaker"):
-        tc.write_librispeech(tmp_path, {"dev-clean": 0}, 2)
-    monkeypatch.setattr(tc, "espeak_available", lambda: False)
+        gen.write_librispeech(tmp_path, {"dev-clean": 0}, 2)
+    monkeypatch.setattr(gen, "espeak_available", lambda: False)
     with pytest.raises(CorpusError, match=r"^espeak-ng not found; install it with apt-get "
                                           r"install espeak-ng$"):
-        tc.generate_speech_corpus(tmp_path / "gen", ["train"], 1, 1, seed=0)
+        gen.generate_speech_corpus(tmp_path / "gen", ["train"], 1, 1, seed=0)
     assert not (tmp_path / "gen").exists()
 
 
 @needs_espeak
 def test_generated_speech_corpus_feeds_index_librispeech(tmp_path: Path) -> None:
-    subsets = tc.generate_speech_corpus(tmp_path, ["train", "val", "test"], 2, 2, seed=4)
+    subsets = gen.generate_speech_corpus(tmp_path, ["train", "val", "test"], 2, 2, seed=4)
     assert subsets == {s: [f"generated-{s}"] for s in ("train", "val", "test")}
     index = index_librispeech(tmp_path, subsets)
     assert [len(index.speakers(s)) for s in ("train", "val", "test")] == [2, 2, 2]
@@ -638,7 +640,7 @@ def test_generated_speech_corpus_feeds_index_librispeech(tmp_path: Path) -> None
 def test_generated_background_corpus_feeds_index_split_folders(tmp_path: Path) -> None:
     splits = ["train", "val", "test"]
     for role in ("noise", "music"):
-        ids = tc.generate_background_corpus(tmp_path / role, role, splits, 3, 0.5, seed=2)
+        ids = gen.generate_background_corpus(tmp_path / role, role, splits, 3, 0.5, seed=2)
         assert ids["val"] == ["val/" + role + f"-{i:04d}" for i in range(3)]
         index = index_split_folders(tmp_path / role, splits)
         assert {s: [i.id for i in index.split(s)] for s in splits} == ids

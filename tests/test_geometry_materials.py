@@ -12,6 +12,7 @@ import pytest
 
 from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry.materials import (
+    LIBRARY_NAMES,
     Material,
     assign_materials,
     custom_material,
@@ -21,6 +22,7 @@ from sonicspec.geometry.materials import (
     material_names,
 )
 from sonicspec.geometry.procedural import shoebox
+from sonicspec.spec.materials import LIBRARY_FILES, MaterialsSpec, library_material_names
 from sonicspec.units import OCTAVE_BANDS_HZ
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared/reference/mp3d_material_config.json"
@@ -81,6 +83,15 @@ def test_default_library_is_complete_and_sourced() -> None:
         assert m.source, name
         for kind in ("absorption", "scattering", "transmission"):
             assert all(0 <= v <= 1 for v in getattr(m, kind))
+
+
+def test_spec_reads_the_same_material_names_as_the_libraries() -> None:
+    # The spec validates names from the data files without importing geometry; both must
+    # agree on every built-in library and its names.
+    allowed = MaterialsSpec.model_fields["library"].annotation.__args__
+    assert set(LIBRARY_FILES) == set(LIBRARY_NAMES) == set(allowed)
+    for library in LIBRARY_NAMES:
+        assert library_material_names(library) == material_names(library)
 
 
 def test_mass_law_against_hand_values() -> None:

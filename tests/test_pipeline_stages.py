@@ -268,10 +268,11 @@ def test_full_disk_during_export_names_the_job_and_file(built: Plan, tmp_path: P
 def test_real_corpus_layouts_feed_a_build(tmp_path: Path) -> None:
     """LibriSpeech, FSD50K and FMA as they are laid out on disk (written by the fixtures)
     go through the real readers into a dataset; the metadata names their files."""
+    from sonicspec.audio.generated import write_librispeech
     from sonicspec.testing import corpora as tc
 
     data = tmp_path / "data"
-    tc.write_librispeech(data / "LibriSpeech", {"train-clean-360": 3}, 2, seed=1)
+    write_librispeech(data / "LibriSpeech", {"train-clean-360": 3}, 2, seed=1)
     tc.write_fsd50k(data / "FSD50K", 6, 2, clip_duration_s=2.0, seed=2)
     tc.write_fma(data / "fma", 10, clip_duration_s=2.0, seed=3)
     text = SPEC.replace(

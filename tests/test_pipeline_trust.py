@@ -416,6 +416,7 @@ def test_the_readme_spec_builds(tmp_path: Path) -> None:
     """As written, but for its group counts (1 per split instead of 100 and 10), on tiny
     corpora in the real LibriSpeech and FSD50K layouts. It failed 52 s into the build on the
     corpus shares, then on a noise clip repeated in its track."""
+    from sonicspec.audio.generated import write_librispeech
     from sonicspec.testing import corpora as tc
 
     text = readme_spec()
@@ -423,8 +424,8 @@ def test_the_readme_spec_builds(tmp_path: Path) -> None:
                      ("test: {groups: 10,", "test: {groups: 1,")):
         assert old in text
         text = text.replace(old, new)
-    tc.write_librispeech(tmp_path / "data" / "LibriSpeech",
-                         {"train-clean-360": 3, "test-clean": 3}, 5, seed=1)
+    write_librispeech(tmp_path / "data" / "LibriSpeech",
+                      {"train-clean-360": 3, "test-clean": 3}, 5, seed=1)
     tc.write_fsd50k(tmp_path / "data" / "FSD50K", 10, 4, clip_duration_s=8.0, seed=2)
     spec = tmp_path / "readme.yaml"
     spec.write_text(text)

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sonicspec.errors import CompileError
+from sonicspec.hashing import canonical_json, content_key, normalised_params_and_key, shared
 from sonicspec.plan.compile import compile_spec, plan_changes
-from sonicspec.plan.hashing import canonical_json, content_key, normalised_params_and_key, shared
 from sonicspec.plan.model import STEP_BY_NAME, Plan
 from sonicspec.spec import validate_text
 

@@ -12,6 +12,7 @@ from build_cases import readme_spec
 from spec_cases import BASE
 from test_cli_spec import run_cli
 
+from sonicspec.audio.generated import espeak_available
 from sonicspec.cli import main
 from sonicspec.errors import CorpusError, SonicspecError
 from sonicspec.shares import split_shares
@@ -20,7 +21,6 @@ from sonicspec.spec.load import format_path
 from sonicspec.stages import preflight as preflight_module
 from sonicspec.stages.corpus import corpus_shares
 from sonicspec.stages.preflight import preflight
-from sonicspec.testing.corpora import espeak_available
 
 # --- split shares: one rule for validate and the corpus stage ----------------------------
 
@@ -308,12 +308,13 @@ def test_plot_without_matplotlib_exits_2_before_any_work(
 def test_readme_spec_validates_plans_and_indexes_its_corpora(tmp_path: Path) -> None:
     """Issue 16: the README's own spec (FSD50K noise, train and test splits only) passed
     validate and failed 52 s into the build on the 7:2:1 default shares."""
+    from sonicspec.audio.generated import write_librispeech
     from sonicspec.plan.compile import compile_spec
     from sonicspec.stages.corpus import build_index
     from sonicspec.testing import corpora as tc
 
-    tc.write_librispeech(tmp_path / "data" / "LibriSpeech",
-                         {"train-clean-360": 3, "test-clean": 3}, 1, seed=1)
+    write_librispeech(tmp_path / "data" / "LibriSpeech",
+                      {"train-clean-360": 3, "test-clean": 3}, 1, seed=1)
     tc.write_fsd50k(tmp_path / "data" / "FSD50K", 6, 2, clip_duration_s=1.0, seed=2)
     path = tmp_path / "readme.yaml"
     path.write_text(readme_spec())

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sonicspec.errors import StoreError
-from sonicspec.plan.hashing import canonical_json, content_key, rng_for
+from sonicspec.hashing import canonical_json, content_key, rng_for
 from sonicspec.store import ArtifactStore
 
 

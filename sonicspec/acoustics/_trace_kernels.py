@@ -157,16 +157,27 @@ def _add_directions(dirsum, k, tb, total, ux, uy, uz, departure):  # pragma: no 
 
 @njit(cache=True, nogil=True)
 def bounce(
-    pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref,
-    face, tfar, u, rain_offset,
-    planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain,
-    rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key, rcv_clear, vol,
-    depth, air, fp, ip, widths,
-    hist, dirsum,
-    req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep,
-    c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep, c_ref,
+    rays, step, events, receivers, air, fp, ip, widths, acc, requests, children,
 ):  # pragma: no cover - compiled; exercised through raytrace.trace_rays
     """One bounce step of ``n = len(face)`` live rays, compacting the survivors in place.
+
+    The arrays come in tuples by what they describe (numba unpacks a tuple at compile time,
+    so the compiled loop is the one over separate arrays):
+
+    * ``rays``: ``(pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure,
+      ref)``, the live rays (updated in place);
+    * ``step``: ``(face, tfar, u, rain_offset)``, this step's Embree hits, random draws and
+      rain offsets;
+    * ``events``: ``(planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t,
+      split_gain)``, the faces and their event tables;
+    * ``receivers``: ``(rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key,
+      rcv_clear, vol, depth)``;
+    * ``air``, ``fp``, ``ip`` (the parameter vectors, ``F_*`` and ``I_*``), ``widths``;
+    * ``acc``: ``(hist, dirsum)``, the histograms the step adds to;
+    * ``requests``: ``(req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep)``,
+      the shadow rays it queues;
+    * ``children``: ``(c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep, c_ref)``, the rays
+      it spawns.
 
     Detects each ray's segment in the receiver spheres, moves it to its hit, queues diffuse-rain
     shadow rays (``req_*``; deposited at once where a convex room needs none), picks the next
@@ -179,6 +190,14 @@ def bounce(
     termination and roulette levels scale with it, so a ray the guiding sent where energy lives
     long, with a weight to match, is not stopped for that weight.
     """
+    pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref = rays
+    face, tfar, u, rain_offset = step
+    planes, face_class, p_t, p_ts, gain, w_diff, scatters, ps_t, split_gain = events
+    (rcv_pos, rcv_cap, rcv_inside, plane_n, plane_off, rcv_order, rcv_key, rcv_clear, vol,
+     depth) = receivers
+    hist, dirsum = acc
+    req_origin, req_dir, req_len, req_k, req_bin, req_energy, req_dep = requests
+    c_pos, c_dirs, c_energy, c_length, c_n_refl, c_dep, c_ref = children
     n = face.shape[0]
     n_bands = energy.shape[1]
     n_rcv = rcv_pos.shape[0]

@@ -7,10 +7,9 @@ import numpy as np
 from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 __all__ = ["check_air", "check_points", "direct_sound"]
-
-DEFAULT_SPEED_OF_SOUND_M_S = 343.0
 
 
 def check_points(name: str, points: np.ndarray) -> np.ndarray:
@@ -43,7 +42,7 @@ def direct_sound(
     source: np.ndarray,
     receivers: np.ndarray,
     air_m_per_band: np.ndarray | None = None,
-    speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S,
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
 ) -> list[Arrivals]:
     """Direct sound at every receiver, attenuated by the surfaces it has to pass through.
 

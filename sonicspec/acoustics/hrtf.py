@@ -60,6 +60,7 @@ from sonicspec.acoustics.synthesis import (
     synthesize_late,
 )
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S, seconds_to_samples_ceil
 
 ALPHA_MIN = 0.1
 THETA_MIN_DEG = 150.0
@@ -144,7 +145,7 @@ def hrir_set_from_sofa(sofa: Any) -> HrirSet:
 
 
 def woodworth_delays_s(cos_theta: np.ndarray, head_radius_m: float,
-                       speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+                       speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Woodworth ray-path delay at an ear relative to the head centre, seconds.
 
     ``cos_theta`` is the cosine of the angle between the ear axis and the direction of arrival.
@@ -190,7 +191,8 @@ def _check(sample_rate_hz: float) -> None:
 def synthesize_sphere_binaural_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
                                    head: SphereHead, sample_rate_hz: float,
                                    rng: np.random.Generator, *, yaw_deg: float = 0.0,
-                                   pitch_deg: float = 0.0, speed_of_sound_m_s: float = 343.0,
+                                   pitch_deg: float = 0.0,
+                                   speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                                    max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
                                    taps: int = DEFAULT_TAPS) -> np.ndarray:
     """Binaural RIR through the Brown–Duda sphere head, ``(2, n_samples)`` (left, right).
@@ -340,7 +342,7 @@ def _counted_weights(directions: np.ndarray, n_points: int = 1 << 16) -> np.ndar
 
 
 def sphere_head_coherence(head: SphereHead, freqs_hz: np.ndarray, sample_rate_hz: float, *,
-                          speed_of_sound_m_s: float = 343.0,
+                          speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                           n_directions: int = DIFFUSE_DIRECTIONS) -> np.ndarray:
     """Diffuse-field interaural coherence ``Γ(f)`` of the sphere head as the renderer models it.
 
@@ -415,7 +417,7 @@ def hrir_set_coherence(hrirs: HrirSet, freqs_hz: np.ndarray, *,
 
 
 def binaural_diffuse_coherence(model: SphereHead | HrirSet, sample_rate_hz: float, *,
-                               speed_of_sound_m_s: float = 343.0
+                               speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
                                ) -> tuple[np.ndarray, np.ndarray]:
     """``(freqs_hz, Γ)`` of a head model's diffuse field on a grid up to Nyquist (read-only).
 
@@ -452,7 +454,7 @@ def _coherence_grid(model: SphereHead | HrirSet, sample_rate_hz: float,
 
 def diffuse_binaural_tails(tails: np.ndarray, model: SphereHead | HrirSet,
                            sample_rate_hz: float, *,
-                           speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+                           speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Two independent tails ``(2, n)`` mixed into the ears of a diffuse field, ``(2, n)``.
 
     Per frequency ``y_L = a x₁ + b x₂``, ``y_R = a x₁ − b x₂`` with ``a = √((1 + Γ)/2)``,
@@ -477,7 +479,7 @@ def diffuse_binaural_tails(tails: np.ndarray, model: SphereHead | HrirSet,
     if isinstance(model, SphereHead):
         # Filters span the largest interaural delay, the Woodworth one of a lateral source.
         itd_s = model.head_radius_m / speed_of_sound_m_s * (math.pi / 2 + 1)
-        pad = math.ceil(4 * itd_s * sample_rate_hz) + 16
+        pad = seconds_to_samples_ceil(4 * itd_s, sample_rate_hz) + 16
     else:
         # Γ of a measured set has no structure finer than its HRIRs' length.
         pad = 2 * math.ceil(model.hrirs.shape[-1] * sample_rate_hz / model.sample_rate_hz) + 16

@@ -28,9 +28,10 @@ from scipy.sparse.csgraph import connected_components
 
 from sonicspec.acoustics import _image_source_kernels as KI
 from sonicspec.acoustics.arrivals import KIND_SPECULAR, Arrivals
-from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
+from sonicspec.acoustics.direct import check_air, check_points
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 T = TypeVar("T")
 
@@ -300,7 +301,7 @@ def image_sources(
     receivers: np.ndarray,
     max_order: int = 3,
     air_m_per_band: np.ndarray | None = None,
-    speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S,
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
     regions: PlanarRegions | None = None,
     max_path_length_m: float | None = None,
     max_candidates: int = 2_000_000,

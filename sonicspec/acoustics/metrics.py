@@ -25,6 +25,7 @@ import numpy as np
 
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.errors import AcousticsError
+from sonicspec.units import seconds_to_samples, seconds_to_samples_floor
 
 DIRECT_WINDOW_S = 0.0025
 
@@ -58,7 +59,7 @@ def schroeder_energy(energy: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     """Backward-integrated energy with the noise handling of the module docstring."""
     e = np.asarray(energy, dtype=np.float64)
     n = e.size
-    env = _smooth(e, int(0.01 * sample_rate_hz))
+    env = _smooth(e, seconds_to_samples_floor(0.01, sample_rate_hz))
     tail = env[int(0.9 * n):]
     noise = float(tail.mean()) if tail.size else 0.0
     peak = float(env.max())
@@ -71,7 +72,8 @@ def schroeder_energy(energy: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     clean = np.clip(e[:cross] - noise, 0.0, None)
     integral = np.cumsum(clean[::-1])[::-1]
     # Tail correction: continue the decay of the last 10 dB before the crossing point.
-    db = 10 * np.log10(np.maximum(_smooth(clean, int(0.01 * sample_rate_hz)), 1e-300))
+    window = seconds_to_samples_floor(0.01, sample_rate_hz)
+    db = 10 * np.log10(np.maximum(_smooth(clean, window), 1e-300))
     start = int(np.argmax(db < db[:cross].max() - 10)) if np.any(db < db.max() - 10) else 0
     seg = np.arange(start, cross)
     if seg.size >= 8:
@@ -185,7 +187,8 @@ def _single(x: np.ndarray, sample_rate_hz: float) -> dict[str, float]:
     e = x[t0:] ** 2
     edc = edc_db(e, sample_rate_hz)
     dt = 1.0 / sample_rate_hz
-    n50, n80 = round(0.05 * sample_rate_hz), round(0.08 * sample_rate_hz)
+    n50 = seconds_to_samples(0.05, sample_rate_hz)
+    n80 = seconds_to_samples(0.08, sample_rate_hz)
     total = e.sum()
     return {
         "t20_s": decay_time_from_edc(edc, dt, -5, -25),
@@ -202,8 +205,9 @@ def direct_to_reverberant_db(rir: np.ndarray, sample_rate_hz: float) -> float:
     x = _check_rir(rir, sample_rate_hz)
     e = x**2
     peak = onset_index(x)
-    peak = peak + int(np.argmax(e[peak:peak + int(DIRECT_WINDOW_S * sample_rate_hz) + 1]))
-    w = round(DIRECT_WINDOW_S * sample_rate_hz)
+    reach = seconds_to_samples_floor(DIRECT_WINDOW_S, sample_rate_hz)
+    peak = peak + int(np.argmax(e[peak:peak + reach + 1]))
+    w = seconds_to_samples(DIRECT_WINDOW_S, sample_rate_hz)
     lo, hi = max(0, peak - w), peak + w + 1
     direct = e[lo:hi].sum()
     rest = e.sum() - direct

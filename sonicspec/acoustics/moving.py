@@ -27,13 +27,14 @@ import numpy as np
 
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 HALF_WIDTH = 8
 KAISER_BETA = 6.0
 
 
 def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
-                speed_of_sound_m_s: float = 343.0, gain=1.0, n_out: int | None = None,
+                speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, gain=1.0, n_out: int | None = None,
                 half_width: int = HALF_WIDTH, beta: float = KAISER_BETA) -> np.ndarray:
     """One propagation path of a moving source to a (moving) receiver, ``(n_out,)``.
 

@@ -116,10 +116,11 @@ import numpy as np
 
 from sonicspec.acoustics import _trace_kernels as K
 from sonicspec.acoustics.arrivals import EnergyHistogram, TraceResult
-from sonicspec.acoustics.direct import DEFAULT_SPEED_OF_SOUND_M_S, check_air, check_points
+from sonicspec.acoustics.direct import check_air, check_points
 from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 __all__ = ["RayTraceSettings", "receiver_clearance_m", "trace_rays"]
 
@@ -223,7 +224,7 @@ class RayTraceSettings:
     radius_growth: float = 0.05
     max_receiver_radius_m: float = 1.0
     specular_order_excluded: int = 3
-    speed_of_sound_m_s: float = DEFAULT_SPEED_OF_SOUND_M_S
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
     batch_size: int = 8192
     diffuse_rain: bool = True
     rain_receivers_per_hit: int = 8
@@ -594,18 +595,18 @@ def _trace_batch(
         req = _RainQueue.empty(m, scene.n_bands, st.directions)
         kids = _Children.empty(n if split else 0, scene.n_bands)
         n, n_req, esc, hits, n_kids = K.bounce(
-            pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref,
-            face, tfar, u, offsets,
-            ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
-            ev.ps_t, ev.split_gain,
-            rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
-            rcv.volume, rcv.depth,
+            (pos, dirs, energy, length, n_refl, any_diffuse, last_diffuse, departure, ref),
+            (face, tfar, u, offsets),
+            (ev.planes, ev.face_class, ev.p_t, ev.p_ts, ev.gain, ev.w_diff, ev.scatters,
+             ev.ps_t, ev.split_gain),
+            (rcv.pos, rcv.cap, rcv.inside, plane_n, plane_off, rcv.order, rcv.key, rcv.clear,
+             rcv.volume, rcv.depth),
             air, fp, ip, widths,
-            acc.energy, acc.directions,
-            req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
-            req.departure,
-            kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
-            kids.ref,
+            (acc.energy, acc.directions),
+            (req.origin, req.direction, req.length, req.receiver, req.bin, req.energy,
+             req.departure),
+            (kids.pos, kids.dirs, kids.energy, kids.length, kids.n_refl, kids.departure,
+             kids.ref),
         )  # fmt: skip
         escaped += esc
         interactions += hits

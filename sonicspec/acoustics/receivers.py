@@ -38,6 +38,7 @@ from sonicspec.acoustics.synthesis import (
     synthesize_late,
 )
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S, seconds_to_samples_ceil
 
 
 def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
@@ -110,7 +111,8 @@ def _scaled(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arri
 
 def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
                          offsets_m: np.ndarray, sample_rate_hz: float,
-                         rng: np.random.Generator, *, speed_of_sound_m_s: float = 343.0,
+                         rng: np.random.Generator, *,
+                         speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                          max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
                          taps: int = DEFAULT_TAPS) -> np.ndarray:
     """RIRs of omni capsules at ``offsets_m`` around the centre, ``(M, n_samples)``."""
@@ -131,7 +133,7 @@ def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
 
 
 def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_hz: float,
-                      speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+                      speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Mix independent signals ``(M, n)`` into a diffuse field heard at ``positions_m``.
 
     Per frequency, the mixing matrix ``C = Γ^½ = V √Λ Vᵀ`` of ``Γ = V Λ Vᵀ``,
@@ -159,7 +161,7 @@ def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_
         root = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
         return root @ np.swapaxes(vec, 1, 2)  # C = V √Λ Vᵀ, symmetric
 
-    pad = math.ceil(4 * d.max() / speed_of_sound_m_s * sample_rate_hz) + 16
+    pad = seconds_to_samples_ceil(4 * d.max() / speed_of_sound_m_s, sample_rate_hz) + 16
     return mix_per_frequency(x, mixing, sample_rate_hz, pad)
 
 

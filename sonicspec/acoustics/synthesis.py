@@ -38,6 +38,7 @@ import numpy as np
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.errors import AcousticsError
+from sonicspec.units import seconds_to_samples_ceil
 
 DEFAULT_TAPS = 65
 # Band responses below this are zero for the noise (the crossovers' cos² ends at ~1e-33).
@@ -291,8 +292,8 @@ def rir_length_samples(arrivals: Arrivals, histogram: EnergyHistogram | None,
         filled = np.flatnonzero(histogram.energy.sum(axis=1) > 0)
         if filled.size:
             end_s = max(end_s, (filled[-1] + 1) * histogram.bin_s)
-    n = math.ceil(end_s * sample_rate_hz) + taps + ring
-    return max(taps, min(n, math.ceil(max_length_s * sample_rate_hz)))
+    n = seconds_to_samples_ceil(end_s, sample_rate_hz) + taps + ring
+    return max(taps, min(n, seconds_to_samples_ceil(max_length_s, sample_rate_hz)))
 
 
 def synthesize_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,

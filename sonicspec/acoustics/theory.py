@@ -31,6 +31,7 @@ import math
 import numpy as np
 
 from sonicspec.errors import AcousticsError
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 SIXTY_DB = 6 * math.log(10)  # 13.8155: ln(10⁶), the decay exponent for 60 dB
 
@@ -42,7 +43,7 @@ def _positive(name: str, value: float) -> float:
 
 
 def sabine_t60(volume_m3: float, surface_m2: float, mean_absorption, air_m_per_m=0.0,
-               speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+               speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Sabine reverberation time, seconds (per band if arrays are given)."""
     v, s = _positive("volume_m3", volume_m3), _positive("surface_m2", surface_m2)
     a = np.asarray(mean_absorption, dtype=np.float64) * s
@@ -51,7 +52,7 @@ def sabine_t60(volume_m3: float, surface_m2: float, mean_absorption, air_m_per_m
 
 
 def eyring_t60(volume_m3: float, surface_m2: float, mean_absorption, air_m_per_m=0.0,
-               speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+               speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Eyring reverberation time, seconds (per band if arrays are given)."""
     v, s = _positive("volume_m3", volume_m3), _positive("surface_m2", surface_m2)
     alpha = np.asarray(mean_absorption, dtype=np.float64)
@@ -62,7 +63,7 @@ def eyring_t60(volume_m3: float, surface_m2: float, mean_absorption, air_m_per_m
 
 
 def kuttruff_t60(volume_m3: float, surface_m2: float, mean_absorption, path_variance: float,
-                 air_m_per_m=0.0, speed_of_sound_m_s: float = 343.0) -> np.ndarray:
+                 air_m_per_m=0.0, speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
     """Eyring's reverberation time corrected for the relative variance ``path_variance``
     (γ²) of the free path lengths, seconds (per band if arrays are given)."""
     v, s = _positive("volume_m3", volume_m3), _positive("surface_m2", surface_m2)
@@ -114,7 +115,7 @@ def shoebox_free_paths(size_m, n_paths: int = 1_000_000, seed: int = 0) -> np.nd
 
 
 def shoebox_decay_t60(size_m, source_m, absorption, scattering: float, air_m_per_m=0.0,
-                      speed_of_sound_m_s: float = 343.0, n_paths: int = 40_000,
+                      speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, n_paths: int = 40_000,
                       seed: int = 0) -> np.ndarray:
     """ISO 3382-1 T30 of the total sound energy in a shoebox, seconds (per band if
     ``absorption``/``air_m_per_m`` are arrays): Schroeder's backward integral of the energy
@@ -193,8 +194,8 @@ def mean_free_path_m(volume_m3: float, surface_m2: float) -> float:
     return 4 * _positive("volume_m3", volume_m3) / _positive("surface_m2", surface_m2)
 
 
-def critical_distance_m(volume_m3: float, t60_s: float, speed_of_sound_m_s: float = 343.0
-                        ) -> float:
+def critical_distance_m(volume_m3: float, t60_s: float,
+                        speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> float:
     """Distance where direct and reverberant energy are equal: √(A/16π), A from Sabine."""
     v, t = _positive("volume_m3", volume_m3), _positive("t60_s", t60_s)
     area = 4 * SIXTY_DB * v / (speed_of_sound_m_s * t)
@@ -202,7 +203,7 @@ def critical_distance_m(volume_m3: float, t60_s: float, speed_of_sound_m_s: floa
 
 
 def barron_reflected_energy(distance_m: float, volume_m3: float, t60_s: float, after_s: float,
-                            speed_of_sound_m_s: float = 343.0) -> float:
+                            speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> float:
     """Reflected energy arriving ``after_s`` after the direct sound, relative units (Barron)."""
     r, v, t = (_positive("distance_m", distance_m), _positive("volume_m3", volume_m3),
                _positive("t60_s", t60_s))
@@ -214,7 +215,7 @@ def barron_reflected_energy(distance_m: float, volume_m3: float, t60_s: float, a
 
 
 def barron_clarity_db(distance_m: float, volume_m3: float, t60_s: float, split_s: float = 0.05,
-                      speed_of_sound_m_s: float = 343.0) -> float:
+                      speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> float:
     """C50 (``split_s`` = 0.05) or C80 (0.08) by Barron's revised theory, dB."""
     direct = 100.0 / _positive("distance_m", distance_m) ** 2
     all_reflected = barron_reflected_energy(distance_m, volume_m3, t60_s, 0.0,
@@ -260,7 +261,8 @@ def _track(points, n: int, name: str) -> np.ndarray:
 
 
 def moving_arrival_times(source_m, receiver_m, n_samples: int, sample_rate_hz: float,
-                         speed_of_sound_m_s: float = 343.0) -> tuple[np.ndarray, np.ndarray]:
+                         speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
+                         ) -> tuple[np.ndarray, np.ndarray]:
     """Arrival time (seconds) and path length (m) of every emitted sample ``k``.
 
     ``source_m``: a point or ``(n_samples, 3)`` positions at the emission times ``k / fs``.
@@ -305,7 +307,7 @@ def windowed_sinc(x: np.ndarray, half_width: int = FRACTIONAL_DELAY_HALF_WIDTH,
 
 
 def moving_point_source(dry, source_m, receiver_m, sample_rate_hz: float, *,
-                        speed_of_sound_m_s: float = 343.0, gain=1.0,
+                        speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, gain=1.0,
                         n_out: int | None = None) -> np.ndarray:
     """The exact pressure at a (moving) receiver of a (moving) point source, ``(n_out,)``.
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.errors import AudioError
+from sonicspec.units import seconds_to_samples
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,8 @@ def _draw_int(rng: np.random.Generator, bounds: Sequence[int]) -> int:
 
 def _draw_samples(rng: np.random.Generator, bounds_s: Sequence[float], rate: int) -> int:
     lo, hi = float(bounds_s[0]), float(bounds_s[1])
-    return round(rng.uniform(lo, hi) * rate) if hi > lo else round(lo * rate)
+    return (seconds_to_samples(rng.uniform(lo, hi), rate) if hi > lo
+            else seconds_to_samples(lo, rate))
 
 
 def arrange_speech(utterances: Sequence[Clip], clip_samples: int, count: Sequence[int],
@@ -91,7 +93,7 @@ def arrange_speech(utterances: Sequence[Clip], clip_samples: int, count: Sequenc
         raise AudioError(
             f"{where}: no utterance fits in the {clip_samples / sample_rate_hz:g} s clip "
             f"(shortest {shortest:.2f} s after a gap drawn in {list(gap_s)} s); lengthen "
-            "mixture.duration_s or shorten mixture.utterance_gap_s")
+            "the clip or shorten the gaps")
     return out
 
 

@@ -35,7 +35,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -45,6 +44,7 @@ from typing import Any
 import numpy as np
 import soundfile as sf
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import AudioError, CorpusError, SonicspecError
 from sonicspec.shares import split_shares
 
@@ -302,27 +302,6 @@ def _finish(kind: str, items: list[CorpusItem], problems: _Findings, splits: Seq
             hint = f"; skipped files: {'; '.join(problems[:3])}" if problems else ""
             raise CorpusError(f"{where}: split '{name}' has no usable files{hint}")
     return index
-
-
-def write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """Write ``path`` through ``write(temp_path)`` and rename it into place.
-
-    The temporary file sits beside ``path`` (same filesystem, so the rename is atomic), is a
-    dot-file (the readers ignore it) and keeps ``path``'s ending (soundfile picks the format
-    from it). An interrupted write leaves either the old file or none, never half a file.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
-                                    suffix=f".tmp{path.suffix}")
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 # --------------------------------------------------------------------------------------------
@@ -689,7 +668,7 @@ def index_split_folders(root: Path, splits: Sequence[str],
                         extensions: Sequence[str] = (".flac", ".wav")) -> CorpusIndex:
     """Index a folder already divided by split: ``<root>/<split>/**/<file>``.
 
-    The layout :func:`sonicspec.testing.corpora.generate_background_corpus` writes. Ids are
+    The layout :func:`sonicspec.audio.generated.generate_background_corpus` writes. Ids are
     paths below ``root`` without the ending (``train/noise-0003``); no speakers.
     """
     root = Path(root)
@@ -730,7 +709,7 @@ def cached_index(cache_file: Path, build: Callable[[], CorpusIndex]) -> CorpusIn
         pass  # absent, unreadable, corrupt or stale: rebuild
     index = build()
     text = json.dumps(index.to_dict(), separators=(",", ":"), sort_keys=True)
-    write_atomic(cache_file, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    write_text(cache_file, text)
     return index
 
 

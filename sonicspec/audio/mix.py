@@ -102,25 +102,24 @@ def _short(name: str) -> str:
 
 
 def task_mixtures(tasks: Sequence[Mapping[str, Any]], speakers: Sequence[str],
-                  available: Sequence[str]) -> list[Mixture]:
-    """The mixtures the spec's tasks ask for, over the group's speaker tracks.
+                  available: Sequence[str], *, where: str = "tasks") -> list[Mixture]:
+    """The mixtures the tasks ask for, over the group's speaker tracks.
 
     Separation of ``k`` speakers: every ``k``-subset of the speakers, plus the background;
     enhancement: every speaker alone plus the background. A background the group lacks is an
-    error naming the task.
+    error naming the task (``<where>[i]``; the caller says where the tasks come from).
     """
     out: list[Mixture] = []
     for i, task in enumerate(tasks):
         background = _BACKGROUND[task["background"]]
         missing = [b for b in background if b not in available]
         if missing:
-            raise AudioError(f"mixture.tasks[{i}]: background {task['background']!r} needs "
-                             f"{' and '.join(missing)}, but the group has no such track (add "
-                             f"corpora.{missing[0]} and a non-zero mixture.{missing[0]}_clips)")
+            raise AudioError(f"{where}[{i}]: background {task['background']!r} needs "
+                             f"{' and '.join(missing)}, but the group has no such track")
         k = task["speakers"] if task["kind"] == "separation" else 1
         if k > len(speakers):
-            raise AudioError(f"mixture.tasks[{i}]: separation of {k} speakers, but a group "
-                             f"has {len(speakers)} (mixture.speakers)")
+            raise AudioError(f"{where}[{i}]: separation of {k} speakers, but a group "
+                             f"has {len(speakers)}")
         suffix = "" if not background else "_" + task["background"]
         prefix = "sep" if task["kind"] == "separation" else "enh"
         for combo in itertools.combinations(speakers, k):
@@ -129,7 +128,7 @@ def task_mixtures(tasks: Sequence[Mapping[str, Any]], speakers: Sequence[str],
     names = [m.name for m in out]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
-        raise AudioError(f"mixture.tasks: mixtures {dupes} are asked for twice")
+        raise AudioError(f"{where}: mixtures {dupes} are asked for twice")
     return out
 
 

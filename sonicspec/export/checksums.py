@@ -12,28 +12,21 @@ own and ``verify`` knows what it is pointed at: ``.sonicspec-dataset.json`` in a
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import SpecError, StoreError
-from sonicspec.export.files import write_json, write_text
+from sonicspec.export.files import write_json
+from sonicspec.hashing import file_sha256
 
 CHECKSUMS_NAME = "checksums.sha256"
 DATASET_MARKER = ".sonicspec-dataset.json"
 STORE_MARKER = "sonicspec-store.json"
 STORE_STEP_FOLDERS = ("plans", "corpus", "mesh")  # what a store made before markers has
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def file_record(out: Path, path: Path) -> dict[str, Any]:

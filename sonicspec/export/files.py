@@ -1,50 +1,23 @@
 """Writing the dataset folder: audio and JSON files, each written atomically.
 
-A file is written to a temporary name beside its final place and renamed, so a dataset folder
-never holds half a file, whatever happens to the process writing it.
+A file is written to a temporary name beside its final place and renamed
+(:func:`sonicspec.atomic.atomic_path`), so a dataset folder never holds half a file, whatever
+happens to the process writing it.
 """
 
 from __future__ import annotations
 
-import errno
 import json
-import os
-import uuid
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sonicspec.atomic import atomic_path, write_text
 from sonicspec.errors import StoreError
 
 SUBTYPES = {"PCM_16", "PCM_24", "FLOAT"}
 FORMATS = {"flac": "FLAC", "wav": "WAV"}
-
-
-def _temp_beside(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-
-
-@contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename.
-
-    On any failure the temporary file is removed and ``path`` keeps its old content; an
-    ``OSError`` becomes a :class:`StoreError` naming the file (and a full disk as such).
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except OSError as exc:
-        hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-        raise StoreError(f"cannot write {path}: {exc.strerror or exc}{hint}") from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def write_audio(path: Path, audio: np.ndarray, sample_rate_hz: int, *, audio_format: str = "flac",
@@ -89,9 +62,3 @@ def write_json(path: Path, data: Any) -> Path:
     text = json.dumps(data, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
     return write_text(path, text)
 
-
-def write_text(path: Path, text: str) -> Path:
-    """Write UTF-8 text, atomically."""
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-    return path

@@ -13,6 +13,7 @@ import numpy as np
 from sonicspec.errors import SonicspecError
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.navigation import Navigation
+from sonicspec.units import seconds_to_samples_floor
 
 
 def _pyplot():
@@ -137,7 +138,7 @@ def plot_rir(rir: np.ndarray, sample_rate_hz: float, bands_hz, path: Path, *, ti
     axes[1].set_xlabel("time (s)")
     axes[1].set_ylabel("dB")
     axes[1].legend(fontsize=8, ncol=3)
-    early = slice(0, min(rir.size, int(0.1 * sample_rate_hz)))
+    early = slice(0, min(rir.size, seconds_to_samples_floor(0.1, sample_rate_hz)))
     level = 20 * np.log10(np.maximum(np.abs(rir[early]), 1e-12))
     axes[2].plot(1000 * t[early], level, lw=0.7)
     axes[2].set_ylim(level.max() - 60, level.max() + 3)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import fnmatch
 import glob
-import hashlib
 import json
 import os
 from collections.abc import Mapping
@@ -22,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import canonical_json, rng_for, sha256_hex, shared
+from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
@@ -63,11 +63,7 @@ class FileDigests:
             raise CompileError(f"{path}: file does not exist") from None
         token = f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}"
         if token not in self._cache:
-            h = hashlib.sha256()
-            with open(path, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(block)
-            self._cache[token] = h.hexdigest()
+            self._cache[token] = file_sha256(path)
             self._dirty = True
         return self._cache[token]
 
@@ -87,10 +83,7 @@ class FileDigests:
     def save(self) -> None:
         if self.cache_file is None or not self._dirty:
             return
-        self.cache_file.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.cache_file.with_name(f".{self.cache_file.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps(self._cache, sort_keys=True))
-        os.replace(tmp, self.cache_file)
+        write_text(self.cache_file, json.dumps(self._cache, sort_keys=True))
 
 
 def expand_scenes(spec: DatasetSpec, base_dir: Path) -> list[SceneEntry]:

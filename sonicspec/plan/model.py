@@ -8,8 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sonicspec.atomic import atomic_path
 from sonicspec.errors import CompileError
-from sonicspec.plan.hashing import (
+from sonicspec.hashing import (
     KEY_LENGTH,
     canonical_json,
     normalised_params_and_key,
@@ -180,18 +181,13 @@ class Plan:
 
     def write(self, path: Path) -> Path:
         """Write the plan as JSON, atomically."""
-        import os
-
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
         # One job per line, streamed: a plan of 10^6 groups has 1.5 million jobs, too many to
         # hold as one indented text (json's indenting encoder is also its slow one).
-        with tmp.open("w") as fh:
+        with atomic_path(path) as tmp, tmp.open("w") as fh:
             fh.write(json.dumps(self._header(), sort_keys=True)[:-1] + ', "jobs": [\n')
             for i, job in enumerate(self.jobs):
                 fh.write((",\n" if i else "") + json.dumps(job.to_dict(), sort_keys=True))
             fh.write("\n]}\n")
-        os.replace(tmp, path)
         return path
 
     @classmethod

@@ -25,6 +25,7 @@ from sonicspec.spec.corpora import (
 )
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import Problem, did_you_mean
+from sonicspec.spec.materials import library_material_names
 from sonicspec.spec.microphone import channel_count
 from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec
 from sonicspec.spec.scene import (
@@ -256,9 +257,7 @@ def _material_refs(spec: DatasetSpec) -> Iterator[tuple[tuple, str]]:
 
 
 def _check_materials(spec: DatasetSpec) -> Iterator[Problem]:
-    from sonicspec.geometry.materials import material_names
-
-    known = set(material_names(spec.materials.library)) | set(spec.materials.custom)
+    known = set(library_material_names(spec.materials.library)) | set(spec.materials.custom)
     for path, name in _material_refs(spec):
         if name not in known:
             yield _err(

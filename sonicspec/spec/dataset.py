@@ -18,6 +18,7 @@ from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import SceneSpec
 from sonicspec.spec.splits import MAX_GROUPS, SplitSpec
 from sonicspec.spec.trajectory import ShortestPathTrajectorySpec, TrajectorySpec
+from sonicspec.units import SPEED_OF_SOUND_M_S
 
 SPEC_VERSION = 1
 
@@ -30,7 +31,9 @@ class DatasetSpec(SpecModel):
     description: str = Field("", description="Free text shown in dataset.json.")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Root of every random draw.")
     sample_rate_hz: int = Field(16000, ge=8000, le=192000, description="Output sample rate, Hz.")
-    speed_of_sound_m_s: float = Field(343.0, ge=300, le=400, description="Speed of sound, m/s.")
+    speed_of_sound_m_s: float = Field(
+        SPEED_OF_SOUND_M_S, ge=300, le=400, description="Speed of sound, m/s."
+    )
     scenes: list[SceneSpec] = Field(min_length=1, description="Rooms and buildings to simulate.")
     materials: MaterialsSpec = Field(
         default_factory=MaterialsSpec, description="Material library and user materials."

@@ -1,7 +1,15 @@
-"""Materials: a built-in library plus user-defined materials."""
+"""Materials: a built-in library plus user-defined materials.
+
+The spec knows the built-in libraries as data: their material names come from the packaged JSON
+files (``sonicspec/data/materials/``), the same files the geometry library builds its materials
+from, so validating a spec imports no geometry (nor numpy).
+"""
 
 from __future__ import annotations
 
+import json
+from functools import cache
+from importlib import resources
 from typing import Literal
 
 from pydantic import Field
@@ -22,6 +30,18 @@ class CustomMaterialSpec(SpecModel):
         0.0, description="Energy transmission coefficient per band, 0–1 (1: acoustically open)."
     )
     description: str = Field("", description="Free text: what the material is, its source.")
+
+
+LIBRARY_FILES = {"sonicspec": "sonicspec.json", "sonicset": "mp3d_material_config.json"}
+"""The packaged data file of each built-in material library."""
+
+
+@cache
+def library_material_names(library: str) -> tuple[str, ...]:
+    """The material names of a built-in library, in the order of its data file."""
+    text = (resources.files("sonicspec").joinpath("data", "materials", LIBRARY_FILES[library])
+            .read_text("utf-8"))
+    return tuple(entry["name"] for entry in json.loads(text)["materials"])
 
 
 class MaterialsSpec(SpecModel):

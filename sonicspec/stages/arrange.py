@@ -14,8 +14,10 @@ import numpy as np
 
 from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
+from sonicspec.errors import AudioError
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import read_index
+from sonicspec.units import seconds_to_samples
 
 
 def resampled_length(num_samples: int, from_hz: int, to_hz: int) -> int:
@@ -42,7 +44,7 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group
     mix = params["mixture"]
     rate = params["sample_rate_hz"]
     split = params["split"]
-    clip_samples = round(mix["duration_s"] * rate)
+    clip_samples = seconds_to_samples(mix["duration_s"], rate)
     speech = indexes["speech"]
     speech.require_speakers(split, mix["speakers"], "corpora.speech")
     by_speaker = speech.speakers(split)
@@ -51,9 +53,14 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group
     tracks = []
     for k, speaker in enumerate(chosen):
         items = by_speaker[speaker]
-        segments = arrange_speech([_clip(i, rate) for i in items], clip_samples,
-                                  mix["utterances_per_speaker"], mix["utterance_gap_s"], rate,
-                                  rng, where=f"group {group} source{k + 1} (speaker {speaker})")
+        try:
+            segments = arrange_speech(
+                [_clip(i, rate) for i in items], clip_samples, mix["utterances_per_speaker"],
+                mix["utterance_gap_s"], rate, rng,
+                where=f"group {group} source{k + 1} (speaker {speaker})")
+        except AudioError as err:
+            raise AudioError(f"{err} (the clip is mixture.duration_s, the gaps "
+                             "mixture.utterance_gap_s)") from None
         tracks.append({"name": f"source{k + 1}", "role": "speech", "speaker": speaker,
                        "segments": [s.to_dict() for s in segments],
                        "files": _files(items, segments)})

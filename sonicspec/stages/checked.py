@@ -16,7 +16,7 @@ import json
 import os
 from pathlib import Path
 
-from sonicspec.export.files import write_text
+from sonicspec.atomic import write_text
 
 CACHE_NAME = "checked.json"
 

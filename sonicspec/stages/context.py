@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.atomic import write_text
 from sonicspec.errors import StageError
-from sonicspec.export.files import write_text
-from sonicspec.plan.hashing import rng_for
+from sonicspec.hashing import rng_for
 from sonicspec.plan.model import STEP_BY_NAME, Job, Plan
 from sonicspec.store import Artifact, ArtifactStore
 

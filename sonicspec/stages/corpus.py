@@ -39,7 +39,7 @@ log = logging.getLogger("sonicspec.stages.corpus")
 
 
 def _generated(params: dict[str, Any], cache: Path, key: str) -> CorpusIndex:
-    from sonicspec.testing.corpora import generate_background_corpus, generate_speech_corpus
+    from sonicspec.audio.generated import generate_background_corpus, generate_speech_corpus
 
     corpus, role, splits = params["corpus"], params["role"], params["splits"]
     root = cache / "generated" / f"{role}-{key[:16]}"

@@ -9,8 +9,9 @@ from typing import Any
 import numpy as np
 
 from sonicspec import __version__
+from sonicspec.atomic import write_text
 from sonicspec.export.checksums import CHECKSUMS_NAME, file_record, write_checksums
-from sonicspec.export.files import write_json, write_text
+from sonicspec.export.files import write_json
 from sonicspec.export.manifests import csv_text, jsonl
 from sonicspec.stages.context import JobContext
 

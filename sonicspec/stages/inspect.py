@@ -14,8 +14,8 @@ import numpy as np
 
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
+from sonicspec.hashing import rng_for
 from sonicspec.plan.compile import FileDigests, expand_scenes, scene_jobs
-from sonicspec.plan.hashing import rng_for
 from sonicspec.spec.load import LoadedSpec, did_you_mean
 from sonicspec.stages.mesh import build_scene_mesh
 from sonicspec.stages.navigation import settings_from as nav_settings

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.audio.mix import gain_to_loudness, integrated_loudness, peak_guard, task_mixtures
+from sonicspec.errors import AudioError
 from sonicspec.stages.context import JobContext
 
 
@@ -63,7 +64,12 @@ def mix_group(render_group: dict[str, Any], arrays: dict[str, np.ndarray],
                         "measured_on": loud["stage"]}
     speakers = [t["name"] for t in render_group["tracks"] if t["role"] == "speech"]
     available = [t["name"] for t in render_group["tracks"] if t["role"] != "speech"]
-    mixtures = task_mixtures(params["tasks"], speakers, available)
+    try:
+        mixtures = task_mixtures(params["tasks"], speakers, available, where="mixture.tasks")
+    except AudioError as err:
+        raise AudioError(f"{err} (a group's tracks: mixture.speakers speakers, and noise or "
+                         "music from corpora.<role> with a non-zero mixture.<role>_clips)"
+                         ) from None
     group_gain, peak = peak_guard(signals, gains, mixtures, loud["peak_limit_dbfs"])
     final = {k: g * group_gain for k, g in gains.items()} | dry_gains
     for name, entry in report.items():

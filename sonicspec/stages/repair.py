@@ -21,11 +21,11 @@ from sonicspec.errors import StoreError
 from sonicspec.export.checksums import (
     CHECKSUMS_NAME,
     DATASET_MARKER,
-    file_sha256,
     read_checksums,
     read_marker,
     verify_dataset,
 )
+from sonicspec.hashing import file_sha256
 from sonicspec.plan.model import Job, Plan
 from sonicspec.stages.checked import CheckCache
 from sonicspec.store import ArtifactStore

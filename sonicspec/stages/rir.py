@@ -32,7 +32,7 @@ def spec_materials(materials: dict[str, Any]):
 
 def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
     """One RIR in a spec's scene (``sonicspec rir``), and the facts to report with it."""
-    from sonicspec.plan.hashing import rng_for
+    from sonicspec.hashing import rng_for
     from sonicspec.stages.inspect import build_scene
 
     spec = loaded.spec

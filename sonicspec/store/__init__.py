@@ -1,5 +1,5 @@
 """Content-hashed Zarr artifact store (DESIGN.md §3)."""
 
-from sonicspec.store.artifacts import Artifact, ArtifactStore, VerifyProblem, array_digest
+from sonicspec.store.artifacts import Artifact, ArtifactStore, VerifyProblem
 
-__all__ = ["Artifact", "ArtifactStore", "VerifyProblem", "array_digest"]
+__all__ = ["Artifact", "ArtifactStore", "VerifyProblem"]

@@ -11,7 +11,6 @@ job computes, two writers racing on one key write the same thing, and the loser 
 from __future__ import annotations
 
 import errno
-import hashlib
 import json
 import os
 import shutil
@@ -27,22 +26,10 @@ import numpy as np
 
 from sonicspec import __version__
 from sonicspec.errors import StoreError
-from sonicspec.plan.hashing import KEY_LENGTH, canonical_json
+from sonicspec.hashing import KEY_LENGTH, array_digest, canonical_json, sha256_hex
 
 TEMP_PREFIX = ".tmp-"
 _ONE_CHUNK_BYTES = 64 * 2**20
-
-
-def array_digest(arrays: Mapping[str, np.ndarray]) -> str:
-    """SHA-256 over every array's name, dtype, shape and bytes, in name order."""
-    h = hashlib.sha256()
-    for name in sorted(arrays):
-        a = np.ascontiguousarray(arrays[name])
-        h.update(name.encode())
-        h.update(a.dtype.str.encode())
-        h.update(repr(tuple(a.shape)).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -99,7 +86,7 @@ class ArtifactStore:
                 full = os.path.join(dirpath, name)
                 st = os.stat(full)
                 entries.append(f"{os.path.relpath(full, root)}|{st.st_size}|{st.st_mtime_ns}")
-        return hashlib.sha256("\n".join(entries).encode()).hexdigest()
+        return sha256_hex("\n".join(entries))
 
     def remove(self, stage: str, key: str) -> None:
         """Delete an artifact (a damaged one, so that the build makes it again)."""

@@ -1,4 +1,8 @@
-"""Content keys and seeds: the one place sonicspec hashes.
+"""Content keys, seeds and digests: the one place sonicspec hashes.
+
+A ground-floor module: the plan (keys, seeds), the store (key length, canonical attributes,
+array digests) and the export (file checksums) all hash through it, and it imports nothing of
+sonicspec but the errors.
 
 A job's key is the SHA-256 of the canonical JSON of ``{stage, stage_version, params,
 input_keys}``: keys sorted, no whitespace, ASCII only, floats as their shortest round-trip
@@ -14,6 +18,7 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -152,8 +157,30 @@ def normalised_params_and_key(
 
 
 def sha256_hex(text: str | bytes) -> str:
+    """SHA-256 hex digest of ``text`` (UTF-8) or of bytes."""
     data = text.encode("utf-8") if isinstance(text, str) else text
     return hashlib.sha256(data).hexdigest()
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 hex digest of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def array_digest(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(a.dtype.str.encode())
+        h.update(repr(tuple(a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def content_key(

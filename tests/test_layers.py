@@ -1,0 +1,199 @@
+"""The package map of DESIGN.md §2, checked on the source: who may import whom.
+
+Every module under ``sonicspec/`` is parsed with ``ast``; every import counts, lazy ones inside
+functions included. Floors, from the ground up:
+
+* ground floor: the modules at the package's top (``errors``, ``units``, ``hashing``,
+  ``atomic``, ``shares``, ...; not ``cli``) import nothing of sonicspec above them;
+* ``spec`` (the language) and ``store`` stand on the ground floor only;
+* the libraries ``geometry``, ``acoustics``, ``audio`` stand on the ground floor and on each
+  other, never on the spec, the store or anything above;
+* ``stages``, ``plan``, ``export`` and then ``cli`` are above them; nothing below imports up;
+* ``testing`` holds test fixtures: it may use the libraries, and nothing in the package uses it.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from functools import cache
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "sonicspec"
+ROOT = PACKAGE.parent
+
+LIBRARIES = {"geometry", "acoustics", "audio"}
+UPPER = {"stages", "plan", "export", "cli", "testing"}
+
+KNOWN_CYCLES: list[set[str]] = []
+
+
+@cache
+def modules() -> dict[str, Path]:
+    out = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+@cache
+def tree(module: str) -> ast.Module:
+    return ast.parse(modules()[module].read_text(encoding="utf-8"))
+
+
+def _owner(name: str) -> str | None:
+    """The sonicspec module ``name`` lives in (an imported function resolves to its module)."""
+    while name and name not in modules():
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def imports(module: str) -> Iterator[tuple[str, int]]:
+    """(imported sonicspec module, line) for every import in ``module``, lazy ones too."""
+    is_package = modules()[module].name == "__init__.py"
+    for node in ast.walk(tree(module)):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = module.split(".")[: len(module.split(".")) - node.level + is_package]
+                base = ".".join(parts + ([node.module] if node.module else []))
+            names = [f"{base}.{a.name}" for a in node.names]
+        else:
+            continue
+        for name in names:
+            if name.split(".")[0] != "sonicspec":
+                continue
+            target = _owner(name)
+            if target is not None and target != module:
+                yield target, node.lineno
+
+
+def floor(module: str) -> str:
+    """``ground``, a subpackage's name, or ``cli``."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return "ground"  # the package itself (its __version__)
+    if (PACKAGE / parts[1]).is_dir():
+        return parts[1]
+    # The command line and the Python API (a facade over the libraries) stand at the top.
+    return "cli" if parts[1] in ("cli", "api") else "ground"
+
+
+def edges() -> list[tuple[str, str, int]]:
+    return [(m, t, line) for m in modules() for t, line in imports(m)]
+
+
+def _where(module: str, line: int) -> str:
+    return f"{modules()[module].relative_to(ROOT)}:{line}"
+
+
+# ``sonicspec.Scene`` and friends: the package reaches the API only when such a name is asked
+# for (PEP 562 ``__getattr__``), so ``import sonicspec`` stays light.
+ALLOWED_EDGES = {("sonicspec", "sonicspec.api")}
+
+
+def _offences(allowed: dict[str, set[str]]) -> list[str]:
+    return [f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+            if floor(a) in allowed and floor(b) not in allowed[floor(a)]
+            and (a, b) not in ALLOWED_EDGES]
+
+
+def test_the_map_sees_every_floor() -> None:
+    floors = {floor(m) for m in modules()}
+    assert floors >= {"ground", "spec", "store", *LIBRARIES, *UPPER}
+    assert {"sonicspec.errors", "sonicspec.units", "sonicspec.hashing",
+            "sonicspec.atomic"} <= {m for m in modules() if floor(m) == "ground"}
+    # lazy imports count: stages/corpus imports the generated corpora inside a function
+    assert ("sonicspec.audio.generated" in
+            {t for t, _ in imports("sonicspec.stages.corpus")})
+
+
+def test_nothing_below_imports_up() -> None:
+    lower = {"ground", "spec", "store", *LIBRARIES}
+    assert _offences({f: lower for f in lower}) == []
+
+
+def test_ground_spec_and_store_stand_on_the_ground_floor() -> None:
+    assert _offences({"ground": {"ground"}, "spec": {"ground", "spec"},
+                      "store": {"ground", "store"}}) == []
+
+
+def test_libraries_know_nothing_of_the_spec_or_the_store() -> None:
+    allowed = {"ground", *LIBRARIES}
+    assert _offences({f: allowed for f in LIBRARIES}) == []
+
+
+def test_nothing_in_the_package_imports_testing() -> None:
+    assert [f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+            if floor(b) == "testing" and floor(a) != "testing"] == []
+    workflow = ROOT / "workflow"
+    assert [p for p in workflow.rglob("*") if p.is_file()
+            and "sonicspec.testing" in p.read_text(encoding="utf-8", errors="replace")] == []
+
+
+def _cycles() -> list[set[str]]:
+    """Strongly connected components of more than one module (Tarjan)."""
+    graph: dict[str, set[str]] = {m: set() for m in modules()}
+    for a, b, _ in edges():
+        graph[a].add(b)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_module_cycles() -> None:
+    assert [c for c in _cycles() if c not in KNOWN_CYCLES] == []
+
+
+def _calls(module: str, owner: str, names: set[str]) -> list[int]:
+    return [node.lineno for node in ast.walk(tree(module))
+            if isinstance(node, ast.Attribute) and node.attr in names
+            and isinstance(node.value, ast.Name) and node.value.id == owner]
+
+
+def test_one_hashing_module_one_atomic_writer_one_speed_of_sound() -> None:
+    hashing = [m for m in modules() for node in ast.walk(tree(m))
+               if isinstance(node, (ast.Import, ast.ImportFrom))
+               and "hashlib" in ([a.name for a in node.names] if isinstance(node, ast.Import)
+                                 else [node.module])]
+    assert hashing == ["sonicspec.hashing"]
+    # Files are renamed into place by sonicspec.atomic; the store renames its Zarr folders.
+    renames = {m for m in modules() if _calls(m, "os", {"replace", "rename"})}
+    assert renames == {"sonicspec.atomic", "sonicspec.store.artifacts"}
+    speeds = [_where(m, node.lineno) for m in modules() for node in ast.walk(tree(m))
+              if isinstance(node, ast.Constant) and type(node.value) in (int, float)
+              and node.value == 343]
+    assert [s.partition(":")[0] for s in speeds] == ["sonicspec/units.py"]
