@@ -256,8 +256,8 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     """The rir stage and the API call the same engine: the same scene, settings, receiver
     and generator give the same bytes for every point of a group's trajectories; and
     ``sonicspec rir SPEC`` is compute_rir with its own seed."""
-    from sonicspec.plan.compile import compile_spec
     from sonicspec.hashing import rng_for
+    from sonicspec.plan.compile import compile_spec
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
     from sonicspec.stages.mesh import load_scene_mesh

@@ -61,12 +61,12 @@ def present_keys(plan: Plan, store: ArtifactStore) -> set[str]:
             for k in store.present(step, (j.key for j in jobs))}
 
 
-def written_files(job: Job, data: Any) -> Iterator[dict[str, Any]]:
-    """The dataset-folder files an ``export`` or ``dataset`` artifact records."""
-    if job.step == "export":
+def written_files(step: str, data: Any) -> Iterator[dict[str, Any]]:
+    """The dataset-folder files an ``export`` or ``dataset`` artifact (its data) records."""
+    if step == "export":
         for group in data.get("groups", []):
             yield from group.get("files", [])
-    elif job.step == "dataset":
+    elif step == "dataset":
         yield from data.get("files", [])
 
 
@@ -112,7 +112,7 @@ def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repai
                 continue
             cache.mark_artifact(job.key, fingerprint)
         if job.step in FILE_STEPS:
-            for record in written_files(job, store.read_data(job.step, job.key)):
+            for record in written_files(job.step, store.read_data(job.step, job.key)):
                 problem = _file_problem(out, record, cache, report)
                 if problem is not None:
                     bad[job.key] = problem
@@ -154,7 +154,7 @@ def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
             continue
         cache.mark_artifact(job.key, store.fingerprint(job.step, job.key))
         if job.step in FILE_STEPS:
-            for record in written_files(job, store.read_data(job.step, job.key)):
+            for record in written_files(job.step, store.read_data(job.step, job.key)):
                 path = out / record["path"]
                 if "sha256" in record and path.is_file():
                     cache.mark_file(path, path.stat(), record["sha256"])
@@ -166,8 +166,8 @@ def missing_outputs(plan: Plan, store: ArtifactStore) -> list[str]:
     missing = []
     for job in plan.jobs:
         if job.step in FILE_STEPS and store.exists(job.step, job.key):
-            missing += [r["path"] for r in written_files(job, store.read_data(job.step, job.key))
-                        if not (out / r["path"]).is_file()]
+            records = written_files(job.step, store.read_data(job.step, job.key))
+            missing += [r["path"] for r in records if not (out / r["path"]).is_file()]
     return missing
 
 
@@ -190,12 +190,10 @@ def verify_dataset_folder(out: Path) -> tuple[int, list[str]]:
         listed = read_checksums(out)
     except StoreError:
         return count, lines
-    dataset_job = Job("dataset", {}, ())  # only its step is read by written_files
-    recorded = list(written_files(dataset_job, store.read_data("dataset", key)))
-    export_job = Job("export", {}, ())
+    recorded = list(written_files("dataset", store.read_data("dataset", key)))
     for k in store.read("dataset", key).provenance["input_keys"]:
         if store.exists("export", k):  # (the others are corpora)
-            recorded += written_files(export_job, store.read_data("export", k))
+            recorded += written_files("export", store.read_data("export", k))
     for r in recorded:
         if r["path"] == CHECKSUMS_NAME:
             continue
