@@ -103,7 +103,8 @@ class _ProceduralBase(_SceneBase):
     )
 
     def floor_polygon(self) -> list[tuple[float, float]]:
-        raise NotImplementedError
+        """The room's floor outline (x, y), metres: every room kind below defines its own."""
+        raise TypeError(f"{type(self).__name__} must define its floor outline")
 
     @model_validator(mode="after")
     def _floor_area_bounded(self) -> _ProceduralBase:
