@@ -15,7 +15,11 @@ from sonicspec.geometry.navigation import (
     build_navigation,
     resample_polyline,
 )
-from sonicspec.geometry.placement import PlacementSettings, sample_placement
+from sonicspec.geometry.placement import (
+    PlacementSettings,
+    polyline_distance,
+    sample_placement,
+)
 from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 
 NAV = NavigationSettings(cell_m=0.05, walker_radius_m=0.25)
@@ -102,6 +106,9 @@ def test_every_rule_holds_over_many_seeds(hall):
             assert box_distance(dense).min() >= NAV.walker_radius_m - NAV.cell_m
             # Its vertices lie on the mic's walkable component (segments may graze cell corners).
             assert np.all(grid.component_at(source.path_m) == grid.component_at(p.mic_m))
+            # Issue 18: the whole path keeps its distance from the mic, not only its ends.
+            assert np.linalg.norm(dense - p.mic_m, axis=1).min() >= (
+                settings.min_path_distance_m - 1e-6)
             if motion == "line":
                 assert source.path_length_m == pytest.approx(travel)
                 assert grid.line_of_sight(source.start_m, source.end_m)
@@ -387,3 +394,31 @@ def test_unsmoothed_paths_follow_the_grid(hall):
     # Interior vertices of the grid path are cell centres, one cell (or a diagonal) apart.
     steps = np.linalg.norm(np.diff(raw.path_m[1:-1, :2], axis=0), axis=1)
     assert np.all(np.isclose(steps, 0.05) | np.isclose(steps, 0.05 * np.sqrt(2)))
+
+
+
+def test_paths_keep_their_distance_from_the_mic_and_the_rule_is_needed(hall):
+    """Issue 18: a path drawn between ends 1-8 m from the mic can pass 0.2 m from it; with
+    min_path_distance_m (default 0.5 m) every path keeps its distance all along."""
+    def closest(settings, seed):
+        p = sample_placement(hall, settings, scene_id="hall", speech=["line"] * 3,
+                             noise=False, music=False, rng=np.random.default_rng(seed))
+        return min(polyline_distance(s.path_m, p.mic_m) for s in p.speech)
+
+    unruled = [closest(PlacementSettings(min_path_distance_m=0.0), seed) for seed in SEEDS]
+    assert min(unruled) < 0.5  # without the rule some walk passes close by
+    ruled = [closest(PlacementSettings(), seed) for seed in range(20)]
+    assert min(ruled) >= 0.5 - 1e-9
+    with pytest.raises(PlacementError, match=r"end point .*most failed: a path closer than "
+                       r"8\.5 m to the mic"):
+        sample_placement(hall, PlacementSettings(min_path_distance_m=8.5, max_tries=300),
+                         scene_id="hall", speech=["shortest_path"], noise=False, music=False,
+                         rng=np.random.default_rng(0))
+
+
+def test_polyline_distance():
+    path = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0]])
+    assert polyline_distance(path, [2, 1, 0]) == pytest.approx(1.0)
+    assert polyline_distance(path, [5, 1.5, 0]) == pytest.approx(1.0)
+    assert polyline_distance(path, [-3, 4, 0]) == pytest.approx(5.0)
+    assert polyline_distance(path[:1], [0, 0, 2]) == pytest.approx(2.0)

@@ -4,7 +4,9 @@ The SonicSet recipe puts, on one floor, a microphone; each speech source's start
 the mic; its end point 1–8 m from both the mic and the start, joined by the shortest walkable
 path; a static noise and a static music source 1–8 m from the mic. sonicspec enforces the
 rules the released scripts skip: every distance range (3-D distances), wall and obstacle
-clearances, the same floor, a minimum separation between sources, and reachability.
+clearances, the same floor, a minimum separation between sources, reachability, and a
+minimum distance between the mic and every point of a moving source's path
+(``min_path_distance_m``: a path that comes closer restarts the group's draw).
 
 How positions are drawn
 -----------------------
@@ -91,6 +93,7 @@ class PlacementSettings:
     noise_distance_m: tuple[float, float] = (1.0, 8.0)
     music_distance_m: tuple[float, float] = (1.0, 8.0)
     min_source_separation_m: float = 0.5
+    min_path_distance_m: float = 0.5
     same_floor: bool = True
     wall_clearance_m: float = 0.3
     obstacle_clearance_m: float = 0.2
@@ -115,7 +118,8 @@ class PlacementSettings:
             object.__setattr__(self, name, _range(name, getattr(self, name), positive=False))
         for name in ("source_height_m", "noise_height_m"):
             object.__setattr__(self, name, _range(name, getattr(self, name), positive=True))
-        for name in ("min_source_separation_m", "wall_clearance_m", "obstacle_clearance_m"):
+        for name in ("min_source_separation_m", "min_path_distance_m", "wall_clearance_m",
+                     "obstacle_clearance_m"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise PlacementError(
@@ -273,6 +277,19 @@ class _Item:
     failures: Counter = field(default_factory=Counter)
     tries: int = 0
     floor: int | None = None  # the floor it was last drawn on (None: any floor)
+
+
+def polyline_distance(path: np.ndarray, point: np.ndarray) -> float:
+    """Smallest 3-D distance from ``point`` to the polyline ``path`` (N, 3), metres."""
+    p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
+    q = np.asarray(point, dtype=np.float64)
+    if len(p) == 1:
+        return float(np.linalg.norm(p[0] - q))
+    a, b = p[:-1], p[1:]
+    ab = b - a
+    length2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(length2 > 0, length2, 1.0), 0, 1)
+    return float(np.min(np.linalg.norm(a + t[:, None] * ab - q, axis=1)))
 
 
 def _fmt_range(low: float, high: float) -> str:
@@ -499,6 +516,12 @@ class _Sampler:
                     # The path's ends are the drawn points exactly (same xy; z from the floor).
                     path[0], path[-1] = start, end
                     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+                closest = polyline_distance(path, mic)
+                if closest < s.min_path_distance_m - 1e-9:
+                    items[f"end{i}"].failures[
+                        f"a path closer than {s.min_path_distance_m:g} m to the mic"] += 1
+                    failed = True
+                    break
                 speech.append(
                     SourcePlacement(motion, start, end, path, length, start_floor, height)
                 )

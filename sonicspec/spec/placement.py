@@ -31,6 +31,13 @@ class PlacementSpec(SpecModel):
     min_source_separation_m: float = Field(
         0.5, ge=0, description="Smallest distance between any two sources' start points, metres."
     )
+    min_path_distance_m: float = Field(
+        0.5,
+        ge=0,
+        description="Smallest distance between the microphone and any point of a moving "
+        "source's path, metres (the distance ranges bound only a path's start and end; a "
+        "shortest path between them can pass right by the microphone).",
+    )
     same_floor: bool = Field(
         True, description="Keep mic and all sources on one floor (level) of the building."
     )

@@ -30,6 +30,7 @@ def settings_from(params: dict[str, Any]) -> PlacementSettings:
         noise_distance_m=tuple(p["noise_distance_m"]),
         music_distance_m=tuple(p["music_distance_m"]),
         min_source_separation_m=p["min_source_separation_m"],
+        min_path_distance_m=p["min_path_distance_m"],
         same_floor=p["same_floor"],
         wall_clearance_m=p["wall_clearance_m"],
         obstacle_clearance_m=p["obstacle_clearance_m"],
