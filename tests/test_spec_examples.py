@@ -106,3 +106,10 @@ def test_round_trip_through_json() -> None:
     spec = load_spec(ROOT / "specs" / "sonicset.yaml").spec
     again = DatasetSpec.model_validate(json.loads(spec.model_dump_json()))
     assert again == spec
+
+
+def test_the_sonicset_preset_keeps_every_fsd50k_clip() -> None:
+    """Issue 20: the paper does not drop FSD50K's speech-like labels; the default does."""
+    spec = load_spec(ROOT / "specs" / "sonicset.yaml").spec
+    assert spec.corpora.noise.exclude_labels == []
+    assert "Speech" in type(spec.corpora.noise)(kind="fsd50k", root="x").exclude_labels
