@@ -348,7 +348,8 @@ def cmd_rir(args: argparse.Namespace) -> int:
         mesh_only = [flag for flag, value in (
             ("--material", args.material), ("--default-material", args.default_material),
             ("--library", args.library), ("--repair", args.repair), ("--rays", args.rays),
-            ("--seed", args.seed), ("--sample-rate", args.sample_rate))
+            ("--seed", args.seed), ("--sample-rate", args.sample_rate),
+            ("--microphone", args.microphone))
             if value not in (None, False)]
         if mesh_only:
             print(f"sonicspec: error: {mesh_only[0]}: expected --mesh FILE with it, got a "
@@ -407,12 +408,41 @@ def _rir_of_mesh(args: argparse.Namespace):
             print(f"sonicspec: error: {flags[error['loc'][0]][0]}: {error['msg'].lower()}, got "
                   f"{error['input']}", file=sys.stderr)
             return None, None
-        result = compute_rir(scene, args.source, args.mic, settings, seed=args.seed or 0)
+        receiver = _microphone_option(args.microphone)
+        if receiver is False:
+            return None, None
+        result = compute_rir(scene, args.source, args.mic, settings, receiver=receiver,
+                             seed=args.seed or 0)
     facts = {"scene_id": scene.name, **result.to_dict(), "mesh_triangles": scene.mesh.n_faces,
              "materials_m2": scene.material_areas_m2(),
              "warnings": [str(w.message) for w in caught
                           if issubclass(w.category, SonicspecWarning)]}
     return result.rir, facts
+
+
+def _microphone_option(text: str | None):
+    """``--microphone "{kind: ambisonics, order: 1}"``: the spec's microphone model (None:
+    mono), or False after a message when the text is not one."""
+    if text is None:
+        return None
+    import yaml
+    from pydantic import TypeAdapter, ValidationError
+
+    from sonicspec.spec.microphone import MicrophoneSpec
+
+    try:
+        value = yaml.safe_load(text)
+        if not isinstance(value, dict):
+            raise ValueError(f"expected a mapping such as '{{kind: ambisonics, order: 1}}', "
+                             f"got {text!r}")
+        return TypeAdapter(MicrophoneSpec).validate_python(value)
+    except (yaml.YAMLError, ValueError) as exc:
+        if isinstance(exc, ValidationError):
+            error = exc.errors()[0]
+            where = ".".join(str(x) for x in error["loc"])
+            exc = f"{where}: {error['msg'].lower()}" if where else error["msg"].lower()
+        print(f"sonicspec: error: --microphone: {exc}", file=sys.stderr)
+        return False
 
 
 def _label_material(text: str) -> tuple[str, str]:
@@ -534,6 +564,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--rays", type=int, metavar="N", help="rays traced (default: 20000)")
     g.add_argument("--seed", type=int, metavar="N", help="random seed (default: 0)")
     g.add_argument("--sample-rate", type=int, metavar="HZ", help="sample rate (default: 16000)")
+    g.add_argument("--microphone", metavar="YAML",
+                   help="the receiver as the spec writes it, e.g. '{kind: ambisonics, order: 1}'"
+                   " or '{kind: circular_array, n: 6, radius_m: 0.05}' (default: mono)")
     p.set_defaults(func=cmd_rir)
 
     p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")

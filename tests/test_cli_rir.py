@@ -234,3 +234,29 @@ def test_mesh_errors_name_the_file_the_label_or_the_material(spec: Path, tmp_pat
     code, _, err = run(capsys, "rir", "--mesh", str(obj), "--source", "20", "2", "1", "--mic",
                        "5", "5", "1")
     assert code == 1 and "source: [20.0, 2.0, 1.0] is outside scene 'room.obj'" in err
+
+
+def test_a_mesh_rir_for_any_receiver_the_spec_knows(tmp_path: Path, capsys) -> None:
+    """`--microphone` takes the receiver as the spec writes it (issue 17: `rir --mesh` was
+    mono only)."""
+    obj = write_room_obj(tmp_path / "room.obj", {"floor": ["floor"],
+                                                 "shell": ["walls", "ceiling"]})
+    where = ["--mesh", str(obj), "--material", "floor=carpet_on_concrete", "--material",
+             "shell=gypsum_board", "--rays", "500", "--source", "2", "2", "1.5", "--mic", "7",
+             "4.5", "1.6"]
+    for microphone, channels in (("{kind: ambisonics, order: 1}", 4),
+                                 ("{kind: circular_array, n: 6, radius_m: 0.05}", 6),
+                                 ("{kind: binaural}", 2)):
+        code, out, _ = run(capsys, "rir", *where, "--microphone", microphone, "--json")
+        assert code == 0 and json.loads(out)["channels"] == channels, microphone
+    for microphone, message in (
+            ("{kind: ambisonic}", "--microphone: input tag 'ambisonic' found using 'kind' does "
+             "not match any of the expected tags"),
+            ("[1, 2]", "--microphone: expected a mapping such as '{kind: ambisonics, order: 1}'"
+             ", got '[1, 2]'"),
+            ("{kind: circular_array, n: 1, radius_m: 0.05}", "--microphone: circular_array.n: ")):
+        code, out, err = run(capsys, "rir", *where, "--microphone", microphone)
+        assert code == 2 and out == "" and err.startswith(f"sonicspec: error: {message}"), err
+    code, _, err = run(capsys, "rir", str(tmp_path / "x.yaml"), "--source", "1", "1", "1",
+                       "--mic", "2", "2", "2", "--microphone", "{kind: mono}")
+    assert code == 2 and "--microphone: expected --mesh FILE with it, got a SPEC" in err
