@@ -218,9 +218,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from sonicspec.stages.repair import missing_outputs
     from sonicspec.stages.workflow import build
-    from sonicspec.store import ArtifactStore
 
     loaded = _load_or_exit(args.spec, args)
     if loaded is None or not _preflight_or_exit(loaded, args.spec):
@@ -235,7 +233,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     if args.until:
         print(f"built up to {args.until}; artifacts in {plan.store_dir}", file=sys.stderr)
         return EXIT_OK
-    missing = missing_outputs(plan, ArtifactStore(plan.store_dir))
+    missing = result.missing_files
     if missing:
         print(f"sonicspec: error: the build finished but {len(missing)} dataset file(s) are "
               f"missing (first: {missing[0]}); run the build again", file=sys.stderr)

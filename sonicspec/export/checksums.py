@@ -12,6 +12,7 @@ own and ``verify`` knows what it is pointed at: ``.sonicspec-dataset.json`` in a
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from dataclasses import dataclass
@@ -125,12 +126,10 @@ def folder_kind(path: Path) -> str | None:
         return "dataset"
     if (path / STORE_MARKER).is_file():
         return "store"
-    try:
+    with contextlib.suppress(OSError, ValueError):  # no (readable) dataset.json: not one
         legacy = json.loads((path / "dataset.json").read_text())
         if isinstance(legacy, dict) and "sonicspec_version" in legacy:
             return "dataset"
-    except (OSError, ValueError):
-        pass
     if (path / "plans").is_dir() and any((path / s).is_dir() for s in STORE_STEP_FOLDERS[1:]):
         return "store"
     return None

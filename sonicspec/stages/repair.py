@@ -145,10 +145,12 @@ def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repai
 
 
 def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
-                   keys: set[str]) -> None:
+                   keys: set[str]) -> list[str]:
     """After a build: remember the artifacts and files its jobs (``keys``) just wrote as sound,
-    so the next build does not re-read them."""
+    so the next build does not re-read them; returns the files those jobs recorded that are
+    not there. (Every other job's files were checked before the build ran.)"""
     out = Path(plan.output_dir)
+    missing = []
     for job in plan.jobs:
         if job.key not in keys or not store.exists(job.step, job.key):
             continue
@@ -156,18 +158,10 @@ def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
         if job.step in FILE_STEPS:
             for record in written_files(job.step, store.read_data(job.step, job.key)):
                 path = out / record["path"]
-                if "sha256" in record and path.is_file():
+                if not path.is_file():
+                    missing.append(record["path"])
+                elif "sha256" in record:
                     cache.mark_file(path, path.stat(), record["sha256"])
-
-
-def missing_outputs(plan: Plan, store: ArtifactStore) -> list[str]:
-    """Dataset files the plan's export and dataset jobs recorded that are not there."""
-    out = Path(plan.output_dir)
-    missing = []
-    for job in plan.jobs:
-        if job.step in FILE_STEPS and store.exists(job.step, job.key):
-            records = written_files(job.step, store.read_data(job.step, job.key))
-            missing += [r["path"] for r in records if not (out / r["path"]).is_file()]
     return missing
 
 

@@ -207,6 +207,8 @@ class BuildResult:
     warnings: list[str]
     skipped: dict[str, list[dict[str, str]]] = field(default_factory=dict)
     """Corpus files the indexes left out, by role (``stages.corpus.skipped_files``)."""
+    missing_files: list[str] = field(default_factory=list)
+    """Dataset files the jobs that ran recorded but that are not there after the build."""
     stray_files: list[str] = field(default_factory=list)
     """Files in the dataset folder that the finished dataset does not list."""
     summary: str = ""
@@ -357,13 +359,14 @@ def build(
         ran = {s.name: 0 for s in STEPS}
         for key in ran_keys:
             ran[jobs[key].step] += 1
+        missing: list[str] = []
         if not dry_run:
-            record_written(plan, store, cache, ran_keys)
+            missing = record_written(plan, store, cache, ran_keys)
             cache.save()
         result = BuildResult(code=code, ran=ran, reused=len(present - ran_keys), check=check,
                              elapsed_s=time.monotonic() - start,
                              warnings=job_warnings(plan, ran_keys),
-                             skipped=skipped_files(plan, store))
+                             skipped=skipped_files(plan, store), missing_files=missing)
         if not dry_run:
             if code == 0 and dataset_key is not None and (out / CHECKSUMS_NAME).is_file():
                 result.stray_files = unlisted_files(out, read_checksums(out))
