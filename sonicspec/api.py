@@ -45,9 +45,15 @@ from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import did_you_mean
-from sonicspec.spec.materials import CustomMaterialSpec
+from sonicspec.spec.materials import CustomMaterialSpec, MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
-from sonicspec.spec.scene import RepairSpec, SurfaceMaterialsSpec
+from sonicspec.spec.scene import (
+    MeshObstacleSpec,
+    MeshSceneSpec,
+    RepairSpec,
+    SceneSpec,
+    SurfaceMaterialsSpec,
+)
 
 __all__ = ["RirResult", "RirSettings", "Scene", "compute_rir", "compute_rirs"]
 
@@ -214,6 +220,59 @@ class Scene:
             _check_labels(mapping, mesh, name)
             mesh = assign_materials(mesh, lib, mapping, default_material, where=name)
         return cls(mesh, lib, name)
+
+    @classmethod
+    def from_spec(cls, scene: SceneSpec, materials: MaterialsSpec | None = None, *,
+                  base_dir: str | Path = ".", seed: int = 0) -> Scene:
+        """A scene as a dataset spec (or a scene file) declares it, built as a build builds
+        it: a procedural room with its obstacles, or a mesh file with its label map, repaired
+        and leak-tested per the scene's ``repair`` settings.
+
+        Parameters
+        ----------
+        scene
+            One of the spec's scene models (``ShoeboxSceneSpec``, ``MeshSceneSpec``, ...).
+            A mesh scene's ``path`` names one file (not a glob).
+        materials
+            The spec's ``materials`` section (library, custom materials, label map; a mesh
+            scene's own ``label_materials`` win).
+        base_dir
+            What the scene's relative paths are relative to (the spec file's folder).
+        seed
+            Seeds the leak test of a mesh scene.
+        """
+        import glob
+
+        from sonicspec.hashing import rng_for
+        from sonicspec.plan.params import MeshParams
+        from sonicspec.stages.scenes import build_scene_mesh
+
+        materials = materials or MaterialsSpec()
+        base = Path(base_dir)
+        paths = {f"obstacle{j}": str(base / ob.path) for j, ob in enumerate(scene.obstacles)
+                 if isinstance(ob, MeshObstacleSpec)}
+        extra: dict[str, Any] = {}
+        if isinstance(scene, MeshSceneSpec):
+            if glob.has_magic(scene.path):
+                raise GeometryError(f"scene {scene.id!r}: path {scene.path!r} is a glob; a "
+                                    "single scene names one file")
+            file = base / scene.path
+            if not file.is_file():
+                raise GeometryError(f"scene {scene.id!r}: mesh file {file} does not exist")
+            paths["mesh"] = str(file)
+            stem = file.with_suffix("")
+            for role, beside in (("semantic", Path(f"{stem}_semantic.ply")),
+                                 ("house", stem.with_suffix(".house"))):
+                if scene.format != "plain" and beside.is_file():
+                    paths[role] = str(beside)
+            extra = {"library": materials.library, "obj_labels": True,
+                     "label_materials": {**materials.label_materials, **scene.label_materials}}
+        params = MeshParams.model_validate({
+            "scene": scene.model_dump(mode="json", exclude={"id", "path"}), "files": {},
+            "scene_id": scene.id, **extra})
+        lib = _library(materials.library, materials.model_dump(mode="json")["custom"])
+        mesh, _ = build_scene_mesh(params, paths, rng_for(seed, "mesh", scene.id))
+        return cls(mesh, lib, scene.id)
 
     # ------------------------------------------------------------------ facts
     @property

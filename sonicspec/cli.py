@@ -19,9 +19,9 @@ from sonicspec.atomic import write_text
 EXIT_OK, EXIT_FAILURE, EXIT_INVALID = 0, 1, 2
 
 
-def _print_problems(problems: Sequence, source: str, stream=sys.stderr) -> None:
+def _print_problems(problems: Sequence, source: str, stream=None) -> None:
     for p in problems:
-        print(p.format(source), file=stream)
+        print(p.format(source), file=stream or sys.stderr)
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -30,8 +30,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
     worst = EXIT_OK
     report = []
     for path in args.specs:
-        loaded, problems = validate_file(path, files=args.check_files)
-        if loaded is not None and args.check_files:
+        scene_file = _scene_file(path)
+        if scene_file:  # one scene for `sonicspec rir`
+            from sonicspec.spec.validate import validate_scene_file
+
+            loaded, problems = validate_scene_file(path)
+        else:
+            loaded, problems = validate_file(path, files=args.check_files)
+        if loaded is not None and args.check_files and not scene_file:
             loaded, problems = _preflight(loaded, problems)
         errors = [p for p in problems if p.severity == "error"]
         warnings = [p for p in problems if p.severity == "warning"]
@@ -60,6 +66,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
                     f"{path}: invalid ({len(errors)} error{'s' * (len(errors) != 1)})",
                     file=sys.stderr,
                 )
+            elif scene_file and not args.quiet:
+                print(f"{path}: valid scene file ({loaded.scene.kind} scene "
+                      f"{loaded.scene.id!r}; `sonicspec rir {path} --source X Y Z --mic X Y Z`)")
             elif not args.quiet:
                 from sonicspec.plan.summary import summarize
 
@@ -353,13 +362,19 @@ def cmd_rir(args: argparse.Namespace) -> int:
             print(f"sonicspec: error: {mesh_only[0]}: expected --mesh FILE with it, got a "
                   "SPEC (the spec sets materials, acoustics and the seed)", file=sys.stderr)
             return EXIT_INVALID
-        from sonicspec.stages.rir import rir_from_spec
+        if _scene_file(args.spec):
+            rir, facts = _rir_of_scene_file(args)
+            if rir is None:
+                return EXIT_INVALID
+            title = f"{facts['scene_id']}: source {args.source} -> mic {args.mic}"
+        else:
+            from sonicspec.stages.rir import rir_from_spec
 
-        loaded = _load_or_exit(args.spec)
-        if loaded is None or not _choose_scene(loaded, args):
-            return EXIT_INVALID
-        rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
-        title = f"{args.scene}: source {args.source} -> mic {args.mic}"
+            loaded = _load_or_exit(args.spec)
+            if loaded is None or not _choose_scene(loaded, args):
+                return EXIT_INVALID
+            rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
+            title = f"{args.scene}: source {args.source} -> mic {args.mic}"
     for warning in facts["warnings"]:
         print(f"sonicspec: warning: {warning}", file=sys.stderr)
     if args.output:
@@ -376,6 +391,72 @@ def cmd_rir(args: argparse.Namespace) -> int:
         facts["plot"] = args.plot
     print(json.dumps(facts, indent=2) if args.json else format_rir_facts(facts))
     return EXIT_OK
+
+
+def _scene_file(path: str) -> bool:
+    """Whether ``path`` is a scene file (a ``scene`` and no ``sonicspec:`` version) rather
+    than a dataset spec; an unreadable file is left to the spec loader to report."""
+    from sonicspec.errors import SpecError
+    from sonicspec.spec.load import parse_text
+    from sonicspec.spec.scene_file import is_scene_file
+    from sonicspec.spec.validate import MAX_SPEC_BYTES
+
+    try:
+        p = Path(path)
+        if p.stat().st_size > MAX_SPEC_BYTES:
+            return False
+        data, _ = parse_text(p.read_text(encoding="utf-8"), path)
+    except (OSError, UnicodeDecodeError, SpecError):
+        return False
+    return is_scene_file(data)
+
+
+def _rir_of_scene_file(args: argparse.Namespace):
+    """``sonicspec rir SCENE.yaml``: the RIR and facts of a scene file through the Python API,
+    or (None, None) after a message."""
+    import warnings
+
+    from sonicspec.api import RirSettings, Scene, compute_rir
+    from sonicspec.errors import SonicspecError, SonicspecWarning
+    from sonicspec.spec.validate import validate_scene_file
+
+    if args.scene is not None:
+        print("sonicspec: error: --scene: a scene file holds one scene; --scene chooses one "
+              "of a dataset spec's", file=sys.stderr)
+        return None, None
+    spec, problems = validate_scene_file(args.spec)
+    _print_problems(problems, args.spec)
+    if spec is None:
+        return None, None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SonicspecWarning)
+        try:
+            scene = Scene.from_spec(spec.scene, spec.materials,
+                                    base_dir=Path(args.spec).resolve().parent, seed=spec.seed)
+            settings = RirSettings(**spec.acoustics.model_dump(),
+                                   sample_rate_hz=spec.sample_rate_hz,
+                                   speed_of_sound_m_s=spec.speed_of_sound_m_s)
+            result = compute_rir(scene, args.source, args.mic, settings,
+                                 receiver=spec.microphone, seed=spec.seed)
+        except SonicspecError as exc:
+            print(f"sonicspec: error: {args.spec}: {exc}", file=sys.stderr)
+            return None, None
+    facts = {"scene_id": scene.name, **result.to_dict(), "mesh_triangles": scene.mesh.n_faces,
+             "materials_m2": scene.material_areas_m2(),
+             "warnings": [str(w.message) for w in caught
+                          if issubclass(w.category, SonicspecWarning)]}
+    return result.rir, facts
+
+
+def _spec_default(section: str, field: str) -> object:
+    """The spec's default of ``section.field`` (``""``: a top-level field), for help texts: a
+    default is written once, in the spec models."""
+    from sonicspec.spec.dataset import DatasetSpec
+
+    model = DatasetSpec
+    if section:
+        model = DatasetSpec.model_fields[section].default_factory().__class__
+    return model.model_fields[field].get_default(call_default_factory=True)
 
 
 def _rir_of_mesh(args: argparse.Namespace):
@@ -559,9 +640,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="material library (default: sonicspec)")
     g.add_argument("--repair", action="store_true",
                    help="repair the mesh first (off: the mesh is traced as given)")
-    g.add_argument("--rays", type=int, metavar="N", help="rays traced (default: 20000)")
+    g.add_argument("--rays", type=int, metavar="N",
+                   help=f"rays traced (default: {_spec_default('acoustics', 'rays')})")
     g.add_argument("--seed", type=int, metavar="N", help="random seed (default: 0)")
-    g.add_argument("--sample-rate", type=int, metavar="HZ", help="sample rate (default: 16000)")
+    g.add_argument("--sample-rate", type=int, metavar="HZ",
+                   help=f"sample rate (default: {_spec_default('', 'sample_rate_hz')})")
     g.add_argument("--microphone", metavar="YAML",
                    help="the receiver as the spec writes it, e.g. '{kind: ambisonics, order: 1}'"
                    " or '{kind: circular_array, n: 6, radius_m: 0.05}' (default: mono)")

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import shutil
 import subprocess
 import sys
 import warnings
@@ -260,7 +261,7 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     from sonicspec.plan.compile import compile_spec
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
-    from sonicspec.stages.mesh import load_scene_mesh
+    from sonicspec.stages.artifacts import decode, read_mesh
     from sonicspec.stages.rir import _source_points, rir_from_spec
     from sonicspec.store import ArtifactStore
 
@@ -277,15 +278,15 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     mesh_job, placement_job = (next(j for j in plan.jobs if j.key == k) for k in rir_job.inputs)
     mesh_art = store.read("mesh", mesh_job.key)
     rirs = store.read("rir", rir_job.key)
-    scene = ss.Scene.from_mesh(load_scene_mesh(mesh_art.arrays, mesh_art.data), name="room",
+    scene = ss.Scene.from_mesh(read_mesh(mesh_art.arrays, mesh_art.data), name="room",
                                custom_materials=spec.materials.model_dump()["custom"])
     settings = ss.RirSettings(**spec.acoustics.model_dump(), sample_rate_hz=spec.sample_rate_hz,
                               speed_of_sound_m_s=spec.speed_of_sound_m_s)
-    (placement,) = store.read_data("placement", placement_job.key)["groups"]
+    (placement,) = decode("placement", store.read_data("placement", placement_job.key)).groups
     sources = _source_points(placement)
     results = ss.compute_rirs(scene, np.concatenate([p for _, p in sources]),
-                              placement["mic_m"], settings, receiver=spec.microphone,
-                              seed=rng_for(spec.seed, "rir", rir_job.key, placement["group"]))
+                              placement.mic_m, settings, receiver=spec.microphone,
+                              seed=rng_for(spec.seed, "rir", rir_job.key, placement.group))
     start = 0
     for s, (_, points) in enumerate(sources):
         stored = rirs.arrays[f"g0_s{s}"]
@@ -332,8 +333,9 @@ def test_a_spec_scene_from_an_obj_with_one_object_gets_its_materials(tmp_path) -
     name) made every face the default material in a build, silently. The plan now reads obj
     scenes as the API does; only obj scenes' mesh keys carry the flag."""
     from sonicspec.plan.compile import compile_spec
+    from sonicspec.plan.params import read_params
     from sonicspec.spec import validate_text
-    from sonicspec.stages.mesh import build_scene_mesh
+    from sonicspec.stages.scenes import build_scene_mesh
 
     write_obj(tmp_path / "lone.obj", {"room": ["floor", "walls", "ceiling"]})
     text = (ROOT / "specs" / "demo.yaml").read_text().replace(
@@ -349,7 +351,37 @@ def test_a_spec_scene_from_an_obj_with_one_object_gets_its_materials(tmp_path) -
     assert "obj_labels" not in meshes["living_room"].params  # procedural keys unchanged
     with warnings.catch_warnings():
         warnings.simplefilter("error", SonicspecWarning)  # no fallback warning
-        mesh, _ = build_scene_mesh(dict(meshes["scan"].params), dict(meshes["scan"].paths),
-                                   np.random.default_rng(0))
+        mesh, _ = build_scene_mesh(read_params("mesh", meshes["scan"].params),
+                                   dict(meshes["scan"].paths), np.random.default_rng(0))
     assert set(np.asarray(mesh.materials)[np.unique(mesh.face_material)]) == {
         "concrete_painted"}
+
+
+def test_scene_from_spec_is_the_mesh_a_build_makes(tmp_path: Path) -> None:
+    # The stages and the API build scenes with the same code: the demo's living room (a
+    # shoebox with a box and a cylinder) from its spec model equals the scene `scene inspect`
+    # builds as the mesh stage does.
+    from sonicspec.spec import load_spec
+    from sonicspec.stages.inspect import build_scene
+
+    loaded = load_spec(ROOT / "specs" / "demo.yaml")
+    mesh, *_ = build_scene(loaded, "living_room")
+    scene = ss.Scene.from_spec(loaded.spec.scenes[0], loaded.spec.materials)
+    assert scene.name == "living_room" and scene.mesh.materials == mesh.materials
+    assert np.array_equal(scene.mesh.vertices, mesh.vertices)
+    assert np.array_equal(scene.mesh.faces, mesh.faces)
+    assert np.array_equal(scene.mesh.face_material, mesh.face_material)
+    # A mesh scene: the obj file with the spec's label map, as the mesh stage reads it.
+    from sonicspec.spec.scene import MeshSceneSpec
+
+    shutil.copy(ROOT / "specs" / "meshes" / "room.obj", tmp_path / "room.obj")
+    spec = MeshSceneSpec(kind="mesh", id="room", path="room.obj",
+                         label_materials={"floor": "carpet_on_concrete"})
+    from sonicspec.errors import GeometryError, SonicspecWarning
+
+    with pytest.warns(SonicspecWarning, match="got none for 'walls'"):  # the fallback shows
+        scene = ss.Scene.from_spec(spec, base_dir=tmp_path)
+    assert "carpet_on_concrete" in scene.material_areas_m2()
+
+    with pytest.raises(GeometryError, match="is a glob"):
+        ss.Scene.from_spec(spec.model_copy(update={"path": "*.obj"}), base_dir=tmp_path)

@@ -260,3 +260,94 @@ def test_a_mesh_rir_for_any_receiver_the_spec_knows(tmp_path: Path, capsys) -> N
     code, _, err = run(capsys, "rir", str(tmp_path / "x.yaml"), "--source", "1", "1", "1",
                        "--mic", "2", "2", "2", "--microphone", "{kind: mono}")
     assert code == 2 and "--microphone: expected --mesh FILE with it, got a SPEC" in err
+
+
+SCENE_FILE = """\
+scene:
+  kind: shoebox
+  id: studio
+  size_m: [10, 7, 3]
+  materials: {walls: panel, floor: panel, ceiling: panel}
+  obstacles:
+    - {kind: box, center_m: [5, 3.5, 0.4], size_m: [1.0, 0.6, 0.8], material: panel}
+materials:
+  custom:
+    panel: {absorption: 0.2, scattering: 0.5}
+acoustics: {rays: 4000, image_source_order: 2, max_rir_length_s: 1.2}
+seed: 5
+"""
+
+
+def test_a_scene_file_computes_the_rir_the_api_computes(tmp_path: Path, capsys) -> None:
+    # Issue 17: `sonicspec rir` takes a scene-only file: a thin caller of the Python API
+    # (Scene.from_spec, compute_rir) with the file's materials, settings, receiver and seed.
+    import sonicspec as ss
+    from sonicspec.spec.validate import validate_scene_file
+
+    room = tmp_path / "studio.yaml"
+    room.write_text(SCENE_FILE)
+    wav = tmp_path / "rir.wav"
+    code, out, err = run(capsys, "rir", str(room), "--source", "2", "2", "1.5", "--mic", "7",
+                         "4.5", "1.6", "--json", "-o", str(wav))
+    assert code == 0, err
+    facts = json.loads(out)
+    # room 2 x (10x7 + 10x3 + 7x3) = 242 m², box 2 x (1x0.6 + 1x0.8 + 0.6x0.8) = 3.76 m²
+    assert facts["scene_id"] == "studio" and facts["mesh_triangles"] == 24
+    assert facts["materials_m2"] == {"panel": pytest.approx(245.76, abs=1e-6)}
+    assert facts["direct"] == "visible" and facts["image_source_order"] == 2
+    spec, problems = validate_scene_file(room)
+    assert problems == []
+    settings = ss.RirSettings(**spec.acoustics.model_dump())
+    expected = ss.compute_rir(ss.Scene.from_spec(spec.scene, spec.materials), [2, 2, 1.5],
+                              [7, 4.5, 1.6], settings, seed=5)
+    written, fs = sf.read(str(wav), dtype="float32", always_2d=True)
+    assert fs == 16000 and np.array_equal(written.T, expected.rir.astype(np.float32))
+
+
+def test_scene_file_errors_name_the_line_and_the_field(tmp_path: Path, capsys) -> None:
+    room = tmp_path / "bad.yaml"
+    room.write_text(SCENE_FILE.replace("size_m: [10, 7, 3]", "size_m: [10, 7]"))
+    code, _, err = run(capsys, "rir", str(room), "--source", "1", "1", "1", "--mic", "2", "2",
+                       "1")
+    assert code == 2 and re.search(r"bad.yaml:4:\d+: scene.shoebox.size_m|bad.yaml:4:\d+: "
+                                   r"scene.size_m", err), err
+    room.write_text(SCENE_FILE.replace("material: panel}", "material: panle}"))
+    code, _, err = run(capsys, "rir", str(room), "--source", "1", "1", "1", "--mic", "2", "2",
+                       "1")
+    assert code == 2 and "panle" in err and "panel" in err, err  # did you mean
+    room.write_text(SCENE_FILE.replace("kind: shoebox\n  id: studio", "kind: mesh\n  id: s\n"
+                                       "  path: rooms/*.obj").replace("  size_m: [10, 7, 3]\n"
+                                                                      "  materials: {walls: "
+                                                                      "panel, floor: panel, "
+                                                                      "ceiling: panel}\n", ""))
+    code, _, err = run(capsys, "rir", str(room), "--source", "1", "1", "1", "--mic", "2", "2",
+                       "1")
+    assert code == 2 and "is a glob" in err, err
+    room.write_text(SCENE_FILE)
+    code, _, err = run(capsys, "rir", str(room), "--scene", "x", "--source", "1", "1", "1",
+                       "--mic", "2", "2", "1")
+    assert code == 2 and "--scene" in err
+
+
+def test_validate_knows_a_scene_file(tmp_path: Path, capsys) -> None:
+    room = tmp_path / "studio.yaml"
+    room.write_text(SCENE_FILE)
+    code, out, _ = run(capsys, "validate", str(room))
+    assert code == 0 and "valid scene file (shoebox scene 'studio'" in out
+    room.write_text(SCENE_FILE.replace("rays: 4000", "rays: -1"))
+    code, _, err = run(capsys, "validate", str(room))
+    assert code == 2 and "acoustics.rays" in err
+
+
+def test_the_readmes_scene_file_runs_as_written(tmp_path: Path, capsys) -> None:
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    text = readme.split("cat > studio.yaml <<'YAML'\n", 1)[1].split("\nYAML\n", 1)[0]
+    command = readme.split("\nYAML\n", 1)[1].splitlines()[0]
+    assert command == ("sonicspec validate studio.yaml && sonicspec rir studio.yaml "
+                       "--source 1 1 1.5 --mic 4 3 1.5")
+    room = tmp_path / "studio.yaml"
+    room.write_text(text + "\n")
+    assert run(capsys, "validate", str(room))[0] == 0
+    code, out, err = run(capsys, "rir", str(room), "--source", "1", "1", "1.5", "--mic", "4",
+                         "3", "1.5")
+    assert code == 0 and out.startswith("RIR in studio:") and "sofa" in out, err

@@ -197,3 +197,40 @@ def test_one_hashing_module_one_atomic_writer_one_speed_of_sound() -> None:
               if isinstance(node, ast.Constant) and type(node.value) in (int, float)
               and node.value == 343]
     assert [s.partition(":")[0] for s in speeds] == ["sonicspec/units.py"]
+
+
+def _stage_modules() -> list[str]:
+    return [m for m in modules() if m.startswith("sonicspec.stages.")]
+
+
+def _is_params(node: ast.AST) -> bool:
+    """``params``, ``x.params`` or ``x.params[...]`` (a job's parameters in any form)."""
+    return ((isinstance(node, ast.Name) and node.id == "params")
+            or (isinstance(node, ast.Attribute) and node.attr == "params"))
+
+
+def test_stages_read_parameters_as_typed_fields() -> None:
+    # Issue 17: no stage looks a parameter up by string; each reads its step's params model.
+    lookups = []
+    for m in _stage_modules():
+        for node in ast.walk(tree(m)):
+            if isinstance(node, ast.Subscript) and _is_params(node.value):
+                lookups.append(_where(m, node.lineno))
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr == "get" and _is_params(node.func.value)):
+                lookups.append(_where(m, node.lineno))
+    assert lookups == []
+
+
+def test_a_stage_decodes_artifacts_only_through_stages_artifacts() -> None:
+    # Issue 17: a stage does not import the producing stage's module to read its artifact;
+    # every artifact's encoding lives in sonicspec.stages.artifacts. (corpus and mesh serve
+    # other stages with functions of their own: corpus roots, and the scene a command shows.)
+    runners = {"mesh", "navigation", "placement", "arrange", "rir", "render", "mix", "export",
+               "dataset"}
+    offences = [
+        f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+        if a.rpartition(".")[2] in runners and a.startswith("sonicspec.stages.")
+        and b.startswith("sonicspec.stages.") and b.rpartition(".")[2] in runners
+    ]
+    assert offences == []

@@ -300,6 +300,7 @@ def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -
     is cut at the clip's end; the render kept only the cut copy and the full use failed
     ("segment 'n0': needs 48000 samples ... the clip has ...")."""
     from sonicspec.audio.arrange import Clip, arrange_background, assemble
+    from sonicspec.stages.artifacts import ArrangedTrack
     from sonicspec.stages.render import _AudioCache, track_audio
 
     fs = 16000
@@ -308,7 +309,9 @@ def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -
     segments = arrange_background([Clip("n0", 3 * fs)], 10 * fs, (4, 4), (0.0, 0.0), fs,
                                   np.random.default_rng(1))
     assert [s.id for s in segments] == ["n0"] * 4 and segments[-1].end - segments[-1].start < 3 * fs
-    track = {"files": {"n0": {"path": "n0.wav"}}}
+    track = ArrangedTrack(name="noise", role="noise", speaker="",
+                          segments=[s.to_dict() for s in segments],
+                          files={"n0": {"path": "n0.wav", "sample_rate_hz": fs, "speaker": ""}})
     dry = assemble(segments, track_audio(track, segments, _AudioCache(fs), tmp_path), 10 * fs)
     for s in segments:
         np.testing.assert_allclose(dry[s.start:s.end], clip[:s.end - s.start], atol=1e-7)

@@ -310,6 +310,7 @@ def test_readme_spec_validates_plans_and_indexes_its_corpora(tmp_path: Path) -> 
     validate and failed 52 s into the build on the 7:2:1 default shares."""
     from sonicspec.audio.generated import write_librispeech
     from sonicspec.plan.compile import compile_spec
+    from sonicspec.plan.params import read_params
     from sonicspec.stages.corpus import build_index
     from sonicspec.testing import corpora as tc
 
@@ -328,7 +329,7 @@ def test_readme_spec_validates_plans_and_indexes_its_corpora(tmp_path: Path) -> 
     plan = compile_spec(loaded, cache=False)
     for job in plan.by_step()["corpus"]:
         rng = np.random.default_rng(0)
-        index = build_index(dict(job.params), dict(job.paths), job.key, rng)
+        index = build_index(read_params("corpus", job.params), dict(job.paths), job.key, rng)
         assert index.splits == ["test", "train"], job.label
         if job.params["role"] == "noise":  # 0.875 : 0.125 of the clips without speech
             n = len(index.items)

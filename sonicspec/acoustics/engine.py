@@ -22,7 +22,7 @@ call it.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +31,7 @@ import numpy as np
 
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals
-from sonicspec.acoustics.bands import default_bands
+from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.metrics import (
@@ -42,7 +42,7 @@ from sonicspec.acoustics.metrics import (
 from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplify_flat_areas
-from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.acoustics.synthesis import synthesize_early, synthesize_rir
 from sonicspec.errors import AcousticsError
 
 if TYPE_CHECKING:
@@ -58,6 +58,7 @@ __all__ = [
     "acoustic_scene",
     "check_inside",
     "check_receiver",
+    "early_part",
     "load_hrirs",
     "ray_trace_settings",
     "receiver_renderer",
@@ -106,25 +107,16 @@ class SimulationSettings:
                   speed_of_sound_m_s: float) -> SimulationSettings:
         """The settings of a spec's ``acoustics`` section (as ``model_dump(mode="json")``
         gives it), ``bands_hz: auto`` resolved for the sample rate."""
+        # Same names as the spec's fields: every field the spec has is taken by name; the
+        # two that differ in form are translated.
+        same = ({f.name for f in fields(cls)} & set(acoustics)) - {
+            "bands_hz", "sample_rate_hz", "speed_of_sound_m_s"}
         bands = acoustics["bands_hz"]
         bands = default_bands(sample_rate_hz) if bands == "auto" else tuple(
             float(b) for b in bands)
-        return cls(sample_rate_hz=sample_rate_hz, bands_hz=bands, rays=acoustics["rays"],
-                   image_source_order=acoustics["image_source_order"],
-                   max_rir_length_s=acoustics["max_rir_length_s"],
-                   energy_threshold_db=acoustics["energy_threshold_db"],
-                   air_absorption=acoustics["air_absorption"],
-                   temperature_c=acoustics["temperature_c"],
-                   relative_humidity_pct=acoustics["relative_humidity_pct"],
-                   transmission=acoustics["transmission"],
+        return cls(**{name: acoustics[name] for name in same},
+                   sample_rate_hz=sample_rate_hz, bands_hz=bands,
                    diffuse_rain=acoustics["detection"] == "diffuse_rain",
-                   receiver_radius_m=acoustics["receiver_radius_m"],
-                   ray_splitting=acoustics["ray_splitting"],
-                   free_air_ball_m=acoustics["free_air_ball_m"],
-                   roulette_db=acoustics["roulette_db"],
-                   horizontal_guiding=acoustics["horizontal_guiding"],
-                   simplify_tolerance_m=acoustics["simplify_tolerance_m"],
-                   histogram_bin_s=acoustics["histogram_bin_s"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
     def air(self) -> np.ndarray | None:
@@ -207,7 +199,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                   settings: SimulationSettings, rng: np.random.Generator,
                   regions=None, microphone: Mapping[str, Any] | None = None,
                   hrirs: HrirSet | None = None, n_threads: int = 1,
-                  expected_figures: bool = False, progress=None,
+                  expected_figures: bool = False, progress=None, keep_arrivals: bool = False,
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs from every source position to the microphone, and facts about each.
 
@@ -240,6 +232,11 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         ``"expected"``.
     progress : callable, optional
         ``progress(rays_done, rays_total)``, called as the trace goes.
+    keep_arrivals : bool
+        Add each RIR's exact early arrivals (:class:`Arrivals`, as rendered into it) to its
+        facts as ``"early_arrivals"``: a moving source's paths are rendered from them
+        (:class:`~sonicspec.acoustics.moving.PathSet`), its late part is the RIR less
+        :func:`early_part`. Mono receivers only.
 
     Returns
     -------
@@ -257,6 +254,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     """
     microphone = microphone or MONO
     check_receiver(microphone, hrirs)
+    if keep_arrivals and microphone["kind"] != "mono":
+        raise AcousticsError(f"keep_arrivals: the early paths of a moving source are rendered "
+                             f"for mono receivers only, got {microphone['kind']!r}")
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
@@ -288,7 +288,17 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
+        if keep_arrivals:
+            facts[-1]["early_arrivals"] = arrivals
     return rirs, facts
+
+
+def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int) -> np.ndarray:
+    """The exact early part a mono RIR of ``n_samples`` holds (its ``arrivals`` synthesised
+    as :func:`~sonicspec.acoustics.synthesis.synthesize_rir` does), float64: the RIR less
+    this is its late, ray-traced part."""
+    bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
+    return synthesize_early(arrivals, bank, n_samples)
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,8 +23,11 @@ margin at half the cost of ±16.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
@@ -82,3 +85,129 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     # the sinc's own reach covers the edges).
     heard = (j >= tau[0] - half_width) & (j <= tau[-1] + half_width)
     return np.where(heard, acc * np.interp(u, k, amp) * density, 0.0)
+
+
+# --------------------------------------------------------------------------- a source's paths
+@dataclass(frozen=True, eq=False)
+class PathSet:
+    """The exact early paths of one moving source, each followed along the source's RIR points.
+
+    The tracer finds the early arrivals of a source point by reciprocity, as image sources of
+    the *microphone* (``acoustics.engine``): for a static microphone the image a path comes
+    from is fixed in space whatever the source does, at ``p_j + L_j · d_j`` (the point, the
+    path's unfolded length and its direction of arrival at the point). A path is therefore
+    identified across points by where its image is; at each point it is valid or not (a wall
+    in the way, a reflection outside its polygon), and its band factors (reflection and
+    transmission factors, air absorption over its length) are known. Spreading ``1/(4πL)`` is
+    left out: :func:`render_path` applies it exactly at every sample.
+
+    Attributes
+    ----------
+    images_m : (K, 3) float
+        Where each path's image of the microphone is (the microphone itself for the direct
+        sound), metres.
+    weights : (K, N, B) float
+        Pressure factor per band of path ``k`` at point ``j``; 0 where the path is not valid.
+    order : (K,) int
+        Reflections of each path (0: direct sound, possibly through walls).
+    """
+
+    images_m: np.ndarray
+    weights: np.ndarray
+    order: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.images_m.shape[0])
+
+    @staticmethod
+    def identify(points_m, arrivals: list[Arrivals], *, tolerance_m: float = 1e-4) -> PathSet:
+        """The paths of ``arrivals[j]`` (the early arrivals at ``points_m[j]``, directions
+        pointing to the apparent source, as the engine gives them) matched across points.
+
+        Two arrivals belong to one path when their images lie within ``tolerance_m`` (images
+        of distinct paths are at least twice a wall's distance to the microphone apart;
+        rounding errors are ~1e-12 m).
+        """
+        points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+        if len(arrivals) != len(points):
+            raise AcousticsError(f"arrivals: expected one set per point ({len(points)}), "
+                                 f"got {len(arrivals)}")
+        bands = arrivals[0].n_bands if arrivals else 0
+        index: dict[tuple[int, int, int], int] = {}
+        images: list[np.ndarray] = []
+        orders: list[int] = []
+        entries: list[tuple[int, int, np.ndarray]] = []
+        for j, (p, a) in enumerate(zip(points, arrivals, strict=True)):
+            where = p[None, :] + a.directions * a.path_length_m[:, None]
+            factor = a.amplitudes * (4 * np.pi * a.path_length_m[:, None])
+            for i in range(len(a)):
+                key = tuple(np.round(where[i] / tolerance_m).astype(np.int64).tolist())
+                if key not in index:
+                    index[key] = len(images)
+                    images.append(where[i])
+                    orders.append(int(a.order[i]))
+                entries.append((index[key], j, factor[i]))
+        weights = np.zeros((len(images), len(points), bands))
+        for k, j, factor in entries:
+            weights[k, j] += factor
+        return PathSet(np.asarray(images).reshape(-1, 3), weights,
+                       np.asarray(orders, dtype=np.int64))
+
+    def select(self, keep: np.ndarray) -> PathSet:
+        return PathSet(self.images_m[keep], self.weights[keep], self.order[keep])
+
+
+def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
+                 speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
+    """The early part heard from a source walking through its RIR points, ``(n_out,)``.
+
+    Every path of ``paths`` is rendered by :func:`render_path` from the source's position at
+    each emission (``points_m`` read at the fractional ``point_index`` of each dry sample) to
+    its fixed image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift
+    are exact at every sample. Its band factors are read at the same fractional index (a
+    path that becomes invalid between two points fades over that stretch) and applied to the
+    dry signal's octave bands (``bank.split``, which sums back to the signal) at emission.
+
+    Parameters
+    ----------
+    dry : (T,) float
+    point_index : (T,) float
+        Fractional index into ``points_m`` of the source at each dry sample.
+    points_m : (N, 3) float
+    paths : PathSet
+        Of these points (:meth:`PathSet.identify`).
+    bank : OctaveFilterBank
+        The bands of ``paths.weights`` (the RIRs' bands).
+    n_out : int
+        Output length.
+    """
+    s = np.asarray(dry, dtype=np.float64)
+    index = np.asarray(point_index, dtype=np.float64)
+    points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    if index.shape != s.shape:
+        raise AcousticsError(f"point_index: expected one index per dry sample {s.shape}, got "
+                             f"{index.shape}")
+    if paths.weights.shape[1:] != (len(points), bank.n_bands):
+        raise AcousticsError(f"paths: expected weights for {len(points)} points and "
+                             f"{bank.n_bands} bands, got {paths.weights.shape[1:]}")
+    out = np.zeros(n_out)
+    if len(paths) == 0 or not np.any(s):
+        return out
+    at = np.arange(len(points), dtype=np.float64)
+    track = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
+    static = len(points) == 1 or np.ptp(index) == 0
+    band_dry = bank.split(s)
+    lo, hi = np.floor(index).astype(np.int64), np.ceil(index).astype(np.int64)
+    frac = index - lo
+    for k in range(len(paths)):
+        w = paths.weights[k]  # (N, B)
+        if not np.any(w):
+            continue
+        if static:
+            x = w[int(np.rint(index[0]))] @ band_dry
+        else:  # band factors at each emission, linear between points
+            x = ((w[lo].T * (1 - frac) + w[hi].T * frac) * band_dry).sum(axis=0)
+        source = track[0] if static else track
+        out += render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
+                           speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out)
+    return out

@@ -25,6 +25,7 @@ from sonicspec.atomic import write_text
 from sonicspec.errors import CompileError
 from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
+from sonicspec.plan.params import ARRANGEMENT_FIELDS, MaterialTable
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
 from sonicspec.spec.scene import MeshObstacleSpec, MeshSceneSpec
@@ -297,28 +298,15 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     # 10^6 groups does not encode them again per job (the keys are the same bytes).
     mic = shared(_dump(spec.microphone))
     mixture = _dump(spec.mixture)
-    arrangement = shared({
-        k: mixture[k]
-        for k in (
-            "duration_s",
-            "speakers",
-            "utterances_per_speaker",
-            "utterance_gap_s",
-            "noise_clips",
-            "noise_gap_s",
-            "music_clips",
-            "music_gap_s",
-        )
-    })
+    arrangement = shared({k: mixture[k] for k in ARRANGEMENT_FIELDS})
     placement_spec, trajectory = shared(_dump(spec.placement)), shared(_dump(spec.trajectory))
-    acoustics, materials = shared(_dump(spec.acoustics)), shared(_dump(spec.materials))
+    acoustics = shared(_dump(spec.acoustics))
+    materials = shared({k: v for k, v in _dump(spec.materials).items()
+                        if k in MaterialTable.model_fields})
     loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
     targets = shared(list(spec.mixture.targets))
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
-    scene_materials = {
-        e.id: shared(getattr(spec.scenes[e.index], "label_materials", {})) for e in entries
-    }
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
     for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard"):
@@ -365,11 +353,11 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         **common,
                         "acoustics": acoustics,
                         "materials": materials,
-                        "scene_label_materials": scene_materials[scene_id],
                         "microphone": mic,
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "files": rir_files_shared,
+                        "early_paths": spec.mixture.interpolation == "paths",
                     },
                     (mesh_keys[scene_id], placement.key),
                     f"rir {tag}",

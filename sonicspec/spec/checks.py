@@ -454,6 +454,15 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
         yield _warn(
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
+    if m.interpolation == "paths":
+        if spec.microphone.kind != "mono":
+            yield _err(("mixture", "interpolation"),
+                       f"'paths' renders mono microphones in this version; microphone.kind is "
+                       f"{spec.microphone.kind!r} (use 'sample_crossfade')")
+        elif not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
+            yield _err(("mixture", "interpolation"),
+                       "'paths' renders a static microphone in this version; "
+                       "microphone.trajectory moves (use 'sample_crossfade')")
 
 
 def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:

@@ -10,6 +10,7 @@ from pydantic_core import PydanticCustomError
 from sonicspec.spec.base import SpecModel, value_range
 
 Background = Literal["noise", "music", "both", "none"]
+Interpolation = Literal["sample_crossfade", "stft_crossfade", "segment_ola", "paths"]
 
 
 LOUDNESS_PRESETS: dict[str, dict[str, float]] = {
@@ -115,11 +116,15 @@ class MixtureSpec(SpecModel):
         (0.0, 4.0), description="Silence drawn before each music clip, seconds."
     )
     loudness: LoudnessSpec = Field(default_factory=LoudnessSpec, description="Target levels.")
-    interpolation: Literal["sample_crossfade", "stft_crossfade", "segment_ola"] = Field(
+    interpolation: Interpolation = Field(
         "sample_crossfade",
-        description="How a moving source blends the RIRs along its path: per-sample crossfade of "
-        "neighbouring convolutions (SonicSet), STFT-domain interpolation (DCASE/SpatialScaper), "
-        "or one RIR per segment with overlap-added tails (gpuRIR).",
+        description="How a moving source is heard along its path. 'paths': the direct sound and "
+        "every image-source reflection as a time-varying delay from where the source is at "
+        "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
+        "between RIR points; mono microphones). Or the RIRs along the path are blended: "
+        "per-sample crossfade of neighbouring convolutions (SonicSet), STFT-domain "
+        "interpolation (DCASE/SpatialScaper), or one RIR per segment with overlap-added tails "
+        "(gpuRIR); blends comb-filter the direct sound (bench/bench_motion.py).",
     )
     targets: list[Literal["dry", "direct", "early"]] = Field(
         default_factory=list,

@@ -19,6 +19,7 @@ from sonicspec.spec.load import (
     problems_from_validation,
     sort_problems,
 )
+from sonicspec.spec.scene_file import SceneFileSpec
 from sonicspec.spec.versions import migrate, version_problem
 
 
@@ -124,6 +125,27 @@ def validate_file(
     except OSError as exc:
         return None, [Problem((), f"cannot be read: {exc.strerror}")]
     return validate_text(text, source, path.parent, files=files, cli_outputs=cli_outputs)
+
+
+def validate_scene_file(path: str | Path) -> tuple[SceneFileSpec | None, list[Problem]]:
+    """Validate a scene file (:mod:`sonicspec.spec.scene_file`): the model, or None and the
+    problems, located in the file. A file without a ``scene`` is named as such."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, [Problem((), f"cannot be read: {getattr(exc, 'strerror', exc)}")]
+    try:
+        data, smap = parse_text(text, str(path))
+    except SpecError as exc:
+        return None, list(exc.problems)
+    if not isinstance(data, dict) or "scene" not in data:
+        return None, [Problem(("scene",), "required field missing: a scene file holds a "
+                              "'scene' (or give a dataset spec, with 'sonicspec: 1')", 1, 1)]
+    try:
+        return SceneFileSpec.model_validate(data), []
+    except ValidationError as exc:
+        return None, sort_problems(problems_from_validation(exc, SceneFileSpec, data, smap))
 
 
 def load_spec(path: str | Path, *, files: bool = False) -> LoadedSpec:

@@ -15,8 +15,11 @@ import numpy as np
 from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
 from sonicspec.errors import AudioError
+from sonicspec.plan.params import ArrangeParams
+from sonicspec.stages import artifacts
+from sonicspec.stages.artifacts import speech_track_name
 from sonicspec.stages.context import JobContext
-from sonicspec.stages.corpus import read_index
+from sonicspec.stages.corpus import corpus_role
 from sonicspec.units import seconds_to_samples
 
 
@@ -37,41 +40,42 @@ def _files(items: list[CorpusItem], segments) -> dict[str, dict[str, Any]]:
                    "speaker": by_id[s.id].speaker} for s in segments}
 
 
-def arrange_group(indexes: dict[str, CorpusIndex], params: dict[str, Any], group: str,
+def arrange_group(indexes: dict[str, CorpusIndex], params: ArrangeParams, group: str,
                   rng: np.random.Generator) -> dict[str, Any]:
     """The tracks of one group as JSON data: name, role, speaker, segments, files (paths
     relative to the corpus root of the track's role)."""
-    mix = params["mixture"]
-    rate = params["sample_rate_hz"]
-    split = params["split"]
-    clip_samples = seconds_to_samples(mix["duration_s"], rate)
+    mix = params.mixture
+    rate = params.sample_rate_hz
+    split = params.split
+    clip_samples = seconds_to_samples(mix.duration_s, rate)
     speech = indexes["speech"]
-    speech.require_speakers(split, mix["speakers"], "corpora.speech")
+    speech.require_speakers(split, mix.speakers, "corpora.speech")
     by_speaker = speech.speakers(split)
     names = sorted(by_speaker)
-    chosen = [names[i] for i in rng.choice(len(names), mix["speakers"], replace=False)]
+    chosen = [names[i] for i in rng.choice(len(names), mix.speakers, replace=False)]
     tracks = []
     for k, speaker in enumerate(chosen):
         items = by_speaker[speaker]
         try:
             segments = arrange_speech(
-                [_clip(i, rate) for i in items], clip_samples, mix["utterances_per_speaker"],
-                mix["utterance_gap_s"], rate, rng,
+                [_clip(i, rate) for i in items], clip_samples, mix.utterances_per_speaker,
+                mix.utterance_gap_s, rate, rng,
                 where=f"group {group} source{k + 1} (speaker {speaker})")
         except AudioError as err:
             raise AudioError(f"{err} (the clip is mixture.duration_s, the gaps "
                              "mixture.utterance_gap_s)") from None
-        tracks.append({"name": f"source{k + 1}", "role": "speech", "speaker": speaker,
+        tracks.append({"name": speech_track_name(k), "role": "speech", "speaker": speaker,
                        "segments": [s.to_dict() for s in segments],
                        "files": _files(items, segments)})
-    for role in ("noise", "music"):
-        if role not in indexes or mix[f"{role}_clips"][1] == 0:
+    background = {"noise": (mix.noise_clips, mix.noise_gap_s),
+                  "music": (mix.music_clips, mix.music_gap_s)}
+    for role, (clips, gaps) in background.items():
+        if role not in indexes or clips[1] == 0:
             continue
         items = indexes[role].split(split)
         indexes[role].require_items(split, 1, f"corpora.{role}")
         segments = arrange_background([_clip(i, rate) for i in items], clip_samples,
-                                      mix[f"{role}_clips"], mix[f"{role}_gap_s"], rate, rng,
-                                      where=f"group {group} {role}")
+                                      clips, gaps, rate, rng, where=f"group {group} {role}")
         if segments:
             tracks.append({"name": role, "role": role, "speaker": "",
                            "segments": [s.to_dict() for s in segments],
@@ -83,7 +87,9 @@ def run(ctx: JobContext) -> None:
     jobs = ctx.plan.by_key()
     indexes: dict[str, CorpusIndex] = {}
     for key in ctx.input_keys("corpus"):
-        indexes[jobs[key].params["role"]] = read_index(ctx.store.read("corpus", key).arrays)
-    groups = [arrange_group(indexes, ctx.params, g, ctx.rng("arrange", g))
-              for g in ctx.params["groups"]]
-    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)}, {"groups": groups})
+        indexes[corpus_role(jobs[key])] = artifacts.read_corpus_index(
+            ctx.store.read("corpus", key).arrays)
+    params: ArrangeParams = ctx.params
+    groups = [arrange_group(indexes, params, g, ctx.rng("arrange", g)) for g in params.groups]
+    ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
+              artifacts.encode("arrange", {"groups": groups}))

@@ -13,6 +13,7 @@ from sonicspec.atomic import write_text
 from sonicspec.errors import StageError
 from sonicspec.hashing import rng_for
 from sonicspec.plan.model import STEP_BY_NAME, Job, Plan
+from sonicspec.plan.params import StepParams, read_params
 from sonicspec.store import Artifact, ArtifactStore
 
 
@@ -25,9 +26,25 @@ class JobContext:
     store: ArtifactStore
     _last_progress: list[float] = field(default_factory=lambda: [0.0], repr=False)
 
+    _params: list[StepParams] = field(default_factory=list, repr=False)
+
     @property
-    def params(self) -> dict[str, Any]:
-        return dict(self.job.params)
+    def params(self) -> Any:
+        """The job's params as its step's model (:mod:`sonicspec.plan.params`), read once; a
+        :class:`StageError` naming the field if they do not fit."""
+        if not self._params:
+            self._params.append(read_params(self.job.step, self.job.params, self.job.label))
+        return self._params[0]
+
+    def input_params(self, step: str) -> Any:
+        """The params of this job's single ``step`` input, as that step's model."""
+        keys = self.input_keys(step)
+        if len(keys) != 1:
+            raise StageError(
+                f"{self.job.label}: expected one {step} input, found {len(keys)}", self.job.key
+            )
+        job = self.plan.by_key()[keys[0]]
+        return read_params(step, job.params, job.label)
 
     def input_keys(self, step: str) -> list[str]:
         """Keys of this job's inputs made by ``step``, in the order the plan lists them."""

@@ -11,12 +11,10 @@ name as warnings and listed in the artifact (``skipped``: path below the root an
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -31,25 +29,34 @@ from sonicspec.audio.corpora import (
 )
 from sonicspec.errors import CorpusError, SonicspecError
 from sonicspec.plan.model import Job, Plan
+from sonicspec.plan.params import CorpusParams, read_params
 from sonicspec.shares import split_shares
+from sonicspec.spec.corpora import (
+    FmaCorpusSpec,
+    Fsd50kCorpusSpec,
+    GeneratedNoiseSpec,
+    GeneratedSpeechSpec,
+    LibriSpeechCorpusSpec,
+)
+from sonicspec.stages import artifacts
 from sonicspec.stages.context import JobContext
 from sonicspec.store import ArtifactStore
 
 log = logging.getLogger("sonicspec.stages.corpus")
 
 
-def _generated(params: dict[str, Any], cache: Path, key: str) -> CorpusIndex:
+def _generated(params: CorpusParams, cache: Path, key: str) -> CorpusIndex:
     from sonicspec.audio.generated import generate_background_corpus, generate_speech_corpus
 
-    corpus, role, splits = params["corpus"], params["role"], params["splits"]
+    corpus, role, splits = params.corpus, params.role, list(params.splits)
     root = cache / "generated" / f"{role}-{key[:16]}"
-    if role == "speech":
-        subsets = generate_speech_corpus(root, splits, corpus["speakers_per_split"],
-                                         corpus["utterances_per_speaker"], seed=params["seed"])
+    if isinstance(corpus, GeneratedSpeechSpec):
+        subsets = generate_speech_corpus(root, splits, corpus.speakers_per_split,
+                                         corpus.utterances_per_speaker, seed=params.seed)
         return index_librispeech(root, subsets)
-    generate_background_corpus(root, role, splits, corpus["clips_per_split"],
-                               corpus["clip_duration_s"], seed=params["seed"],
-                               sample_rate_hz=params["sample_rate_hz"])
+    generate_background_corpus(root, role, splits, corpus.clips_per_split,
+                               corpus.clip_duration_s, seed=params.seed,
+                               sample_rate_hz=params.sample_rate_hz)
     return index_split_folders(root, splits)
 
 
@@ -62,37 +69,39 @@ def corpus_shares(ratios: dict[str, float] | None, splits: list[str], role: str
         raise CorpusError(f"corpora.{role}.split_ratios: {err}") from None
 
 
-def build_index(params: dict[str, Any], paths: dict[str, str], key: str,
+def build_index(params: CorpusParams, paths: dict[str, str], key: str,
                 rng: np.random.Generator) -> CorpusIndex:
     """The index a corpus job describes (its folder from ``paths``, ratio splits from ``rng``)."""
-    corpus, role = params["corpus"], params["role"]
-    kind = corpus["kind"]
-    if kind == "generated":
+    corpus, role, splits = params.corpus, params.role, list(params.splits)
+    if isinstance(corpus, GeneratedSpeechSpec | GeneratedNoiseSpec):
         return _generated(params, Path(paths["cache"]), key)
     root = Path(paths["root"])
-    splits = params["splits"]
-    if kind == "librispeech":
-        return index_librispeech(root, {s: v for s, v in corpus["subsets"].items()
-                                        if s in splits})
-    ratios = corpus_shares(corpus.get("split_ratios"), splits, role)
-    if kind == "fsd50k":
-        return index_fsd50k(root, ratios, corpus["exclude_labels"], rng)
-    if kind == "fma":
-        return index_fma(root, corpus["size"], ratios, corpus["instrumental_only"], rng)
-    return index_folder(root, corpus["extensions"], ratios, rng, by_speaker=role == "speech")
+    if isinstance(corpus, LibriSpeechCorpusSpec):
+        return index_librispeech(root, {s: v for s, v in corpus.subsets.items() if s in splits})
+    ratios = corpus_shares(corpus.split_ratios, splits, role)
+    if isinstance(corpus, Fsd50kCorpusSpec):
+        return index_fsd50k(root, ratios, corpus.exclude_labels, rng)
+    if isinstance(corpus, FmaCorpusSpec):
+        return index_fma(root, corpus.size, ratios, corpus.instrumental_only, rng)
+    return index_folder(root, corpus.extensions, ratios, rng, by_speaker=role == "speech")
+
+
+def corpus_role(job: Job) -> str:
+    """Which corpus a corpus job indexes: ``speech``, ``noise`` or ``music``."""
+    return read_params("corpus", job.params, job.label).role
 
 
 def corpus_root(job: Job) -> Path:
     """The folder a corpus job's item paths are relative to."""
     if "root" in job.paths:
         return Path(job.paths["root"])
-    return Path(job.paths["cache"]) / "generated" / f"{job.params['role']}-{job.key[:16]}"
+    return Path(job.paths["cache"]) / "generated" / f"{corpus_role(job)}-{job.key[:16]}"
 
 
 def corpus_roots(ctx: JobContext) -> dict[str, Path]:
     """Role -> root of every corpus a job reads."""
     jobs = ctx.plan.by_key()
-    return {jobs[k].params["role"]: corpus_root(jobs[k]) for k in ctx.input_keys("corpus")}
+    return {corpus_role(jobs[k]): corpus_root(jobs[k]) for k in ctx.input_keys("corpus")}
 
 
 def _portable(index: CorpusIndex, root: Path) -> CorpusIndex:
@@ -105,29 +114,23 @@ def _portable(index: CorpusIndex, root: Path) -> CorpusIndex:
                        skipped)
 
 
-def read_index(arrays: dict[str, np.ndarray]) -> CorpusIndex:
-    """The index stored by :func:`run`."""
-    return CorpusIndex.from_dict(json.loads(arrays["index_json"].tobytes().decode("utf-8")))
-
-
 def run(ctx: JobContext) -> None:
-    params = ctx.params
+    params: CorpusParams = ctx.params
     cache = Path(ctx.job.paths["cache"])
-    rng = ctx.rng("corpus", params["role"])
+    rng = ctx.rng("corpus", params.role)
     root = corpus_root(ctx.job)
     index = cached_index(
-        cache / "index" / f"{params['role']}-{ctx.job.key}.json",
+        cache / "index" / f"{params.role}-{ctx.job.key}.json",
         lambda: _portable(build_index(params, dict(ctx.job.paths), ctx.job.key, rng), root))
     for problem in index.problems:
-        log.warning("corpora.%s: %s", params["role"], problem)
-    blob = json.dumps(index.to_dict(), sort_keys=True, separators=(",", ":")).encode("utf-8")
+        log.warning("corpora.%s: %s", params.role, problem)
     counts = {}
-    for split in params["splits"]:
+    for split in params.splits:
         items = index.split(split)
         counts[split] = {"items": len(items), "speakers": len(index.speakers(split)),
                          "hours": round(sum(i.duration_s for i in items) / 3600.0, 6)}
-    ctx.write({"index_json": np.frombuffer(blob, dtype=np.uint8)},
-              {"role": params["role"], "kind": params["corpus"]["kind"],
+    ctx.write(artifacts.corpus_index_arrays(index),
+              {"role": params.role, "kind": params.corpus.kind,
                "splits": counts, "problems": list(index.problems),
                "skipped": [{"path": p, "reason": r} for p, r in index.skipped]})
 
@@ -143,5 +146,5 @@ def skipped_files(plan: Plan, store: ArtifactStore) -> dict[str, list[dict[str, 
     for job in plan.by_step()["corpus"]:
         if store.exists("corpus", job.key):
             data = store.read_data("corpus", job.key)
-            out[job.params["role"]] = [dict(s) for s in data.get("skipped", ())]
+            out[corpus_role(job)] = [dict(s) for s in data.get("skipped", ())]
     return out

@@ -12,6 +12,7 @@ the next build check), the manifest entries and the metadata for the ``dataset``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,26 +24,36 @@ from sonicspec.audio.render import walk_index
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
+from sonicspec.plan.params import ExportParams
+from sonicspec.stages import artifacts
+from sonicspec.stages.artifacts import (
+    ArrangedGroup,
+    GroupPlacement,
+    MixGroup,
+    RenderGroup,
+    RirGroup,
+    SourcePlacement,
+)
 from sonicspec.stages.context import JobContext
 
 
 class _GroupWriter:
     """Writes one group's files and keeps the manifest rows."""
 
-    def __init__(self, out: Path, folder: Path, group: str, params: dict[str, Any]) -> None:
+    def __init__(self, out: Path, folder: Path, group: str, params: ExportParams) -> None:
         self.out, self.folder, self.group = out, folder, group
-        self.outputs = params["outputs"]
-        self.rate = params["sample_rate_hz"]
+        self.outputs = params.outputs
+        self.rate = params.sample_rate_hz
         self.files: list[dict[str, Any]] = []
         self.recordings: list[dict[str, Any]] = []
         self.rec_ids: dict[str, str] = {}
 
     def audio(self, kind: str, name: str, x: np.ndarray, *, float_wav: bool = False,
               custom: dict[str, Any] | None = None) -> str:
-        ext = "wav" if float_wav else self.outputs["audio_format"]
+        ext = "wav" if float_wav else self.outputs.audio_format
         path = self.folder / f"{name}.{ext}"
         write_audio(path, x, self.rate, audio_format=ext,
-                    subtype="FLOAT" if float_wav else self.outputs["subtype"])
+                    subtype="FLOAT" if float_wav else self.outputs.subtype)
         rel = path.relative_to(self.out).as_posix()
         x2 = np.atleast_2d(x)
         entry = {"kind": kind, "name": name, **file_record(self.out, path),
@@ -61,100 +72,104 @@ class _GroupWriter:
 TRACK_HOP_S = 0.01
 
 
-def position_track(source: dict[str, Any], segments: list[dict[str, Any]], clip_samples: int,
-                   rate: int, motion: dict[str, Any], mic_m) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Motion:
+    """How the renderer walked a group's sources and where the microphone faced."""
+
+    speed_m_s: float | None
+    """The trajectory's speed (None: each walk spans its source's speech)."""
+    yaw_deg: float
+    pitch_deg: float
+
+
+def position_track(source: SourcePlacement, segments: list[Segment], clip_samples: int,
+                   rate: int, motion: Motion, mic_m) -> dict[str, Any]:
     """Where a source is every ``TRACK_HOP_S`` from t = 0 over the whole clip (held before and
     after its walk), read from the same walk the renderer used, with its azimuth, elevation
     and distance in the microphone's frame."""
     hop = max(1, round(TRACK_HOP_S * rate))
-    spans = speech_span([Segment.from_dict(s) for s in segments])
-    index = walk_index(source["rir_points_distance_m"], clip_samples, spans,
-                       motion["speed_m_s"], rate)[::hop]
-    points = np.asarray(source["rir_points_m"], dtype=np.float64)
+    index = walk_index(source.rir_points_distance_m, clip_samples, speech_span(segments),
+                       motion.speed_m_s, rate)[::hop]
+    points = np.asarray(source.rir_points_m, dtype=np.float64)
     at = np.arange(len(points), dtype=np.float64)
     positions = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
     azimuth, elevation, distance = local_directions(positions - np.asarray(mic_m),
-                                                    motion["yaw_deg"], motion["pitch_deg"])
+                                                    motion.yaw_deg, motion.pitch_deg)
     return {"hop_s": hop / rate, "positions_m": np.round(positions, 4).tolist(),
             "azimuth_deg": np.round(azimuth, 2).tolist(),
             "elevation_deg": np.round(elevation, 2).tolist(),
             "distance_m": np.round(distance, 4).tolist()}
 
 
-def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray],
-                 render: dict[str, Any], mix: dict[str, Any], arrange: dict[str, Any],
-                 placement: dict[str, Any], rir: dict[str, Any], rir_arrays: dict[str, Any],
-                 keys: dict[str, str], motion: dict[str, Any]) -> dict[str, Any]:
-    """Write one group's folder; its record for ``dataset``. ``motion``: the walk's speed
-    (``speed_m_s``, None: the walk spans the speech) and the microphone's orientation."""
-    group = render["group"]
+def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
+                 render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
+                 placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
+                 keys: dict[str, str], motion: Motion) -> dict[str, Any]:
+    """Write one group's folder; its record for ``dataset``."""
+    group = render.group
     split, index = group.split("/")
     w = _GroupWriter(out, out / split / index, group, params)
-    outputs = params["outputs"]
-    gains = mix["gains"]
-    tracks = {t["name"]: t for t in render["tracks"]}
-    arranged = {t["name"]: t for t in arrange["tracks"]}
-    rir_sources = {s["name"]: s for s in rir["sources"]}
+    outputs = params.outputs
+    gains = mix.gains
+    tracks = {t.name: t for t in render.tracks}
+    arranged = {t.name: t for t in arrange.tracks}
     metadata: dict[str, Any] = {}
     spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
     for name, track in tracks.items():
-        role = track["role"]
+        role = track.role
         a = arranged[name]
-        signal = gains[name] * np.asarray(arrays[track["arrays"]["reverberant"]],
-                                          dtype=np.float64)
-        geometry = (placement["speech"][int(name[6:]) - 1] if role == "speech"
-                    else placement[name])
-        track_labels = position_track(geometry, arranged[name]["segments"],
-                                      render["clip_samples"], w.rate, motion,
-                                      placement["mic_m"])
-        if (outputs["sources"] and role == "speech") or (outputs["background"]
-                                                         and role != "speech"):
+        rir_source = rir.source(name)
+        signal = gains[name] * np.asarray(arrays[track.arrays["reverberant"]], dtype=np.float64)
+        geometry = placement.source(name)
+        track_labels = position_track(geometry, a.segment_list(), render.clip_samples, w.rate,
+                                      motion, placement.mic_m)
+        if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
             audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
         else:
             audio_rel = None
         for kind in ("dry", "direct", "early"):
             if f"{name}_{kind}" in gains:
                 w.audio(f"{role}_{kind}", f"{name}_{kind}",
-                        gains[f"{name}_{kind}"] * np.asarray(arrays[track["arrays"][kind]],
+                        gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
                                                              dtype=np.float64))
-        if outputs["rirs"]:
-            stack = np.asarray(rir_arrays[rir_sources[name]["array"]])
+        if outputs.rirs:
+            stack = np.asarray(rir_arrays[rir_source.array])
             for j in range(stack.shape[0]):
                 w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
-        segs = a["segments"]
+        segs = a.segments
         entry: dict[str, Any] = {
-            "audio": [a["files"][s["id"]]["path"] for s in segs],
+            "audio": [a.files[s["id"]].path for s in segs],
             "start_end_points": [[s["start"], s["end"]] for s in segs],
             "file": audio_rel,
-            "rir_points_m": geometry["rir_points_m"],
-            "t30_s": rir_sources[name]["t30_s"], "drr_db": rir_sources[name]["drr_db"],
-            "direct_path": rir_sources[name]["direct"],
-            "loudness": mix["components"][name],
+            "rir_points_m": [list(p) for p in geometry.rir_points_m],
+            "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
+            "direct_path": rir_source.direct,
+            "loudness": mix.components[name].model_dump(mode="json"),
             "track": track_labels,
         }
         if role == "speech":
-            entry.update(words=[s["text"] for s in segs], speaker=a["speaker"],
-                         trajectory_m=geometry["path_m"],
-                         path_length_m=geometry.get("path_length_m"))
-            spoken[name] = (a["speaker"], segs)
+            entry.update(words=[s["text"] for s in segs], speaker=a.speaker,
+                         trajectory_m=[list(p) for p in geometry.path_m],
+                         path_length_m=geometry.path_length_m)
+            spoken[name] = (a.speaker, segs)
         else:
-            entry["position_m"] = geometry["rir_points_m"][0]
+            entry["position_m"] = list(geometry.rir_points_m[0])
         metadata[name] = entry
     mixtures = []
-    if outputs["mixtures"]:
-        for m in mix["mixtures"]:
-            total = sum(gains[c] * np.asarray(arrays[tracks[c]["arrays"]["reverberant"]],
-                                              dtype=np.float64) for c in m["components"])
-            rel = w.audio("mixture", f"mixtures/{m['name']}", total)
-            mixtures.append({**m, "file": rel})
+    if outputs.mixtures:
+        for m in mix.mixtures:
+            total = sum(gains[c] * np.asarray(arrays[tracks[c].arrays["reverberant"]],
+                                              dtype=np.float64) for c in m.components)
+            rel = w.audio("mixture", f"mixtures/{m.name}", total)
+            mixtures.append({**m.model_dump(mode="json"), "file": rel})
     metadata.update(
-        group=group, split=split, scene_id=params["scene_id"], mic_m=placement["mic_m"],
-        floor=placement.get("floor_index"), sample_rate_hz=w.rate,
-        num_samples=render["clip_samples"], mixtures=mixtures,
-        group_gain_db=mix["group_gain_db"], keys=keys,
+        group=group, split=split, scene_id=params.scene_id, mic_m=list(placement.mic_m),
+        floor=placement.floor_index, sample_rate_hz=w.rate,
+        num_samples=render.clip_samples, mixtures=mixtures,
+        group_gain_db=mix.group_gain_db, keys=keys,
         microphone_track={"hop_s": TRACK_HOP_S,
-                          "positions_m": [placement["mic_m"]] * len(track_labels["distance_m"])})
-    if outputs["metadata"]:
+                          "positions_m": [list(placement.mic_m)] * len(track_labels["distance_m"])})
+    if outputs.metadata:
         write_json(w.folder / "metadata.json", metadata)
         w.files.append({"kind": "metadata", "name": "metadata",
                         **file_record(out, w.folder / "metadata.json")})
@@ -173,33 +188,33 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             rows.extend(SupervisionEntry(f"{stem}_{k}", rec, seg["start"], seg["end"], w.rate,
                                          seg["text"], speaker).to_lhotse()
                         for k, seg in enumerate(segs))
-    return {"group": group, "split": split, "scene_id": params["scene_id"],
-            "metadata": {"path": f"{split}/{index}/metadata.json" if outputs["metadata"]
+    return {"group": group, "split": split, "scene_id": params.scene_id,
+            "metadata": {"path": f"{split}/{index}/metadata.json" if outputs.metadata
                          else None},
             "files": w.files, "recordings": w.recordings, "supervisions": rows,
-            "duration_s": render["clip_samples"] / w.rate}
+            "duration_s": render.clip_samples / w.rate}
 
 
 def run(ctx: JobContext) -> None:
-    params = ctx.params
+    params: ExportParams = ctx.params
     out = Path(ctx.plan.output_dir)
-    mix = ctx.input_data("mix")[0]["groups"]
+    mix = artifacts.read(ctx, "mix").groups
     render_art = ctx.input("render")
+    render = artifacts.decode("render", render_art.data, ctx.job.label)
     rir_art = ctx.input("rir")
-    arrange_data = ctx.input_data("arrange")[0]
-    placements = ctx.input_data("placement")[0]["groups"]
+    rir = artifacts.decode("rir", rir_art.data, ctx.job.label)
+    arrange = artifacts.read(ctx, "arrange").groups
+    placements = artifacts.read(ctx, "placement").groups
     keys = {step: ctx.input_keys(step)[0]
             for step in ("placement", "arrange", "rir", "render", "mix")}
-    jobs = ctx.plan.by_key()
-    microphone = jobs[keys["rir"]].params["microphone"]
-    motion = {"speed_m_s": jobs[keys["render"]].params["speed_m_s"],
-              "yaw_deg": microphone["yaw_deg"], "pitch_deg": microphone["pitch_deg"]}
+    microphone = ctx.input_params("rir").microphone
+    motion = Motion(ctx.input_params("render").speed_m_s, microphone.yaw_deg,
+                    microphone.pitch_deg)
     groups = []
-    for render, m, arr, placement, rir in zip(render_art.data["groups"], mix,
-                                              arrange_data["groups"], placements,
-                                              rir_art.data["groups"], strict=True):
-        groups.append(export_group(out, params, render_art.arrays, render, m, arr, placement,
-                                   rir, rir_art.arrays, {**keys, "export": ctx.job.key},
+    for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
+                                               rir.groups, strict=True):
+        groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
+                                   rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
                                    motion))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})

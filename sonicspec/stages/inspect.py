@@ -16,11 +16,12 @@ from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
 from sonicspec.hashing import rng_for
 from sonicspec.plan.compile import FileDigests, expand_scenes, scene_jobs
+from sonicspec.plan.params import PlacementParams, read_params
 from sonicspec.spec.load import LoadedSpec, did_you_mean
-from sonicspec.stages.mesh import build_scene_mesh
 from sonicspec.stages.navigation import settings_from as nav_settings
 from sonicspec.stages.placement import place_group
 from sonicspec.stages.placement import settings_from as placement_settings
+from sonicspec.stages.scenes import build_scene_mesh
 
 
 def scene_ids(loaded: LoadedSpec) -> list[str]:
@@ -40,7 +41,8 @@ def build_scene(loaded: LoadedSpec, scene_id: str):
     ((_, mesh_job, nav_job),) = scene_jobs(spec, chosen, base, FileDigests())
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SonicspecWarning)
-        mesh, report = build_scene_mesh(dict(mesh_job.params), dict(mesh_job.paths),
+        mesh, report = build_scene_mesh(read_params("mesh", mesh_job.params, mesh_job.label),
+                                        dict(mesh_job.paths),
                                         rng_for(spec.seed, "mesh", mesh_job.key))
     return mesh, report, mesh_job, nav_job, [str(w.message) for w in caught]
 
@@ -51,19 +53,17 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
 
     spec = loaded.spec
     mesh, report, _, nav_job, caught = build_scene(loaded, scene_id)
-    nav = build_navigation(mesh, nav_settings(dict(nav_job.params)))
+    nav = build_navigation(mesh, nav_settings(read_params("navigation", nav_job.params)))
     areas = mesh.face_areas
     by_material: dict[str, float] = {}
     for index, name in enumerate(mesh.materials):
         by_material[name] = float(areas[mesh.face_material == index].sum())
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    params = {
-        "scene_id": scene_id, "placement": spec.placement.model_dump(mode="json"),
-        "trajectory": spec.trajectory.model_dump(mode="json"),
-        "microphone": spec.microphone.model_dump(mode="json"),
-        "speakers": spec.mixture.speakers, "noise": spec.corpora.noise is not None,
-        "music": spec.corpora.music is not None,
-    }
+    params = PlacementParams(
+        groups=("inspect",), split="inspect", seed=spec.seed, scene_id=scene_id,
+        placement=spec.placement, trajectory=spec.trajectory, microphone=spec.microphone,
+        speakers=spec.mixture.speakers, noise=spec.corpora.noise is not None,
+        music=spec.corpora.music is not None)
     placement: dict[str, Any] | None = None
     placement_error = None
     try:

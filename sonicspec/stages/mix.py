@@ -19,6 +19,9 @@ import numpy as np
 
 from sonicspec.audio.mix import gain_to_loudness, integrated_loudness, peak_guard, task_mixtures
 from sonicspec.errors import AudioError
+from sonicspec.plan.params import MixParams
+from sonicspec.stages import artifacts
+from sonicspec.stages.artifacts import ComponentLevel, MixData, MixGroup, Mixture, RenderGroup
 from sonicspec.stages.context import JobContext
 
 
@@ -27,66 +30,69 @@ def _db(gain: float) -> float | None:
     return 20.0 * math.log10(gain) if gain > 0 else None
 
 
-def mix_group(render_group: dict[str, Any], arrays: dict[str, np.ndarray],
-              params: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
-    """Gains, loudness and mixtures of one group as JSON data."""
-    loud = params["loudness"]
-    rate = params["sample_rate_hz"]
-    group = render_group["group"]
+def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: MixParams,
+              rng: np.random.Generator) -> MixGroup:
+    """Gains, loudness and mixtures of one group."""
+    loud = params.loudness
+    targets = {"speech": loud.speech_lufs, "noise": loud.noise_lufs, "music": loud.music_lufs}
+    limit = 10.0 ** (loud.peak_limit_dbfs / 20.0)
+    rate = params.sample_rate_hz
+    group = render_group.group
     signals: dict[str, np.ndarray] = {}
     gains: dict[str, float] = {}
     dry_gains: dict[str, float] = {}
     report: dict[str, dict[str, Any]] = {}
-    for track in render_group["tracks"]:
-        name, role = track["name"], track["role"]
-        base = loud[f"{role}_lufs"]
-        jitter = loud["jitter_lu"]
-        target = base + (rng.uniform(-jitter, jitter) if jitter > 0 else 0.0)
-        reverberant = np.asarray(arrays[track["arrays"]["reverberant"]], dtype=np.float64)
-        dry = np.asarray(arrays[track["arrays"]["dry"]], dtype=np.float64)
+    for track in render_group.tracks:
+        name, role = track.name, track.role
+        jitter = loud.jitter_lu
+        target = targets[role] + (rng.uniform(-jitter, jitter) if jitter > 0 else 0.0)
+        reverberant = np.asarray(arrays[track.arrays["reverberant"]], dtype=np.float64)
+        dry = np.asarray(arrays[track.arrays["dry"]], dtype=np.float64)
         where = f"group {group} {name}"
-        measured_on = dry if loud["stage"] == "dry" else reverberant
+        measured_on = dry if loud.stage == "dry" else reverberant
         gain, measured = gain_to_loudness(measured_on, rate, target, where=where,
-                                          binaural=params["binaural"] and measured_on.shape[0] == 2)
+                                          binaural=params.binaural and measured_on.shape[0] == 2)
         signals[name], gains[name] = reverberant, gain
         for kind in ("direct", "early"):
-            if kind in track["arrays"]:
-                signals[f"{name}_{kind}"] = np.asarray(arrays[track["arrays"][kind]])
+            if kind in track.arrays:
+                signals[f"{name}_{kind}"] = np.asarray(arrays[track.arrays[kind]])
                 gains[f"{name}_{kind}"] = gain
-        if "dry" in params["targets"]:
+        if "dry" in params.targets:
             # The dry target has its own level and its own guard: its peaks (no room to
             # smooth them) must not pull the whole group down.
             dry_gain, _ = gain_to_loudness(dry, rate, target, where=f"{where} (dry target)")
-            limit = 10.0 ** (loud["peak_limit_dbfs"] / 20.0)
             dry_gain = min(dry_gain, limit / float(np.max(np.abs(dry))))
             dry_gains[f"{name}_dry"] = dry_gain
         report[name] = {"role": role, "target_lufs": target, "measured_lufs": measured,
-                        "measured_on": loud["stage"]}
-    speakers = [t["name"] for t in render_group["tracks"] if t["role"] == "speech"]
-    available = [t["name"] for t in render_group["tracks"] if t["role"] != "speech"]
+                        "measured_on": loud.stage}
+    speakers = [t.name for t in render_group.tracks if t.role == "speech"]
+    available = [t.name for t in render_group.tracks if t.role != "speech"]
     try:
-        mixtures = task_mixtures(params["tasks"], speakers, available, where="mixture.tasks")
+        mixtures = task_mixtures([t.model_dump(mode="json") for t in params.tasks], speakers,
+                                 available, where="mixture.tasks")
     except AudioError as err:
         raise AudioError(f"{err} (a group's tracks: mixture.speakers speakers, and noise or "
                          "music from corpora.<role> with a non-zero mixture.<role>_clips)"
                          ) from None
-    group_gain, peak = peak_guard(signals, gains, mixtures, loud["peak_limit_dbfs"])
+    group_gain, peak = peak_guard(signals, gains, mixtures, loud.peak_limit_dbfs)
     final = {k: g * group_gain for k, g in gains.items()} | dry_gains
     for name, entry in report.items():
         entry["gain_db"] = _db(final[name])
         entry["output_lufs"] = integrated_loudness(
             final[name] * (signals[name]), rate, where=f"group {group} {name}",
-            binaural=params["binaural"] and signals[name].shape[0] == 2)
-    return {"group": group, "gains": final, "group_gain_db": _db(group_gain),
-            "peak_before_guard_dbfs": _db(peak), "components": report,
-            "mixtures": [m.to_dict() for m in mixtures]}
+            binaural=params.binaural and signals[name].shape[0] == 2)
+    return MixGroup(group=group, gains=final, group_gain_db=_db(group_gain),
+                    peak_before_guard_dbfs=_db(peak),
+                    components={k: ComponentLevel(**v) for k, v in report.items()},
+                    mixtures=[Mixture(**m.to_dict()) for m in mixtures])
 
 
 def run(ctx: JobContext) -> None:
+    params: MixParams = ctx.params
     art = ctx.input("render")
-    groups = [mix_group(g, art.arrays, ctx.params, ctx.rng("mix", g["group"]))
-              for g in art.data["groups"]]
-    names = sorted({k for g in groups for k in g["gains"]})
-    table = np.array([[g["gains"].get(k, np.nan) for k in names] for g in groups])
-    ctx.write({"gains": table}, {"groups": groups, "gain_columns": names,
-                                 "sample_rate_hz": ctx.params["sample_rate_hz"]})
+    render = artifacts.decode("render", art.data, ctx.job.label)
+    groups = [mix_group(g, art.arrays, params, ctx.rng("mix", g.group)) for g in render.groups]
+    names = sorted({k for g in groups for k in g.gains})
+    table = np.array([[g.gains.get(k, np.nan) for k in names] for g in groups])
+    ctx.write({"gains": table}, artifacts.encode("mix", MixData(
+        groups=groups, gain_columns=names, sample_rate_hz=params.sample_rate_hz)))

@@ -130,7 +130,8 @@ def _meshes(spec: DatasetSpec, base: Path, missing: set[tuple]) -> list[Problem]
     from sonicspec.errors import CompileError
     from sonicspec.geometry.io import load_mesh
     from sonicspec.plan.compile import FileDigests, SceneEntry, scene_jobs
-    from sonicspec.stages.mesh import load_scan
+    from sonicspec.plan.params import read_params
+    from sonicspec.stages.scenes import load_scan
 
     out: list[Problem] = []
     for i, scene in enumerate(spec.scenes):
@@ -153,10 +154,10 @@ def _meshes(spec: DatasetSpec, base: Path, missing: set[tuple]) -> list[Problem]
             except CompileError as exc:
                 out.append(_err(where, str(exc).removeprefix(f"scenes[{i}]: ")))
                 continue
+            params = read_params("mesh", job.params, job.label)
             out += _read(where, str(file),
-                         lambda job=job: load_scan(
-                             job.params["scene"], dict(job.paths),
-                             obj_labels=job.params.get("obj_labels", False)))
+                         lambda params=params, job=job: load_scan(
+                             params.scene, dict(job.paths), obj_labels=params.obj_labels))
     return out
 
 

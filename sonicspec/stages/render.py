@@ -1,27 +1,45 @@
 """Stage ``render``: every track of every group through its RIRs at the microphone.
 
 A track's dry signal is assembled from its clips (resampled to the dataset rate), then
-rendered through the RIRs along its source's path (:func:`sonicspec.audio.render.render_moving`
-with the spec's interpolation). A speech source walks its path while its utterances play (the
-speed is set so the path spans them, as in the recipe, unless the trajectory gives one); noise
-and music are static. The output is cut to the clip: ``(channels, clip samples)`` float32.
+rendered along its source's path. A speech source walks its path while its utterances play
+(the speed is set so the path spans them, as in the recipe, unless the trajectory gives one);
+noise and music are static. The output is cut to the clip: ``(channels, clip samples)``
+float32.
+
+``interpolation: paths``: the direct sound and every image-source path are rendered as
+time-varying delays from the source's position at each emission
+(:func:`sonicspec.acoustics.moving.render_paths`), and the late part of the RIRs (the RIRs less
+those paths) is crossfaded between RIR points. Otherwise the whole RIRs are blended
+(:func:`sonicspec.audio.render.render_moving` with the spec's interpolation).
 
 Optional training targets, rendered with the same path: ``direct`` (each RIR cut just after
-its direct sound) and ``early`` (cut 50 ms after it). The dry track is always stored (mono,
-small): the mixer may normalise on it, and the ``dry`` target exports it.
+its direct sound; with ``paths``, the direct path alone) and ``early`` (cut 50 ms after it;
+with ``paths``, the paths arriving within 50 ms of the direct sound and the late part's first
+50 ms). The dry track is always stored (mono, small): the mixer may normalise on it, and the
+``dry`` target exports it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.moving import PathSet, render_paths
 from sonicspec.audio.arrange import Segment, assemble, speech_span
 from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import render_moving, split_rir, walk_index
 from sonicspec.errors import StageError
+from sonicspec.plan.params import RenderParams
+from sonicspec.stages import artifacts
+from sonicspec.stages.artifacts import (
+    ArrangedTrack,
+    RenderData,
+    RenderedTrack,
+    RenderGroup,
+    SourcePlacement,
+)
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
 
@@ -41,13 +59,7 @@ class _AudioCache:
         return x[:length] if x.size >= length else np.pad(x, (0, length - x.size))
 
 
-def _source_geometry(placement: dict[str, Any], name: str) -> dict[str, Any]:
-    if name.startswith("source"):
-        return placement["speech"][int(name[len("source"):]) - 1]
-    return placement[name]
-
-
-def track_audio(track: dict[str, Any], segments: list[Segment], cache: _AudioCache,
+def track_audio(track: ArrangedTrack, segments: list[Segment], cache: _AudioCache,
                 corpus_root: Path) -> dict[str, np.ndarray]:
     """Each clip of a track, once, as long as its longest use needs.
 
@@ -57,72 +69,111 @@ def track_audio(track: dict[str, Any], segments: list[Segment], cache: _AudioCac
     need: dict[str, int] = {}
     for seg in segments:
         need[seg.id] = max(need.get(seg.id, 0), seg.offset + seg.end - seg.start)
-    return {sid: cache.clip(str(corpus_root / track["files"][sid]["path"]), n)
+    return {sid: cache.clip(str(corpus_root / track.files[sid].path), n)
             for sid, n in need.items()}
 
 
-def render_track(track: dict[str, Any], rirs: np.ndarray, source: dict[str, Any],
-                 mic_m: np.ndarray, params: dict[str, Any], cache: _AudioCache,
-                 clip_samples: int, corpus_root: Path) -> dict[str, np.ndarray]:
-    """``{"reverberant", "dry", and any targets}`` arrays of one track."""
-    rate = params["sample_rate_hz"]
-    segments = [Segment.from_dict(s) for s in track["segments"]]
+def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement,
+                 mic_m: np.ndarray, params: RenderParams, cache: _AudioCache,
+                 clip_samples: int, corpus_root: Path,
+                 paths: tuple[PathSet, np.ndarray, OctaveFilterBank] | None = None
+                 ) -> dict[str, np.ndarray]:
+    """``{"reverberant", "dry", and any targets}`` arrays of one track. ``paths``: the
+    source's exact early paths, its late RIRs and their bands (``interpolation: paths``)."""
+    rate = params.sample_rate_hz
+    segments = track.segment_list()
     dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
-    points = np.asarray(source["rir_points_m"], dtype=np.float64)
+    points = np.asarray(source.rir_points_m, dtype=np.float64)
     if len(points) != rirs.shape[0]:
-        raise StageError(f"track {track['name']}: {len(points)} RIR points in the placement but "
+        raise StageError(f"track {track.name}: {len(points)} RIR points in the placement but "
                          f"{rirs.shape[0]} RIRs")
-    position = walk_index(source["rir_points_distance_m"], clip_samples, speech_span(segments),
-                          params["speed_m_s"], rate)
-    method = params["interpolation"]
-    out = {"dry": dry[None, :].astype(np.float32),
-           "reverberant": render_moving(dry, rirs, position, method)[:, :clip_samples]
-           .astype(np.float32)}
-    wanted = [t for t in ("direct", "early") if t in params["targets"]]
-    if wanted:
-        distance = np.linalg.norm(points - mic_m[None, :], axis=1)
-        delays = distance / params["speed_of_sound_m_s"] * rate
-        direct, early = split_rir(rirs, delays, rate)
-        for name, h in (("direct", direct), ("early", early)):
-            if name in wanted:
-                out[name] = render_moving(dry, h, position, method)[:, :clip_samples].astype(
-                    np.float32)
-    return out
+    position = walk_index(source.rir_points_distance_m, clip_samples, speech_span(segments),
+                          params.speed_m_s, rate)
+    wanted = [t for t in ("direct", "early") if t in params.targets]
+    distance = np.linalg.norm(points - mic_m[None, :], axis=1)
+    delays = distance / params.speed_of_sound_m_s * rate
+    out = {"dry": dry[None, :].astype(np.float32)}
+    if paths is None:
+        method = params.interpolation
+        out["reverberant"] = render_moving(dry, rirs, position, method)[:, :clip_samples]
+        if wanted:
+            direct, early = split_rir(rirs, delays, rate)
+            for name, h in (("direct", direct), ("early", early)):
+                if name in wanted:
+                    out[name] = render_moving(dry, h, position, method)[:, :clip_samples]
+    else:
+        found, late, bank = paths
+
+        def heard(subset: PathSet) -> np.ndarray:
+            return render_paths(dry, position, points, subset, bank, n_out=clip_samples,
+                                speed_of_sound_m_s=params.speed_of_sound_m_s)[None, :]
+
+        tail = render_moving(dry, late, position, "sample_crossfade")[:, :clip_samples]
+        out["reverberant"] = heard(found) + tail
+        if "direct" in wanted:
+            out["direct"] = heard(found.select(found.order == 0))
+        if "early" in wanted:  # paths within 50 ms of the direct sound, and the tail's start
+            _, early_tail = split_rir(late, delays, rate)
+            out["early"] = (heard(_within(found, points, delays / rate, EARLY_MS / 1000.0,
+                                          params.speed_of_sound_m_s))
+                            + render_moving(dry, early_tail, position,
+                                            "sample_crossfade")[:, :clip_samples])
+    return {k: v.astype(np.float32) for k, v in out.items()}
+
+
+EARLY_MS = 50.0
+"""The ``early`` target: what arrives within this long after the direct sound."""
+
+
+def _within(paths: PathSet, points: np.ndarray, direct_s: np.ndarray, window_s: float,
+            speed_of_sound_m_s: float) -> PathSet:
+    """``paths`` kept only at the points where they arrive within ``window_s`` of the direct
+    sound (a path that crosses the limit between two points fades there)."""
+    length = np.linalg.norm(points[None, :, :] - paths.images_m[:, None, :], axis=2)
+    inside = (length / speed_of_sound_m_s - direct_s[None, :]) <= window_s
+    return PathSet(paths.images_m, paths.weights * inside[:, :, None], paths.order)
 
 
 def run(ctx: JobContext) -> None:
-    params = ctx.params
-    arrange = ctx.input_data("arrange")[0]["groups"]
-    placements = ctx.input_data("placement")[0]["groups"]
+    params: RenderParams = ctx.params
+    arrange = artifacts.read(ctx, "arrange").groups
+    placements = artifacts.read(ctx, "placement").groups
     rir_art = ctx.input("rir")
-    cache = _AudioCache(params["sample_rate_hz"])
+    rir = artifacts.decode("rir", rir_art.data, ctx.job.label)
+    cache = _AudioCache(params.sample_rate_hz)
     roots = corpus_roots(ctx)
+    bank = OctaveFilterBank(rir.sample_rate_hz, tuple(rir.bands_hz))
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
-            zip(arrange, placements, rir_art.data["groups"], strict=True)):
-        if not arr["group"] == placement["group"] == rir_group["group"]:
+            zip(arrange, placements, rir.groups, strict=True)):
+        if not arr.group == placement.group == rir_group.group:
             raise StageError(f"{ctx.job.label}: inputs disagree on group order "
-                             f"({arr['group']}, {placement['group']}, {rir_group['group']})")
-        rir_by_name = {s["name"]: s for s in rir_group["sources"]}
-        mic = np.asarray(placement["mic_m"], dtype=np.float64)
+                             f"({arr.group}, {placement.group}, {rir_group.group})")
+        mic = np.asarray(placement.mic_m, dtype=np.float64)
         tracks = []
-        for n, track in enumerate(arr["tracks"]):
-            ctx.progress(f"group {g + 1}/{len(arrange)}, track {n + 1}/{len(arr['tracks'])}")
-            name = track["name"]
-            if name not in rir_by_name:
-                raise StageError(f"{ctx.job.label}: group {arr['group']} has no RIRs for "
-                                 f"track {name}")
-            rirs = np.asarray(rir_art.arrays[rir_by_name[name]["array"]], dtype=np.float64)
-            signals = render_track(track, rirs, _source_geometry(placement, name), mic, params,
-                                   cache, arr["clip_samples"], roots[track["role"]])
+        for n, track in enumerate(arr.tracks):
+            ctx.progress(f"group {g + 1}/{len(arrange)}, track {n + 1}/{len(arr.tracks)}")
+            entry = rir_group.source(track.name)
+            rirs = np.asarray(rir_art.arrays[entry.array], dtype=np.float64)
+            paths = None
+            if params.interpolation == "paths":
+                if entry.paths is None:
+                    raise StageError(f"{ctx.job.label}: interpolation 'paths' but the RIRs of "
+                                     f"group {arr.group} {track.name} hold no early paths")
+                paths = (artifacts.read_path_set(rir_art.arrays, entry.paths),
+                         np.asarray(rir_art.arrays[f"{entry.paths}_late"], dtype=np.float64),
+                         bank)
+            signals = render_track(track, rirs, placement.source(track.name), mic, params,
+                                   cache, arr.clip_samples, roots[track.role], paths)
             keys = {}
             for kind, x in signals.items():
-                key = f"g{g}_{name}_{kind}"
+                key = f"g{g}_{track.name}_{kind}"
                 arrays[key] = x
                 keys[kind] = key
-            tracks.append({"name": name, "role": track["role"], "arrays": keys,
-                           "channels": int(signals["reverberant"].shape[0])})
-        groups.append({"group": arr["group"], "clip_samples": arr["clip_samples"],
-                       "tracks": tracks})
-    ctx.write(arrays, {"groups": groups, "sample_rate_hz": params["sample_rate_hz"]})
+            tracks.append(RenderedTrack(name=track.name, role=track.role, arrays=keys,
+                                        channels=int(signals["reverberant"].shape[0])))
+        groups.append(RenderGroup(group=arr.group, clip_samples=arr.clip_samples,
+                                  tracks=tracks))
+    ctx.write(arrays, artifacts.encode("render", RenderData(
+        groups=groups, sample_rate_hz=params.sample_rate_hz)))

@@ -17,17 +17,30 @@ from sonicspec.acoustics.engine import (
     acoustic_scene,
     check_inside,
     check_receiver,
+    early_part,
     load_hrirs,
     rir_results,
     simulate_rirs,
 )
 from sonicspec.acoustics.image_sources import planar_regions
+from sonicspec.acoustics.moving import PathSet
 from sonicspec.geometry.materials import material_library
+from sonicspec.plan.params import MaterialTable, RirParams
+from sonicspec.spec.materials import MaterialsSpec
+from sonicspec.spec.microphone import SofaHrtfSpec
+from sonicspec.stages import artifacts
+from sonicspec.stages.artifacts import (
+    GroupPlacement,
+    RirData,
+    RirGroup,
+    RirSource,
+    speech_track_name,
+)
 
 
-def spec_materials(materials: dict[str, Any]):
-    """The material library of a spec's ``materials`` section (dumped), custom ones added."""
-    return material_library(materials["library"], materials.get("custom", {}))
+def spec_materials(materials: MaterialsSpec | MaterialTable):
+    """The material library of a spec's ``materials`` section, custom ones added."""
+    return material_library(materials.library, materials.model_dump(mode="json")["custom"])
 
 
 def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
@@ -37,16 +50,14 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
 
     spec = loaded.spec
     microphone = spec.microphone.model_dump(mode="json")
-    hrirs = None
-    if microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa":
-        hrirs = load_hrirs(loaded.base_dir / microphone["hrtf"]["path"])
+    hrtf = getattr(spec.microphone, "hrtf", None)
+    hrirs = load_hrirs(loaded.base_dir / hrtf.path) if isinstance(hrtf, SofaHrtfSpec) else None
     check_receiver(microphone, hrirs)
     mesh, _, mesh_job, _, warnings = build_scene(loaded, scene_id)
     check_inside(mesh.vertices, f"scene {scene_id!r}", **{"--source": source_m, "--mic": mic_m})
     settings = SimulationSettings.from_spec(spec.acoustics.model_dump(mode="json"),
                                             spec.sample_rate_hz, spec.speed_of_sound_m_s)
-    scene = acoustic_scene(mesh, spec_materials(spec.materials.model_dump(mode="json")),
-                           settings)
+    scene = acoustic_scene(mesh, spec_materials(spec.materials), settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
     (result,) = rir_results(scene, np.asarray(mic_m), np.asarray([source_m]), settings, rng,
                             microphone=microphone, hrirs=hrirs)
@@ -103,45 +114,46 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _source_points(placement: dict[str, Any]) -> list[tuple[str, np.ndarray]]:
-    """(name, RIR points) of every source of a group: speech1..N, then noise and music."""
-    out = [(f"source{k + 1}", np.asarray(s["rir_points_m"], dtype=np.float64))
-           for k, s in enumerate(placement["speech"])]
+def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
+    """(track name, RIR points) of every source of a group: speech, then noise and music."""
+    out = [(speech_track_name(k), np.asarray(s.rir_points_m, dtype=np.float64))
+           for k, s in enumerate(placement.speech)]
     for kind in ("noise", "music"):
-        if placement.get(kind) is not None:
-            out.append((kind, np.asarray(placement[kind]["rir_points_m"], dtype=np.float64)))
+        source = getattr(placement, kind)
+        if source is not None:
+            out.append((kind, np.asarray(source.rir_points_m, dtype=np.float64)))
     return out
 
 
 def run(ctx) -> None:
     """Stage ``rir``: every source's RIRs along its path, for every group of a shard."""
     from sonicspec.acoustics.metrics import room_acoustic_figures
-    from sonicspec.stages.mesh import load_scene_mesh
 
-    params = ctx.params
+    params: RirParams = ctx.params
+    microphone = params.microphone.model_dump(mode="json")
     hrirs = load_hrirs(ctx.job.paths["hrtf"]) if "hrtf" in ctx.job.paths else None
-    check_receiver(params["microphone"], hrirs)
+    check_receiver(microphone, hrirs)
     mesh_art = ctx.input("mesh")
-    mesh = load_scene_mesh(mesh_art.arrays, mesh_art.data)
-    settings = SimulationSettings.from_spec(params["acoustics"], params["sample_rate_hz"],
-                                            params["speed_of_sound_m_s"])
-    scene = acoustic_scene(mesh, spec_materials(dict(params["materials"])), settings)
+    mesh = artifacts.read_mesh(mesh_art.arrays, mesh_art.data)
+    settings = SimulationSettings.from_spec(params.acoustics.model_dump(mode="json"),
+                                            params.sample_rate_hz, params.speed_of_sound_m_s)
+    scene = acoustic_scene(mesh, spec_materials(params.materials), settings)
     regions = planar_regions(scene)
-    placements = ctx.input_data("placement")[0]["groups"]
+    placements = artifacts.read(ctx, "placement").groups
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, placement in enumerate(placements):
         sources = _source_points(placement)
         points = np.concatenate([p for _, p in sources])
-        rng = ctx.rng("rir", ctx.job.key, placement["group"])
+        rng = ctx.rng("rir", ctx.job.key, placement.group)
 
         def progress(done: int, total: int, g: int = g, n: int = len(points)) -> None:
             ctx.progress(f"group {g + 1}/{len(placements)}: {n} points, "
                          f"{done:,}/{total:,} rays")
 
-        rirs, facts = simulate_rirs(scene, np.asarray(placement["mic_m"]), points, settings,
-                                    rng, regions, params["microphone"], hrirs,
-                                    progress=progress)
+        rirs, facts = simulate_rirs(scene, np.asarray(placement.mic_m), points, settings,
+                                    rng, regions, microphone, hrirs, progress=progress,
+                                    keep_arrivals=params.early_paths)
         entries, start = [], 0
         for s, (name, pts) in enumerate(sources):
             block = rirs[start:start + len(pts)]
@@ -151,13 +163,29 @@ def run(ctx) -> None:
                 stack[i, :, :r.shape[-1]] = r
             key = f"g{g}_s{s}"
             arrays[key] = stack
+            paths = None
+            if params.early_paths:
+                paths = f"{key}_paths"
+                early = [f["early_arrivals"] for f in facts[start:start + len(pts)]]
+                arrays.update(artifacts.path_set_arrays(paths, PathSet.identify(pts, early)))
+                late = stack.astype(np.float64)
+                for i, a in enumerate(early):  # each as long as its own RIR was made
+                    n = block[i].shape[-1]
+                    late[i, 0, :n] -= early_part(a, settings, n)
+                arrays[f"{paths}_late"] = late.astype(np.float32)
             first = room_acoustic_figures(block[0][0], settings.sample_rate_hz,
-                                          settings.bands_hz).to_dict()  # NaN -> None
-            entries.append({"name": name, "array": key, "points": len(pts),
-                            "t30_s": first["broadband"]["t30_s"], "drr_db": first["drr_db"],
-                            "direct": facts[start]["direct"],
-                            "escaped_ray_fraction": facts[start]["escaped_ray_fraction"]})
+                                          settings.bands_hz)
+            entries.append(RirSource(
+                name=name, array=key, points=len(pts),
+                t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
+                direct=facts[start]["direct"],
+                escaped_ray_fraction=facts[start]["escaped_ray_fraction"], paths=paths))
             start += len(pts)
-        groups.append({"group": placement["group"], "sources": entries})
-    ctx.write(arrays, {"groups": groups, "bands_hz": list(settings.bands_hz),
-                       "sample_rate_hz": settings.sample_rate_hz})
+        groups.append(RirGroup(group=placement.group, sources=entries))
+    ctx.write(arrays, artifacts.encode("rir", RirData(
+        groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
+
+
+def _finite(value: float) -> float | None:
+    """JSON has no NaN: a figure that could not be fitted is None."""
+    return None if value is None or not np.isfinite(value) else float(value)

@@ -28,6 +28,7 @@ from sonicspec.export.checksums import (
     unlisted_files,
 )
 from sonicspec.plan.model import STEPS, Job, Plan, Step
+from sonicspec.plan.params import read_params
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
@@ -261,10 +262,10 @@ def _job_progress(plan: Plan, waiting: list[Job]) -> str:
 
 def _hours(plan: Plan) -> tuple[int, float]:
     """Groups in the plan and the hours of audio they last (one track's length each)."""
-    arranged = [j for j in plan.jobs if j.step == "arrange"]
-    groups = sum(len(j.params["groups"]) for j in arranged)
-    seconds = sum(len(j.params["groups"]) * float(j.params["mixture"]["duration_s"])
-                  for j in arranged)
+    arranged = [read_params("arrange", j.params, j.label) for j in plan.jobs
+                if j.step == "arrange"]
+    groups = sum(len(p.groups) for p in arranged)
+    seconds = sum(len(p.groups) * p.mixture.duration_s for p in arranged)
     return groups, seconds / 3600.0
 
 
