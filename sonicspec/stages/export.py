@@ -129,6 +129,7 @@ def export_group(out: Path, params: dict[str, Any], arrays: dict[str, np.ndarray
             "rir_points_m": geometry["rir_points_m"],
             "t30_s": rir_sources[name]["t30_s"], "drr_db": rir_sources[name]["drr_db"],
             "direct_path": rir_sources[name]["direct"],
+            "rir_tail": rir_sources[name]["tail"],
             "loudness": mix["components"][name],
             "track": track_labels,
         }
