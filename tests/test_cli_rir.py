@@ -167,12 +167,21 @@ def test_a_mesh_file_without_a_spec(tmp_path: Path, capsys) -> None:
                                      "carpet_on_concrete": pytest.approx(70.0)}
     assert facts["direct"] == "visible" and facts["channels"] == 1
     rir, rate = sf.read(wav, dtype="float32")
-    assert rate == 16000 and len(rir) == facts["samples"] == 2 * 16000
+    assert rate == 16000 and len(rir) == facts["samples"]
+    # max_rir_length_s: auto: the RIR ends where every band's decay is 60 dB down (plus the
+    # band filters' ringing), no band cut by the cap.
+    tail = facts["tail"]
+    assert tail["rule"] == "auto" and tail["limit_field"] == "max_rir_cap_s"
+    assert None not in tail["decay_60db_s"] and set(tail["level_at_limit_db"]) == {None}
+    assert tail["decay_end_s"] == max(tail["decay_60db_s"])
+    assert 0 < facts["samples"] / 16000 - tail["decay_end_s"] < 0.1
     # The same seed, the same bytes; the text report names the materials.
     code, out, _ = run(capsys, *args, "--rays", "2000", "--seed", "3", "-o",
                        str(tmp_path / "again.wav"))
     assert np.array_equal(sf.read(tmp_path / "again.wav", dtype="float32")[0], rir)
     assert "RIR in room.obj:" in out
+    assert (f"length: {len(rir) / 16000:.3f} s (max_rir_length_s: auto, every band's decay "
+            "60 dB down, at most 10 s)") in out
     assert "materials: gypsum_board 172.0 m² (71 %), carpet_on_concrete 70.0 m² (29 %)" in out
 
 

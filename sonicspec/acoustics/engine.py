@@ -290,8 +290,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     Warns
     -----
     SonicspecWarning
-        Once per call when the longest RIR allowed cut a band's decay before it was 60 dB
-        below its early level (:func:`late_envelope`), naming ``where`` and the bands.
+        Once per call when ``max_rir_cap_s`` (with ``max_rir_length_s: auto``) cut a band's
+        decay before it was 60 dB below its early level (:func:`late_envelope`), naming
+        ``where`` and the bands.
 
     Raises
     ------
@@ -352,9 +353,11 @@ def late_envelope(histogram: EnergyHistogram, settings: SimulationSettings
 
 
 def warn_cut_tails(reports: list[TailReport], where: str) -> None:
-    """One :class:`SonicspecWarning` for the RIRs of a call whose decay the longest RIR
-    allowed cut short: the scene, the bands (of the worst position) and the field to raise."""
-    cut = [r for r in reports if r.cut_bands_hz]
+    """One :class:`SonicspecWarning` for the RIRs of a call whose decay ``max_rir_cap_s``
+    cut short (``max_rir_length_s: auto``): the scene, the bands and levels (of the worst
+    position) and the field to raise. A number of seconds is taken as asked: a decay it cuts
+    is reported in the RIR facts (``tail.level_at_limit_db``), without a warning."""
+    cut = [r for r in reports if r.cut_bands_hz and r.rule == "auto"]
     if not cut:
         return
     worst = max(cut, key=lambda r: max(d.level_at_end_db for d in r.decays

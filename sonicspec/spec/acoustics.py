@@ -32,8 +32,9 @@ class AcousticsSpec(SpecModel):
         "band's late decay (its Schroeder curve) is 60 dB below its early level; 'auto' "
         "traces rays up to max_rir_cap_s, a number up to that many seconds (at most 20). "
         "Where the rays run out before 60 dB (Russian roulette, few rays) the late envelope "
-        "goes on with the decay fitted to its last 20 dB; where the limit cuts a decay "
-        "short, a warning names the scene and the band. The RIR facts (sonicspec rir "
+        "goes on with the decay fitted to its last 20 dB. Where max_rir_cap_s cuts a "
+        "decay short a warning names the scene and the band; a number is taken as asked "
+        "(the facts report the cut). The RIR facts (sonicspec rir "
         "--json, RirResult.tail, the dataset metadata) give the length and how it was "
         "chosen.",
     )
@@ -43,7 +44,7 @@ class AcousticsSpec(SpecModel):
         le=60.0,
         description="Longest RIR with max_rir_length_s: auto, seconds (at most 60). The "
         "tracer follows rays this long and keeps a histogram this long per trajectory point "
-        "(8 bytes x bands per millisecond), so the cap bounds time and memory; a live room "
+        "(8 bytes per band and histogram bin), so the cap bounds time and memory; a live room "
         "whose decay needs longer is cut here with a warning naming the scene and the band. "
         "10 s holds a hall with a 9 s reverberation time.",
     )
