@@ -269,3 +269,28 @@ def test_a_mesh_rir_for_any_receiver_the_spec_knows(tmp_path: Path, capsys) -> N
     code, _, err = run(capsys, "rir", str(tmp_path / "x.yaml"), "--source", "1", "1", "1",
                        "--mic", "2", "2", "2", "--microphone", "{kind: mono}")
     assert code == 2 and "--microphone: expected --mesh FILE with it, got a SPEC" in err
+
+
+def test_a_cap_below_the_decay_warns_naming_the_scene_and_the_band(spec: Path,
+                                                                   capsys) -> None:
+    """Issue 19: `max_rir_length_s: auto` with `max_rir_cap_s` below a live room's decay
+    (α 0.03: T60 about 4 s; cap 0.5 s) cuts it and says so on stderr and in the facts,
+    naming the scene, the field and each band with the level it reached."""
+    live = spec.with_name("live.yaml")
+    live.write_text(SPEC.replace("absorption: 0.2", "absorption: 0.03").replace(
+        "max_rir_length_s: 1.2}", "max_rir_length_s: auto, max_rir_cap_s: 0.5}"))
+    code, out, err = run(capsys, "rir", str(live), "--scene", "box", "--source", "2", "2",
+                         "1.5", "--mic", "7", "4.5", "1.6", "--json")
+    assert code == 0
+    facts = json.loads(out)
+    (warning,) = facts["warnings"]
+    assert warning.startswith("scene 'box': the RIR's late decay is cut at 0.5 s "
+                              "(acoustics.max_rir_cap_s) before it is 60 dB below its early "
+                              "level: the 125 Hz band at -"), warning
+    assert f"sonicspec: warning: {warning}" in err
+    assert facts["samples"] == 8000 and facts["tail"]["rule"] == "auto"
+    assert all(v is not None and -15 < v < -3 for v in facts["tail"]["level_at_limit_db"])
+    code, out, _ = run(capsys, "rir", str(live), "--scene", "box", "--source", "2", "2",
+                       "1.5", "--mic", "7", "4.5", "1.6")
+    assert ("length: 0.500 s (max_rir_length_s: auto, every band's decay 60 dB down, at "
+            "most 0.5 s); cut at the limit: 125 Hz at -") in out
