@@ -65,8 +65,9 @@ class BandDecay:
     Attributes
     ----------
     status : {"complete", "continued", "cut", "empty"}
-        Traced to 60 dB down; continued by its fitted decay after the rays ran out; cut by
-        the histogram's end before 60 dB; no late energy at all.
+        Traced to 60 dB down (or, with no decay to fit, to the data's end); continued by
+        its fitted decay after the rays ran out; cut by the histogram's end before 60 dB;
+        no late energy at all.
     end_bin : int
         Bins the band needs: where its decay is 60 dB down (the histogram's length when cut,
         0 when empty).
@@ -161,12 +162,10 @@ def band_decay(energy: np.ndarray, bin_s: float, floor_db: float = DECAY_RANGE_D
         missing = missing_after_end(line)
         d = curve(missing)
     if line is None or line[0] >= 0:
-        # No decay to fit (too few bins, or not falling): the data as they are.
+        # No decay to fit (a few bins, or not falling): the data as they are, to their end.
         down = np.flatnonzero(d[:last + 1] <= -floor_db)
-        if down.size:
-            return BandDecay("complete", int(down[0]) + 1, None, None, None, e)
-        level = float(d[min(last, n - 1)])
-        return BandDecay("cut", n, None, level if last >= n - 1 else None, None, e)
+        end = int(down[0]) + 1 if down.size else last + 1
+        return BandDecay("complete", end, None, None, None, e)
     slope, intercept = line
     level_at_data_end = slope * t_end + intercept
     if level_at_data_end <= -floor_db:
@@ -286,7 +285,7 @@ def shape_tail(histogram: EnergyHistogram, bands_hz: Sequence[float], rule: str,
     report = TailReport(rule=rule, limit_s=float(limit_s), limit_field=limit_field,
                         bands_hz=tuple(float(b) for b in bands_hz), decays=decays,
                         bin_s=histogram.bin_s)
-    n = max((d.end_bin for d in decays), default=0)
+    n = max(1, max((d.end_bin for d in decays), default=0))  # one bin even when silent
     energy = np.stack([d.energy for d in decays], axis=1)[:n] if decays else e[:0]
     directions = histogram.direction_sum[:n] if len(histogram.direction_sum) else \
         histogram.direction_sum
