@@ -121,9 +121,9 @@ def test_a_live_room_at_default_settings_decays_to_its_end() -> None:
     −38 … −53 %. Now (8 kHz: the bands 125 Hz … 2 kHz) T30 per band is within 5 % of the
     exact particle walk (:func:`shoebox_decay_t60`, air included; measured +0.0 … +2.5 %
     at 16 kHz, 125 Hz … 4 kHz), the RIR ends where the last band's decay is 60 dB down,
-    below the cap, and each band's energy decay curve is still falling at 0.8 T30: near −48 dB there (an
-    exponential's), 6 dB down over the 0.1 T30 before it (±20 %) and more than 4 dB over
-    the 0.1 T30 after it (the RIR's end, 60 dB down, steepens the curve's last dB)."""
+    below the cap, and each band's energy decay curve is still falling at 0.8 T30: near
+    −48 dB there (an exponential's), 6 dB down over the 0.1 T30 before it (±20 %) and more
+    than 4 dB over the 0.1 T30 after it (the RIR's end, 60 dB down, steepens its last dB)."""
     settings = live_settings()
     assert settings.max_rir_length_s == "auto" and settings.rir_limit_s == 10.0
     bands = settings.bands_hz
