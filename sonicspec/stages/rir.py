@@ -58,6 +58,9 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
         (result,) = rir_results(scene, np.asarray(mic_m), np.asarray([source_m]), settings,
                                 rng, microphone=microphone, hrirs=hrirs,
                                 where=f"scene {scene_id!r}")
+    for w in caught:
+        if not issubclass(w.category, SonicspecWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     facts = {"scene_id": scene_id, **result.to_dict(), "mesh_triangles": mesh.n_faces,
              "warnings": scene_warnings + [str(w.message) for w in caught
                                            if issubclass(w.category, SonicspecWarning)]}
