@@ -344,7 +344,7 @@ def compute_rirs(scene: Scene, sources: Sequence[Sequence[float]] | np.ndarray,
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     traced = acoustic_scene(scene.mesh, scene.library, sim)
     return rir_results(traced, mic_m, points, sim, rng, microphone=microphone, hrirs=hrirs,
-                       n_threads=n_threads)
+                       n_threads=n_threads, where=f"scene {scene.name!r}")
 
 
 def compute_rir(scene: Scene, source: Sequence[float], mic: Sequence[float],

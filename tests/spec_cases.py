@@ -108,6 +108,13 @@ CASES = [
      "acoustics.bands_hz[0]", 33, True),
     ("temperature-too-high", "image_source_order: 2", "image_source_order: 2\n  temperature_c: 90",
      "acoustics.temperature_c", 33, True),
+    # max_rir_length_s: seconds or 'auto' (issue 19); the cap is seconds.
+    ("rir-length-word", "image_source_order: 2",
+     "image_source_order: 2\n  max_rir_length_s: longest", "acoustics.max_rir_length_s", 33, True),
+    ("rir-length-zero", "image_source_order: 2", "image_source_order: 2\n  max_rir_length_s: 0",
+     "acoustics.max_rir_length_s", 33, True),
+    ("rir-cap-too-long", "image_source_order: 2",
+     "image_source_order: 2\n  max_rir_cap_s: 120", "acoustics.max_rir_cap_s", 33, True),
     ("corpus-kind", "{kind: librispeech,", "{kind: librispeach,", "corpora.speech.kind", 34, True),
     ("corpus-root-missing", "root: data/ls, ", "", "corpora.speech.root", 34, True),
     ("duration-negative", "duration_s: 20", "duration_s: -20", "mixture.duration_s", 37, True),

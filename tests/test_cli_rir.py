@@ -167,12 +167,21 @@ def test_a_mesh_file_without_a_spec(tmp_path: Path, capsys) -> None:
                                      "carpet_on_concrete": pytest.approx(70.0)}
     assert facts["direct"] == "visible" and facts["channels"] == 1
     rir, rate = sf.read(wav, dtype="float32")
-    assert rate == 16000 and len(rir) == facts["samples"] == 2 * 16000
+    assert rate == 16000 and len(rir) == facts["samples"]
+    # max_rir_length_s: auto: the RIR ends where every band's decay is 60 dB down (plus the
+    # band filters' ringing), no band cut by the cap.
+    tail = facts["tail"]
+    assert tail["rule"] == "auto" and tail["limit_field"] == "max_rir_cap_s"
+    assert None not in tail["decay_60db_s"] and set(tail["level_at_limit_db"]) == {None}
+    assert tail["decay_end_s"] == max(tail["decay_60db_s"])
+    assert 0 < facts["samples"] / 16000 - tail["decay_end_s"] < 0.1
     # The same seed, the same bytes; the text report names the materials.
     code, out, _ = run(capsys, *args, "--rays", "2000", "--seed", "3", "-o",
                        str(tmp_path / "again.wav"))
     assert np.array_equal(sf.read(tmp_path / "again.wav", dtype="float32")[0], rir)
     assert "RIR in room.obj:" in out
+    assert (f"length: {len(rir) / 16000:.3f} s (max_rir_length_s: auto, every band's decay "
+            "60 dB down, at most 10 s)") in out
     assert "materials: gypsum_board 172.0 m² (71 %), carpet_on_concrete 70.0 m² (29 %)" in out
 
 
@@ -351,3 +360,26 @@ def test_the_readmes_scene_file_runs_as_written(tmp_path: Path, capsys) -> None:
     code, out, err = run(capsys, "rir", str(room), "--source", "1", "1", "1.5", "--mic", "4",
                          "3", "1.5")
     assert code == 0 and out.startswith("RIR in studio:") and "sofa" in out, err
+def test_a_cap_below_the_decay_warns_naming_the_scene_and_the_band(spec: Path,
+                                                                   capsys) -> None:
+    """Issue 19: `max_rir_length_s: auto` with `max_rir_cap_s` below a live room's decay
+    (α 0.03: T60 about 4 s; cap 0.5 s) cuts it and says so on stderr and in the facts,
+    naming the scene, the field and each band with the level it reached."""
+    live = spec.with_name("live.yaml")
+    live.write_text(SPEC.replace("absorption: 0.2", "absorption: 0.03").replace(
+        "max_rir_length_s: 1.2}", "max_rir_length_s: auto, max_rir_cap_s: 0.5}"))
+    code, out, err = run(capsys, "rir", str(live), "--scene", "box", "--source", "2", "2",
+                         "1.5", "--mic", "7", "4.5", "1.6", "--json")
+    assert code == 0
+    facts = json.loads(out)
+    (warning,) = facts["warnings"]
+    assert warning.startswith("scene 'box': the RIR's late decay is cut at 0.5 s "
+                              "(acoustics.max_rir_cap_s) before it is 60 dB below its early "
+                              "level: the 125 Hz band at -"), warning
+    assert f"sonicspec: warning: {warning}" in err
+    assert facts["samples"] == 8000 and facts["tail"]["rule"] == "auto"
+    assert all(v is not None and -15 < v < -3 for v in facts["tail"]["level_at_limit_db"])
+    code, out, _ = run(capsys, "rir", str(live), "--scene", "box", "--source", "2", "2",
+                       "1.5", "--mic", "7", "4.5", "1.6")
+    assert ("length: 0.500 s (max_rir_length_s: auto, every band's decay 60 dB down, at "
+            "most 0.5 s); cut at the limit: 125 Hz at -") in out

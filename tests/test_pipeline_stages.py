@@ -177,6 +177,10 @@ def test_rirs_and_manifests_point_at_real_files(built: Plan) -> None:
         info = sf.info(str(out / r["sources"][0]["source"]))
         assert info.frames == r["num_samples"] and info.channels == len(r["channel_ids"])
     meta = json.loads((group_folder(built) / "metadata.json").read_text())
+    # How each source's RIR length was chosen (issue 19): the spec's 0.3 s, taken as asked.
+    tail = meta["source1"]["rir_tail"]
+    assert tail["rule"] == "fixed" and tail["limit_s"] == 0.3
+    assert len(tail["decay_60db_s"]) == len(tail["level_at_limit_db"]) == 6
     spoken = sum(len(meta[s]["words"]) for s in ("source1", "source2"))
     # Each utterance is supervised on its source, its dry/direct/early targets are not
     # recordings of the task, and on every mixture containing it (1 separation + 1 enhancement).
@@ -360,3 +364,21 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
                   .read_text().splitlines()}
     assert recordings["train_000000_source1"]["custom"]["track"] == meta["source1"]["track"]
     assert "custom" not in recordings["train_000000_mixtures_sep_s1s2_music"]
+
+
+def test_a_cap_below_the_decay_is_a_warning_in_the_rir_jobs_log(tmp_path: Path,
+                                                                caplog) -> None:
+    """Issue 19: with `max_rir_length_s: auto` a cap below the room's decay is logged by the
+    rir job as a WARNING line naming the scene (what the build's summary collects)."""
+    text = SPEC.replace("max_rir_length_s: 0.3}", "max_rir_length_s: auto, "
+                        "max_rir_cap_s: 0.2}")
+    (tmp_path / "spec.yaml").write_text(text)
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    with caplog.at_level("WARNING", logger="sonicspec.stages.rir"):
+        for job in plan.jobs:
+            if job.step in ("mesh", "navigation", "placement", "rir"):
+                run_job(plan, job.key)
+    (record,) = [r for r in caplog.records if r.name == "sonicspec.stages.rir"]
+    assert record.levelname == "WARNING"
+    assert record.getMessage().startswith("scene 'room' (")
+    assert "cut at 0.2 s (acoustics.max_rir_cap_s)" in record.getMessage()

@@ -21,8 +21,9 @@ call it.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
-from sonicspec.acoustics.arrivals import Arrivals
+from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
 from sonicspec.acoustics.direct import direct_sound
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
@@ -43,7 +44,8 @@ from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.acoustics.simplify import simplify_flat_areas
 from sonicspec.acoustics.synthesis import synthesize_early, synthesize_rir
-from sonicspec.errors import AcousticsError
+from sonicspec.acoustics.tails import TailReport, cut_warning, shape_tail
+from sonicspec.errors import AcousticsError, SonicspecWarning
 
 if TYPE_CHECKING:
     from sonicspec.acoustics.hrtf import HrirSet
@@ -59,12 +61,14 @@ __all__ = [
     "check_inside",
     "check_receiver",
     "early_part",
+    "late_envelope",
     "load_hrirs",
     "ray_trace_settings",
     "receiver_renderer",
     "rir_results",
     "simulate_rirs",
     "traced_geometry",
+    "warn_cut_tails",
 ]
 
 #: The receiver a call without one gets: one omnidirectional capsule that stays put.
@@ -80,13 +84,17 @@ class SimulationSettings:
     :class:`sonicspec.RirSettings`), so the spec's defaults are the only ones a user meets;
     the defaults below are the tracer's own (roulette, guiding and splitting off), which
     tests and benches use to measure the tracer alone.
+
+    ``max_rir_length_s`` is a number of seconds or ``"auto"``: either way a RIR ends where
+    every band's late decay is 60 dB below its early level (:mod:`~sonicspec.acoustics.tails`),
+    at most that number or, with ``"auto"``, ``max_rir_cap_s``.
     """
 
     sample_rate_hz: int
     bands_hz: tuple[float, ...]
     rays: int
     image_source_order: int
-    max_rir_length_s: float
+    max_rir_length_s: float | str
     energy_threshold_db: float
     air_absorption: bool
     temperature_c: float
@@ -101,6 +109,31 @@ class SimulationSettings:
     roulette_db: float = 0.0
     horizontal_guiding: float = 0.0
     simplify_tolerance_m: float = 0.0
+    max_rir_cap_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        length = self.max_rir_length_s
+        if not (length == "auto" or (isinstance(length, int | float)
+                                     and not isinstance(length, bool) and length > 0)):
+            raise AcousticsError(f"max_rir_length_s: expected 'auto' or seconds > 0, got "
+                                 f"{length!r}")
+        if not self.max_rir_cap_s > 0:
+            raise AcousticsError(f"max_rir_cap_s: expected seconds > 0, got "
+                                 f"{self.max_rir_cap_s!r}")
+
+    @property
+    def rir_limit_s(self) -> float:
+        """The longest RIR allowed, seconds: ``max_rir_length_s``, or ``max_rir_cap_s``
+        when it is ``"auto"`` (the tracer follows rays that long, the decay decides where
+        each RIR ends)."""
+        if self.max_rir_length_s == "auto":
+            return float(self.max_rir_cap_s)
+        return float(self.max_rir_length_s)
+
+    @property
+    def rir_limit_field(self) -> str:
+        """The spec field that sets :attr:`rir_limit_s`."""
+        return "max_rir_cap_s" if self.max_rir_length_s == "auto" else "max_rir_length_s"
 
     @classmethod
     def from_spec(cls, acoustics: Mapping[str, Any], sample_rate_hz: int,
@@ -175,7 +208,7 @@ def ray_trace_settings(settings: SimulationSettings, specular_order: int) -> Ray
     completed (those purely specular paths are left out of the trace)."""
     ball = settings.free_air_ball_m
     return RayTraceSettings(
-        n_rays=settings.rays, max_time_s=settings.max_rir_length_s,
+        n_rays=settings.rays, max_time_s=settings.rir_limit_s,
         energy_threshold_db=settings.energy_threshold_db, bin_s=settings.histogram_bin_s,
         receiver_radius_m=settings.receiver_radius_m,
         specular_order_excluded=specular_order, speed_of_sound_m_s=settings.speed_of_sound_m_s,
@@ -199,7 +232,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                   settings: SimulationSettings, rng: np.random.Generator,
                   regions=None, microphone: Mapping[str, Any] | None = None,
                   hrirs: HrirSet | None = None, n_threads: int = 1,
-                  expected_figures: bool = False, progress=None, keep_arrivals: bool = False,
+                  expected_figures: bool = False, progress=None, where: str = "the scene",
+                  keep_arrivals: bool = False,
                   ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """RIRs from every source position to the microphone, and facts about each.
 
@@ -232,6 +266,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         ``"expected"``.
     progress : callable, optional
         ``progress(rays_done, rays_total)``, called as the trace goes.
+    where : str
+        What the cap warning calls the scene (``"scene 'flat'"``).
     keep_arrivals : bool
         Add each RIR's exact early arrivals (:class:`Arrivals`, as rendered into it) to its
         facts as ``"early_arrivals"``: a moving source's paths are rendered from them
@@ -245,7 +281,15 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     facts : list of dict
         Per position: ``arrivals`` (early arrivals: direct sound and image sources),
         ``direct`` (``"visible"``, ``"through walls"`` or ``"blocked"``),
-        ``image_source_order`` (completed), ``escaped_ray_fraction``.
+        ``image_source_order`` (completed), ``escaped_ray_fraction``, ``tail`` (how the
+        length was chosen: :meth:`~sonicspec.acoustics.tails.TailReport.to_dict`).
+
+    Warns
+    -----
+    SonicspecWarning
+        Once per call when ``max_rir_cap_s`` (with ``max_rir_length_s: auto``) cut a band's
+        decay before it was 60 dB below its early level (:func:`late_envelope`), naming
+        ``where`` and the bands.
 
     Raises
     ------
@@ -264,32 +308,35 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     regions = regions if regions is not None else planar_regions(scene)
     direct = direct_sound(scene, mic, points, air, c)
     ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
-                        max_path_length_m=c * settings.max_rir_length_s)
+                        max_path_length_m=c * settings.rir_limit_s)
     traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
     render = receiver_renderer(microphone, settings, hrirs)
-    rirs, facts = [], []
+    rirs, facts, reports = [], [], []
     for k in range(len(points)):
         if microphone["kind"] == "mono":
             arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
         else:  # the same paths, traced towards the mic: directions of arrival at the mic
             (d,) = direct_sound(scene, points[k], mic[None], air, c)
             early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
-                                  max_path_length_m=c * settings.max_rir_length_s)
+                                  max_path_length_m=c * settings.rir_limit_s)
             arrivals = Arrivals.concatenate([d, early.arrivals[0]])
-        late = traces[k].histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
+        late, report = late_envelope(traces[k].histogram, settings)
+        reports.append(report)
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
             "through walls" if len(direct[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": ism.max_order,
-                      "escaped_ray_fraction": traces[k].escaped_ray_fraction})
+                      "escaped_ray_fraction": traces[k].escaped_ray_fraction,
+                      "tail": report.to_dict()})
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
         if keep_arrivals:
             facts[-1]["early_arrivals"] = arrivals
+    warn_cut_tails(reports, where)
     return rirs, facts
 
 
@@ -299,6 +346,35 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int)
     this is its late, ray-traced part."""
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
     return synthesize_early(arrivals, bank, n_samples)
+
+
+# --- where a RIR ends (issue 19): kept apart from the paths above ----------------------------
+
+def late_envelope(histogram: EnergyHistogram, settings: SimulationSettings
+                  ) -> tuple[EnergyHistogram, TailReport]:
+    """The late envelope one RIR is synthesised from: the tracer's histogram smoothed
+    (:data:`LATE_ENVELOPE_RELATIVE_WIDTH`), each band's decay continued by the fit to its
+    last 20 dB where the rays ran out, ending where every band is 60 dB below its early
+    level or at the longest RIR allowed (:func:`~sonicspec.acoustics.tails.shape_tail`)."""
+    late = histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
+    rule = "auto" if settings.max_rir_length_s == "auto" else "fixed"
+    return shape_tail(late, settings.bands_hz, rule, settings.rir_limit_s,
+                      settings.rir_limit_field)
+
+
+def warn_cut_tails(reports: list[TailReport], where: str) -> None:
+    """One :class:`SonicspecWarning` for the RIRs of a call whose decay ``max_rir_cap_s``
+    cut short (``max_rir_length_s: auto``): the scene, the bands and levels (of the worst
+    position) and the field to raise. A number of seconds is taken as asked: a decay it cuts
+    is reported in the RIR facts (``tail.level_at_limit_db``), without a warning."""
+    cut = [r for r in reports if r.cut_bands_hz and r.rule == "auto"]
+    if not cut:
+        return
+    worst = max(cut, key=lambda r: max(d.level_at_end_db for d in r.decays
+                                       if d.level_at_end_db is not None))
+    message = cut_warning(worst, where, positions=len(cut))
+    if message:
+        warnings.warn(message, SonicspecWarning, stacklevel=3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -328,6 +404,11 @@ class RirResult:
         late noise's draw (:func:`~sonicspec.acoustics.metrics.figures_from_energy`).
     traced_faces : int
         Triangles traced (after flat areas were merged).
+    tail : dict
+        How the RIR's length was chosen (:meth:`~sonicspec.acoustics.tails.TailReport.to_dict`):
+        the rule (``auto`` or ``fixed``), the longest RIR allowed, per band when the decay
+        is 60 dB down, where a fitted continuation starts (the rays ran out before), and the
+        level a cut band reached at the limit.
     """
 
     rir: np.ndarray
@@ -341,6 +422,7 @@ class RirResult:
     escaped_ray_fraction: float
     expected: dict[str, Any]
     traced_faces: int
+    tail: dict[str, Any] = field(default_factory=dict)
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -385,13 +467,14 @@ class RirResult:
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
-                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict()}
+                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict(),
+                "length_s": self.rir.shape[-1] / self.sample_rate_hz, "tail": self.tail}
 
 
 def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                 settings: SimulationSettings, rng: np.random.Generator,
                 microphone: Mapping[str, Any] | None = None, hrirs: HrirSet | None = None,
-                n_threads: int = 1) -> list[RirResult]:
+                n_threads: int = 1, where: str = "the scene") -> list[RirResult]:
     """:func:`simulate_rirs` for a few positions, each RIR with its facts and figures.
 
     Parameters and randomness as :func:`simulate_rirs` (with ``expected_figures``), whose
@@ -404,7 +487,8 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
     """
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     rirs, facts = simulate_rirs(scene, mic_m, points, settings, rng, microphone=microphone,
-                                hrirs=hrirs, n_threads=n_threads, expected_figures=True)
+                                hrirs=hrirs, n_threads=n_threads, expected_figures=True,
+                                where=where)
     mic = tuple(float(v) for v in np.asarray(mic_m, dtype=np.float64).reshape(3))
     return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
                       bands_hz=tuple(settings.bands_hz),
@@ -412,7 +496,7 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       arrivals=f["arrivals"], direct=f["direct"],
                       image_source_order=f["image_source_order"],
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
-                      traced_faces=scene.n_faces)
+                      traced_faces=scene.n_faces, tail=f["tail"])
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 
@@ -429,7 +513,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
         synthesize_array_rir,
     )
 
-    common = {"max_length_s": settings.max_rir_length_s, "bands_hz": settings.bands_hz}
+    common = {"max_length_s": settings.rir_limit_s, "bands_hz": settings.bands_hz}
     fs = settings.sample_rate_hz
     kind = microphone["kind"]
     if kind == "mono":

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field
 
@@ -26,12 +26,27 @@ class AcousticsSpec(SpecModel):
     image_source_order: int = Field(
         3, ge=0, le=8, description="Highest reflection order found exactly by image sources."
     )
-    max_rir_length_s: float = Field(
-        2.0,
+    max_rir_length_s: Annotated[float, Field(gt=0, le=20.0)] | Literal["auto"] = Field(
+        "auto",
+        description="Longest RIR, seconds, or 'auto'. Either way a RIR ends where every "
+        "band's late decay (its Schroeder curve) is 60 dB below its early level; 'auto' "
+        "traces rays up to max_rir_cap_s, a number up to that many seconds (at most 20). "
+        "Where the rays run out before 60 dB (Russian roulette, few rays) the late envelope "
+        "goes on with the decay fitted to its last 20 dB. Where max_rir_cap_s cuts a "
+        "decay short a warning names the scene and the band; a number is taken as asked "
+        "(the facts report the cut). The RIR facts (sonicspec rir "
+        "--json, RirResult.tail, the dataset metadata) give the length and how it was "
+        "chosen.",
+    )
+    max_rir_cap_s: float = Field(
+        10.0,
         gt=0,
-        le=20.0,
-        description="Longest RIR kept, seconds; tracing stops earlier once the energy is below "
-        "the threshold.",
+        le=60.0,
+        description="Longest RIR with max_rir_length_s: auto, seconds (at most 60). The "
+        "tracer follows rays this long and keeps a histogram this long per trajectory point "
+        "(8 bytes per band and histogram bin), so the cap bounds time and memory; a live room "
+        "whose decay needs longer is cut here with a warning naming the scene and the band. "
+        "10 s holds a hall with a 9 s reverberation time.",
     )
     energy_threshold_db: float = Field(
         80.0,

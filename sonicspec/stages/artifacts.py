@@ -224,6 +224,9 @@ class RirSource(_Data):
     direct: str
     """The direct path at the first point: ``visible``, ``through walls`` or ``blocked``."""
     escaped_ray_fraction: float
+    tail: dict[str, Any]
+    """How the RIR's length was chosen (first point;
+    :meth:`sonicspec.acoustics.tails.TailReport.to_dict`)."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``: a

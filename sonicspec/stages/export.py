@@ -144,6 +144,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             "rir_points_m": [list(p) for p in geometry.rir_points_m],
             "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
             "direct_path": rir_source.direct,
+            "rir_tail": rir_source.tail,
             "loudness": mix.components[name].model_dump(mode="json"),
             "track": track_labels,
         }

@@ -8,6 +8,8 @@ it, and writes the RIRs.
 
 from __future__ import annotations
 
+import logging
+import warnings
 from typing import Any
 
 import numpy as np
@@ -24,6 +26,7 @@ from sonicspec.acoustics.engine import (
 )
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.moving import PathSet
+from sonicspec.errors import SonicspecWarning
 from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
 from sonicspec.spec.materials import MaterialsSpec
@@ -36,6 +39,8 @@ from sonicspec.stages.artifacts import (
     RirSource,
     speech_track_name,
 )
+
+log = logging.getLogger("sonicspec.stages.rir")
 
 
 def spec_materials(materials: MaterialsSpec | MaterialTable):
@@ -53,16 +58,23 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     hrtf = getattr(spec.microphone, "hrtf", None)
     hrirs = load_hrirs(loaded.base_dir / hrtf.path) if isinstance(hrtf, SofaHrtfSpec) else None
     check_receiver(microphone, hrirs)
-    mesh, _, mesh_job, _, warnings = build_scene(loaded, scene_id)
+    mesh, _, mesh_job, _, scene_warnings = build_scene(loaded, scene_id)
     check_inside(mesh.vertices, f"scene {scene_id!r}", **{"--source": source_m, "--mic": mic_m})
     settings = SimulationSettings.from_spec(spec.acoustics.model_dump(mode="json"),
                                             spec.sample_rate_hz, spec.speed_of_sound_m_s)
     scene = acoustic_scene(mesh, spec_materials(spec.materials), settings)
     rng = rng_for(spec.seed, "rir-cli", mesh_job.key, repr(list(source_m)), repr(list(mic_m)))
-    (result,) = rir_results(scene, np.asarray(mic_m), np.asarray([source_m]), settings, rng,
-                            microphone=microphone, hrirs=hrirs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SonicspecWarning)
+        (result,) = rir_results(scene, np.asarray(mic_m), np.asarray([source_m]), settings,
+                                rng, microphone=microphone, hrirs=hrirs,
+                                where=f"scene {scene_id!r}")
+    for w in caught:
+        if not issubclass(w.category, SonicspecWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     facts = {"scene_id": scene_id, **result.to_dict(), "mesh_triangles": mesh.n_faces,
-             "warnings": warnings}
+             "warnings": scene_warnings + [str(w.message) for w in caught
+                                           if issubclass(w.category, SonicspecWarning)]}
     return result.rir, facts
 
 
@@ -102,6 +114,7 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
         lines.append("expected (the energy it was synthesised to have, without the noise draw):")
         lines += per_band(facts["expected"])
     lines += [
+        _tail_line(facts),
         f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
         f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
         f" dB, DRR {num(fig['drr_db'], '.2f')} dB; escaped rays "
@@ -112,6 +125,26 @@ def format_rir_facts(facts: dict[str, Any]) -> str:
     if "plot" in facts:
         lines.append(f"plot: {facts['plot']}")
     return "\n".join(lines)
+
+
+def _tail_line(facts: dict[str, Any]) -> str:
+    """How the RIR's length was chosen, on one line."""
+    tail = facts["tail"]
+    bands = facts["figures"]["bands_hz"]
+    rule = ("max_rir_length_s: auto, every band's decay 60 dB down" if tail["rule"] == "auto"
+            else f"max_rir_length_s: {tail['limit_s']:g}, every band's decay 60 dB down")
+    line = (f"length: {facts['samples'] / facts['sample_rate_hz']:.3f} s ({rule}, at most "
+            f"{tail['limit_s']:g} s)")
+    continued = [f"{b:g} Hz from {t:.2f} s" for b, t in zip(bands, tail["continued_from_s"],
+                                                           strict=True) if t is not None]
+    if continued:
+        line += "; rays ran out, decay fitted to its last 20 dB continued: " + ", ".join(
+            continued)
+    cut = [f"{b:g} Hz at {v:.0f} dB" for b, v in zip(bands, tail["level_at_limit_db"],
+                                                   strict=True) if v is not None]
+    if cut:
+        line += "; cut at the limit: " + ", ".join(cut)
+    return line
 
 
 def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
@@ -151,9 +184,19 @@ def run(ctx) -> None:
             ctx.progress(f"group {g + 1}/{len(placements)}: {n} points, "
                          f"{done:,}/{total:,} rays")
 
-        rirs, facts = simulate_rirs(scene, np.asarray(placement.mic_m), points, settings,
-                                    rng, regions, microphone, hrirs, progress=progress,
-                                    keep_arrivals=params.early_paths)
+        # A decay cut short by the longest RIR allowed is a warning in the job's log,
+        # which the build summary collects.
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", SonicspecWarning)
+            rirs, facts = simulate_rirs(
+                scene, np.asarray(placement.mic_m), points, settings, rng, regions, microphone,
+                hrirs, progress=progress, where=f"scene {mesh_art.data.get('scene_id', '?')!r}",
+                keep_arrivals=params.early_paths)
+        for w in caught:
+            if issubclass(w.category, SonicspecWarning):
+                log.warning("%s", w.message)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         entries, start = [], 0
         for s, (name, pts) in enumerate(sources):
             block = rirs[start:start + len(pts)]
@@ -178,7 +221,7 @@ def run(ctx) -> None:
             entries.append(RirSource(
                 name=name, array=key, points=len(pts),
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
-                direct=facts[start]["direct"],
+                direct=facts[start]["direct"], tail=facts[start]["tail"],
                 escaped_ray_fraction=facts[start]["escaped_ray_fraction"], paths=paths))
             start += len(pts)
         groups.append(RirGroup(group=placement.group, sources=entries))

@@ -63,3 +63,25 @@ def partitioned_shoebox(lx: float, ly: float, lz: float, x_m: float
     wall = np.array([[x_m, 0, 0], [x_m, ly, 0], [x_m, ly, lz], [x_m, 0, lz]], dtype=float)
     return (np.vstack([verts, wall]),
             np.vstack([faces, np.array([[0, 1, 2], [0, 2, 3]]) + len(verts)]))
+
+
+def door_rooms(room_m: tuple[float, float, float] = (5.0, 4.0, 3.0),
+               door_m: tuple[float, float, float] = (1.5, 0.9, 2.1)
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Two equal boxes ``room_m`` side by side along x, joined by a door opening in the
+    single-sheet wall between them at ``x = room_m[0]``: ``door_m`` is (y of its edge,
+    width, height), from the floor. The wall's six triangles (left of the door, right of it,
+    above it) are the last six faces."""
+    lx, ly, lz = room_m
+    y0, width, height = door_m
+    y1 = y0 + width
+    if not (0 < y0 < y1 < ly and 0 < height < lz):
+        raise ValueError(f"door_m: expected a door inside the {ly} x {lz} m wall, got {door_m}")
+    verts, faces = shoebox(2 * lx, ly, lz)
+    quads = [((0.0, 0.0), (y0, lz)), ((y1, 0.0), (ly, lz)), ((y0, height), (y1, lz))]
+    wall_v, wall_f = [], []
+    for (ya, za), (yb, zb) in quads:
+        base = len(verts) + len(wall_v)
+        wall_v += [(lx, ya, za), (lx, yb, za), (lx, yb, zb), (lx, ya, zb)]
+        wall_f += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    return np.vstack([verts, np.array(wall_v)]), np.vstack([faces, np.array(wall_f)])
