@@ -76,21 +76,27 @@ def _a(beta: np.ndarray, n: np.ndarray, sign: int) -> np.ndarray:
     return 2 * np.cos((2 * n * math.pi * big_n - beta) / 2) ** 2
 
 
-def _kp_terms(k, open_angle, theta_s, theta_r, distance_l, sin_beta0) -> list[np.ndarray]:
-    """The four complex terms of the Kouyoumjian–Pathak coefficient (their sum is ``D``)."""
+def _kp_terms(k, open_angle, theta_s, theta_r, distance_l, sin_beta0, reflection0=1.0,
+              reflection1=1.0) -> list[np.ndarray]:
+    """The four complex terms of the Kouyoumjian–Pathak coefficient (their sum is ``D``).
+
+    ``reflection0``/``reflection1``: pressure reflection factor of face 0 / face 1, applied to
+    the term that completes that face's reflection at its boundary (Luebbers' heuristic for
+    non-rigid faces; 1 is the rigid wedge)."""
     k, tw, ts, tr, big_l, sb = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (
         k, open_angle, theta_s, theta_r, distance_l, sin_beta0)))
     n = tw / math.pi
     front = -np.exp(-1j * math.pi / 4) / (2 * n * np.sqrt(2 * math.pi * k) * sb)
     terms = []
-    for beta in (tr - ts, tr + ts):
+    face = {(1, 1): reflection1, (1, -1): reflection0}
+    for which, beta in enumerate((tr - ts, tr + ts)):
         for sign in (1, -1):
             arg = (math.pi + sign * beta) / (2 * n)
             sin_arg = np.sin(arg)
             ok = np.abs(sin_arg) > 1e-12
             cot = np.where(ok, np.cos(arg) / np.where(ok, sin_arg, 1.0), 0.0)
             f = transition_function(k * big_l * _a(beta, n, sign))
-            terms.append(front * np.where(ok, cot * f, 0.0))
+            terms.append(front * np.where(ok, cot * f, 0.0) * face.get((which, sign), 1.0))
     return terms
 
 
@@ -108,7 +114,8 @@ def kp_coefficient(k: np.ndarray, open_angle: np.ndarray, theta_s: np.ndarray,
     return sum(_kp_terms(k, open_angle, theta_s, theta_r, distance_l, sin_beta0))
 
 
-def kp_real(k, open_angle, theta_s, theta_r, distance_l, sin_beta0) -> np.ndarray:
+def kp_real(k, open_angle, theta_s, theta_r, distance_l, sin_beta0, reflection0=1.0,
+            reflection1=1.0) -> np.ndarray:
     """The coefficient as a real number: each term's magnitude with its sign.
 
     Every term's phase lies in [−45°, 0°] (or that plus 180°): −45° far from its boundary,
@@ -117,7 +124,8 @@ def kp_real(k, open_angle, theta_s, theta_r, distance_l, sin_beta0) -> np.ndarra
     phase; a band amplitude, which carries no phase, can hold nothing more.
     """
     out = 0.0
-    for t in _kp_terms(k, open_angle, theta_s, theta_r, distance_l, sin_beta0):
+    for t in _kp_terms(k, open_angle, theta_s, theta_r, distance_l, sin_beta0, reflection0,
+                       reflection1):
         out = out + np.abs(t) * np.sign((t * np.exp(1j * math.pi / 8)).real)
     return out
 
@@ -150,9 +158,23 @@ def _check(name: str, value: np.ndarray, low: float = 0.0, strict: bool = True) 
     return value
 
 
+def _reflections(r0, r1, m: int, n_bands: int) -> tuple:
+    out = []
+    for name, r in (("reflection0", r0), ("reflection1", r1)):
+        if r is None:
+            out.append(1.0)
+            continue
+        r = np.asarray(r, dtype=np.float64)
+        if r.shape != (m, n_bands) or np.any(~np.isfinite(r)) or np.any((r < 0) | (r > 1)):
+            raise AcousticsError(f"{name}: expected ({m}, {n_bands}) factors in [0, 1], got "
+                                 f"shape {r.shape}")
+        out.append(r[:, :, None])
+    return out[0], out[1]
+
+
 def first_order_band_amplitudes(
     r_s, theta_s, r_r, theta_r, dz, open_angle, bands_hz,
-    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, reflection0=None, reflection1=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Signed octave-band amplitudes of single edge-diffraction paths, and their lengths.
 
@@ -165,6 +187,8 @@ def first_order_band_amplitudes(
         Open (air) angle of each wedge, rad, in (π, 2π].
     bands_hz : sequence of float
         Octave band centres.
+    reflection0, reflection1 : (m, n_bands) float, optional
+        Pressure reflection factor of each wedge's face 0 and face 1 per band (None: rigid).
 
     Returns
     -------
@@ -185,7 +209,8 @@ def first_order_band_amplitudes(
     big_l = s_src * s_rcv / length * sin_b**2
     k = 2 * math.pi * f[None] / speed_of_sound_m_s
     ex = (slice(None), None, None)
-    d = kp_real(k, tw[ex], theta_s[ex], theta_r[ex], big_l[ex], sin_b[ex])
+    r0, r1 = _reflections(reflection0, reflection1, len(r_s), f.shape[0])
+    d = kp_real(k, tw[ex], theta_s[ex], theta_r[ex], big_l[ex], sin_b[ex], r0, r1)
     spread = 1.0 / (4 * math.pi * np.sqrt(s_src * s_rcv * length))
     return _band_amplitude(d, w) * spread[:, None], length
 
@@ -193,13 +218,15 @@ def first_order_band_amplitudes(
 def second_order_band_amplitudes(
     s1, d12, s2, sin_b1, sin_b2, open_angle1, theta_in1, theta_out1,
     open_angle2, theta_in2, theta_out2, bands_hz,
-    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, reflections=None,
 ) -> np.ndarray:
     """Signed octave-band amplitudes ``(m, n_bands)`` of source → edge 1 → edge 2 → receiver.
 
     ``s1``, ``d12``, ``s2``: lengths of the three legs (m); ``sin_b1``, ``sin_b2``: sine of the
     angle between the rays and each edge; angles in each edge's own cylindrical frame
-    (rad, from its face 0). Free field ``1/(4πR)``; see the module docstring for the cascade.
+    (rad, from its face 0). ``reflections``: optional four ``(m, n_bands)`` pressure
+    reflection factors (edge 1 face 0, face 1, edge 2 face 0, face 1). Free field
+    ``1/(4πR)``; see the module docstring for the cascade.
     """
     s1, d12, s2 = _check("s1", s1), _check("d12", d12), _check("s2", s2)
     sb1, sb2 = _check("sin_b1", sin_b1), _check("sin_b2", sin_b2)
@@ -214,8 +241,11 @@ def second_order_band_amplitudes(
     # pair must continue the first-order path over edge 1 that it replaces (continuity).
     l1 = s1 * (d12 + s2) / (s1 + d12 + s2) * sb1**2
     l2 = d12 * s2 / (d12 + s2) * sb2**2
-    d1 = kp_real(k, tw1[ex], ti1[ex], to1[ex], l1[ex], sb1[ex])
-    d2 = kp_real(k, tw2[ex], ti2[ex], to2[ex], l2[ex], sb2[ex])
+    refl = reflections if reflections is not None else (None,) * 4
+    a0, a1 = _reflections(refl[0], refl[1], len(s1), f.shape[0])
+    b0, b1 = _reflections(refl[2], refl[3], len(s1), f.shape[0])
+    d1 = kp_real(k, tw1[ex], ti1[ex], to1[ex], l1[ex], sb1[ex], a0, a1)
+    d2 = kp_real(k, tw2[ex], ti2[ex], to2[ex], l2[ex], sb2[ex], b0, b1)
     grazing = (np.abs(ti2) < 1e-6) | (np.abs(ti2 - tw2) < 1e-6)
     d2 = d2 * np.where(grazing, 0.5, 1.0)[ex]
     total = s1 + d12 + s2

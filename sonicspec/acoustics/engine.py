@@ -33,6 +33,8 @@ from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.bands import default_bands
 from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.edge_paths import diffracted_sound
+from sonicspec.acoustics.edges import DiffractingEdges, diffracting_edges
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.metrics import (
     RoomAcousticFigures,
@@ -58,10 +60,12 @@ __all__ = [
     "acoustic_scene",
     "check_inside",
     "check_receiver",
+    "diffraction_arrivals",
     "load_hrirs",
     "ray_trace_settings",
     "receiver_renderer",
     "rir_results",
+    "scene_edges",
     "simulate_rirs",
     "traced_geometry",
 ]
@@ -100,6 +104,8 @@ class SimulationSettings:
     roulette_db: float = 0.0
     horizontal_guiding: float = 0.0
     simplify_tolerance_m: float = 0.0
+    diffraction: bool = False
+    diffraction_max_edges: int = 256
 
     @classmethod
     def from_spec(cls, acoustics: Mapping[str, Any], sample_rate_hz: int,
@@ -125,6 +131,8 @@ class SimulationSettings:
                    horizontal_guiding=acoustics["horizontal_guiding"],
                    simplify_tolerance_m=acoustics["simplify_tolerance_m"],
                    histogram_bin_s=acoustics["histogram_bin_s"],
+                   diffraction=acoustics["diffraction"],
+                   diffraction_max_edges=acoustics["diffraction_max_edges"],
                    speed_of_sound_m_s=speed_of_sound_m_s)
 
     def air(self) -> np.ndarray | None:
@@ -246,8 +254,10 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     rirs : list of (channels, samples) float32 arrays
         One per source position.
     facts : list of dict
-        Per position: ``arrivals`` (early arrivals: direct sound and image sources),
-        ``direct`` (``"visible"``, ``"through walls"`` or ``"blocked"``),
+        Per position: ``arrivals`` (early arrivals: direct sound, image sources and
+        diffracted paths), ``direct`` (``"visible"``, ``"through walls"``, ``"diffracted"``:
+        out of sight and heard round edges, or ``"blocked"``), ``diffracted_paths`` (with
+        diffraction on),
         ``image_source_order`` (completed), ``escaped_ray_fraction``.
 
     Raises
@@ -268,27 +278,52 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    diffracted = diffraction_arrivals(scene, mic, points, settings, regions)
     render = receiver_renderer(microphone, settings, hrirs)
     rirs, facts = [], []
     for k in range(len(points)):
         if microphone["kind"] == "mono":
-            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k], diffracted[k]])
         else:  # the same paths, traced towards the mic: directions of arrival at the mic
             (d,) = direct_sound(scene, points[k], mic[None], air, c)
             early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
                                   max_path_length_m=c * settings.max_rir_length_s)
-            arrivals = Arrivals.concatenate([d, early.arrivals[0]])
+            arrivals = Arrivals.concatenate([d, early.arrivals[0], diffracted[k]])
         late = traces[k].histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
-            "through walls" if len(direct[k]) else "blocked")
+            "through walls" if len(direct[k]) else
+            "diffracted" if len(diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": ism.max_order,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction})
+        if settings.diffraction:
+            facts[-1]["diffracted_paths"] = len(diffracted[k])
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
     return rirs, facts
+
+
+def scene_edges(scene: AcousticScene, max_edges: int) -> DiffractingEdges:
+    """The traced scene's diffracting edges, the longest ``max_edges`` (memoized per scene)."""
+    return scene.memoized(f"diffracting_edges:{max_edges}", lambda: diffracting_edges(
+        scene.vertices, scene.faces, scene.normals, max_edges=max_edges))
+
+
+def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                         settings: SimulationSettings, regions=None) -> list[Arrivals]:
+    """Edge-diffracted arrivals from every source position at the microphone (empty ones
+    when ``settings.diffraction`` is off): over one edge, two edges, and one edge with a
+    reflection (:mod:`~sonicspec.acoustics.edge_paths`), directions of arrival at the
+    microphone."""
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    if not settings.diffraction:
+        return [Arrivals.empty(scene.n_bands) for _ in points]
+    edges = scene_edges(scene, settings.diffraction_max_edges)
+    return diffracted_sound(scene, edges, points, np.asarray(mic_m, dtype=np.float64),
+                            settings.bands_hz, settings.air(), settings.speed_of_sound_m_s,
+                            regions=regions)
 
 
 @dataclass(frozen=True, eq=False)
@@ -306,9 +341,11 @@ class RirResult:
     source_m, mic_m : tuple of float
         The positions, metres.
     arrivals : int
-        Early arrivals rendered exactly: the direct sound and the image sources.
-    direct : {"visible", "through walls", "blocked"}
-        The direct path: in sight, heard through transmitting surfaces, or absent.
+        Early arrivals rendered exactly: the direct sound, the image sources and the
+        edge-diffracted paths.
+    direct : {"visible", "through walls", "diffracted", "blocked"}
+        The direct path: in sight, heard through transmitting surfaces, heard round edges
+        (out of sight, with ``acoustics.diffraction``), or absent.
     image_source_order : int
         The image-source order completed (lower than asked when a scene has too many).
     escaped_ray_fraction : float

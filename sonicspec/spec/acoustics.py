@@ -54,8 +54,16 @@ class AcousticsSpec(SpecModel):
     )
     diffraction: bool = Field(
         False,
-        description="Add edge-diffracted sound around occluders (not yet supported: "
-        "must be false).",
+        description="Add edge-diffracted sound (UTD, first and second order) round the "
+        "diffracting edges of the traced mesh: the sound of a source out of sight, and the "
+        "wave that keeps the level continuous at every shadow boundary.",
+    )
+    diffraction_max_edges: int = Field(
+        256,
+        ge=0,
+        le=100_000,
+        description="Edge budget of diffraction: at most this many diffracting edges, the "
+        "longest, are used (a scan can have thousands of creases).",
     )
     detection: Literal["diffuse_rain", "receiver_volume"] = Field(
         "diffuse_rain",
