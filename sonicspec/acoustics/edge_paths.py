@@ -35,12 +35,12 @@ from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
 
-__all__ = ["MAX_PAIR_DISTANCE_M", "REFLECTORS", "diffracted_sound"]
+__all__ = ["MAX_PAIR_DISTANCE_M", "REFLECTORS", "close_pairs", "diffracted_sound"]
 
 #: Second-order pairs are edges whose segments come this close (m): a door frame's jambs, a
 #: thick wall's corners, a cupboard's two front edges. Farther pairs are left to first order.
 MAX_PAIR_DISTANCE_M = 1.0
-_APEX_ITERATIONS = 30
+_APEX_ITERATIONS = 12  # exact after one for parallel edges; skew ones converge linearly
 _ON_EDGE_TOL_M = 1e-6
 #: Planar regions (the largest) whose reflections are bent round edges: the floor, the
 #: ceiling and the big walls carry the strong first reflections.
@@ -88,19 +88,36 @@ def _face_reflection(scene: AcousticScene, edges: DiffractingEdges) -> tuple[np.
     return factor(f0), factor(f1)
 
 
-def _close_pairs(edges: DiffractingEdges, max_distance_m: float) -> np.ndarray:
-    """``(p, 2)`` ordered pairs of distinct edges whose segments come within the distance."""
+def close_pairs(edges: DiffractingEdges, max_distance_m: float | None = None) -> np.ndarray:
+    """``(p, 2)`` ordered pairs of distinct edges that a path can take one after the other:
+    segments within ``max_distance_m`` (default :data:`MAX_PAIR_DISTANCE_M`) and each in
+    front of the other (some point of edge 2 on edge 1's air side, and the reverse)."""
+    max_distance_m = MAX_PAIR_DISTANCE_M if max_distance_m is None else max_distance_m
     m = len(edges)
     if m < 2:
         return np.zeros((0, 2), np.int64)
+    lo = np.minimum(edges.start, edges.end) - max_distance_m
+    hi = np.maximum(edges.start, edges.end) + max_distance_m
+    i, j = np.triu_indices(m, 1)
+    boxes = np.all((lo[i] <= np.maximum(edges.start[j], edges.end[j]))
+                   & (np.minimum(edges.start[j], edges.end[j]) <= hi[i]), axis=1)
+    i, j = i[boxes], j[boxes]
     t = np.linspace(0, 1, 9)
     pts = edges.start[:, None] + t[None, :, None] * (edges.end - edges.start)[:, None]
-    i, j = np.triu_indices(m, 1)
     # the closest pair of sample points, less half a sample step of each: a lower bound
     gap = np.linalg.norm(pts[i][:, :, None] - pts[j][:, None, :], axis=-1).min(axis=(1, 2))
     slack = (edges.length_m[i] + edges.length_m[j]) / 16
     close = gap - slack <= max_distance_m
     i, j = i[close], j[close]
+
+    def in_front(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Some sample point of edge b (off its ends) on edge a's air side."""
+        inner = pts[b][:, 1:-1]
+        r, th, _ = _cylindrical(edges, a[:, None], inner)
+        return np.any((r > _ON_EDGE_TOL_M) & (th <= edges.open_angle[a][:, None]), axis=1)
+
+    both = in_front(i, j) & in_front(j, i)
+    i, j = i[both], j[both]
     return np.concatenate([np.column_stack([i, j]), np.column_stack([j, i])])
 
 
@@ -115,6 +132,7 @@ def diffracted_sound(
     second_order: bool = True,
     reflections: bool = True,
     regions: PlanarRegions | None = None,
+    pairs: np.ndarray | None = None,
 ) -> list[Arrivals]:
     """Edge-diffracted arrivals at ``receiver`` from every source position.
 
@@ -141,6 +159,8 @@ def diffracted_sound(
         :data:`REFLECTORS` largest planar regions.
     regions : PlanarRegions, optional
         The scene's planar regions, when the caller has them.
+    pairs : (p, 2) int, optional
+        :func:`close_pairs` of ``edges``, when the caller keeps them.
 
     Returns
     -------
@@ -173,7 +193,9 @@ def diffracted_sound(
         _reflected_first_order(scene, edges, regions, reflectors, sources, receiver[0], bands,
                                air, c, refl0, refl1, parts)
     if second_order:
-        _second_order(scene, edges, sources, receiver[0], bands, air, c, refl0, refl1, parts)
+        pairs = close_pairs(edges) if pairs is None else pairs
+        _second_order(scene, edges, pairs, sources, receiver[0], bands, air, c, refl0, refl1,
+                      parts)
     return [Arrivals.concatenate(p) if p else Arrivals.empty(scene.n_bands) for p in parts]
 
 
@@ -324,13 +346,19 @@ def _plane_point(a: np.ndarray, b: np.ndarray, n: np.ndarray, d: float
     return ok, a + t[:, None] * (b - a)
 
 
-def _second_order(scene, edges, sources, receiver, bands, air, c, refl0, refl1, parts) -> None:
-    pairs = _close_pairs(edges, MAX_PAIR_DISTANCE_M)
+def _second_order(scene, edges, pairs, sources, receiver, bands, air, c, refl0, refl1, parts
+                  ) -> None:
     if len(pairs) == 0:
         return
-    n, p = len(sources), len(pairs)
-    src_i = np.repeat(np.arange(n), p)
-    e1, e2 = np.tile(pairs[:, 0], n), np.tile(pairs[:, 1], n)
+    # the source on edge 1's air side, the receiver on edge 2's
+    r_in, th_in, _ = _cylindrical(edges, pairs[None, :, 0], sources[:, None, :])
+    r_out, th_out, _ = _cylindrical(edges, pairs[:, 1], receiver[None])
+    ok = ((r_in > _ON_EDGE_TOL_M) & (th_in <= edges.open_angle[pairs[:, 0]][None])
+          & ((r_out > _ON_EDGE_TOL_M) & (th_out <= edges.open_angle[pairs[:, 1]]))[None])
+    src_i, pair_i = np.nonzero(ok)
+    if len(src_i) == 0:
+        return
+    e1, e2 = pairs[pair_i, 0], pairs[pair_i, 1]
     s = sources[src_i]
     r = np.broadcast_to(receiver, s.shape)
     a2 = 0.5 * (edges.start[e2] + edges.end[e2])

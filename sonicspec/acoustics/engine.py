@@ -33,7 +33,7 @@ from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.bands import default_bands
 from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.edge_paths import diffracted_sound
+from sonicspec.acoustics.edge_paths import close_pairs, diffracted_sound
 from sonicspec.acoustics.edges import DiffractingEdges, diffracting_edges
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.metrics import (
@@ -321,9 +321,11 @@ def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.
     if not settings.diffraction:
         return [Arrivals.empty(scene.n_bands) for _ in points]
     edges = scene_edges(scene, settings.diffraction_max_edges)
+    pairs = scene.memoized(f"diffracting_edge_pairs:{settings.diffraction_max_edges}",
+                           lambda: close_pairs(edges))
     return diffracted_sound(scene, edges, points, np.asarray(mic_m, dtype=np.float64),
                             settings.bands_hz, settings.air(), settings.speed_of_sound_m_s,
-                            regions=regions)
+                            regions=regions, pairs=pairs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -355,6 +357,8 @@ class RirResult:
         late noise's draw (:func:`~sonicspec.acoustics.metrics.figures_from_energy`).
     traced_faces : int
         Triangles traced (after flat areas were merged).
+    diffracted_paths : int
+        Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
     """
 
     rir: np.ndarray
@@ -368,6 +372,7 @@ class RirResult:
     escaped_ray_fraction: float
     expected: dict[str, Any]
     traced_faces: int
+    diffracted_paths: int = 0
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -412,7 +417,8 @@ class RirResult:
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
-                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict()}
+                "traced_triangles": self.traced_faces, "diffracted_paths": self.diffracted_paths,
+                "figures": self.figures.to_dict()}
 
 
 def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -439,7 +445,8 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       arrivals=f["arrivals"], direct=f["direct"],
                       image_source_order=f["image_source_order"],
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
-                      traced_faces=scene.n_faces)
+                      traced_faces=scene.n_faces,
+                      diffracted_paths=f.get("diffracted_paths", 0))
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 

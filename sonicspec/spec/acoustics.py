@@ -53,10 +53,11 @@ class AcousticsSpec(SpecModel):
         True, description="Let sound pass through surfaces by their transmission coefficient."
     )
     diffraction: bool = Field(
-        False,
-        description="Add edge-diffracted sound (UTD, first and second order) round the "
-        "diffracting edges of the traced mesh: the sound of a source out of sight, and the "
-        "wave that keeps the level continuous at every shadow boundary.",
+        True,
+        description="Add edge-diffracted sound (UTD, first and second order, and one edge "
+        "with one reflection) round the diffracting edges of the traced mesh: the sound of a "
+        "source out of sight, and the wave that keeps the level continuous at every shadow "
+        "boundary. Costs about +20 % per RIR in a furnished apartment.",
     )
     diffraction_max_edges: int = Field(
         256,
