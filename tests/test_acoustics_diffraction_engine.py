@@ -160,3 +160,31 @@ def test_edges_are_found_once_per_scene_and_budgeted() -> None:
     edges = engine.scene_edges(scene, 4)
     assert edges is engine.scene_edges(scene, 4)
     assert len(edges) == 4 and edges.n_found == 6
+
+
+def test_diffracted_paths_carry_direction_materials_and_air() -> None:
+    from sonicspec.acoustics.edge_paths import diffracted_sound
+
+    src, mic = np.array([[2.5, 2.0, 1.0]]), np.array([6.0, 2.0, 1.2])
+    scene = screen_room()
+    edges = engine.scene_edges(scene, 256)
+
+    def first(scene, air=None):
+        (a,) = diffracted_sound(scene, edges, src, mic, BANDS, air, C, second_order=False,
+                                reflections=False)
+        k = int(np.argmin(a.times_s))
+        return a.amplitudes[k], a.directions[k], a.path_length_m[k]
+
+    amp, direction, length = first(scene)
+    # over the top edge: the apex divides the path as the distances to the edge
+    apex = np.array([4.0, 2.0, 1.8])
+    np.testing.assert_allclose(direction, (apex - mic) / np.linalg.norm(apex - mic), atol=1e-9)
+    assert length == pytest.approx(np.linalg.norm(apex - src[0]) + np.linalg.norm(mic - apex))
+    air = np.linspace(0.001, 0.05, len(BANDS))
+    np.testing.assert_allclose(first(scene, air)[0], amp * np.exp(-0.5 * air * length))
+    # absorbing faces weaken the wave their reflection would have completed, not the rest
+    n, b = scene.n_faces, len(BANDS)
+    soft = AcousticScene(scene.vertices, scene.faces, np.full((n, b), 0.9), np.zeros((n, b)),
+                         np.zeros((n, b)))
+    soft_amp = first(soft)[0]
+    assert np.all(np.abs(soft_amp) < np.abs(amp)) and np.all(np.abs(soft_amp) > 0.3 * np.abs(amp))

@@ -40,6 +40,7 @@ __all__ = ["MAX_PAIR_DISTANCE_M", "REFLECTORS", "close_pairs", "diffracted_sound
 #: Second-order pairs are edges whose segments come this close (m): a door frame's jambs, a
 #: thick wall's corners, a cupboard's two front edges. Farther pairs are left to first order.
 MAX_PAIR_DISTANCE_M = 1.0
+_SOURCE_CHUNK = 32
 _APEX_ITERATIONS = 12  # exact after one for parallel edges; skew ones converge linearly
 _ON_EDGE_TOL_M = 1e-6
 #: Planar regions (the largest) whose reflections are bent round edges: the floor, the
@@ -184,18 +185,25 @@ def diffracted_sound(
     if len(edges) == 0:
         return [Arrivals.empty(scene.n_bands) for _ in sources]
     refl0, refl1 = _face_reflection(scene, edges)
-    _first_order(scene, edges, sources, receiver[0], bands, air, c, refl0, refl1, parts)
+    reflectors = np.zeros(0, np.int64)
     if reflections:
         regions = regions if regions is not None else planar_regions(scene)
         area = np.zeros(regions.n_regions)
         np.add.at(area, regions.face_region, scene.face_areas_m2)
         reflectors = np.argsort(-area, kind="stable")[:REFLECTORS]
-        _reflected_first_order(scene, edges, regions, reflectors, sources, receiver[0], bands,
-                               air, c, refl0, refl1, parts)
     if second_order:
         pairs = close_pairs(edges) if pairs is None else pairs
-        _second_order(scene, edges, pairs, sources, receiver[0], bands, air, c, refl0, refl1,
-                      parts)
+    # Sources in chunks: the candidate arrays grow as sources × edges (× pairs, × planes).
+    for lo in range(0, len(sources), _SOURCE_CHUNK):
+        chunk = sources[lo:lo + _SOURCE_CHUNK]
+        sub: list[list[Arrivals]] = parts[lo:lo + _SOURCE_CHUNK]
+        _first_order(scene, edges, chunk, receiver[0], bands, air, c, refl0, refl1, sub)
+        if len(reflectors):
+            _reflected_first_order(scene, edges, regions, reflectors, chunk, receiver[0],
+                                   bands, air, c, refl0, refl1, sub)
+        if second_order:
+            _second_order(scene, edges, pairs, chunk, receiver[0], bands, air, c, refl0,
+                          refl1, sub)
     return [Arrivals.concatenate(p) if p else Arrivals.empty(scene.n_bands) for p in parts]
 
 
