@@ -5,8 +5,8 @@ An edge between two faces diffracts when the air around it spans more than a hal
 (``θ_w < π``, a room's corners) does not (its sound is the reflections'), and a flat one
 (``θ_w = π``) diffracts nothing (``sin(π/n) = 0``). An edge with one face is the free rim of a
 thin sheet, a half-plane (``θ_w = 2π``). Edges bent by less than :data:`MIN_TURN_DEG` are left
-out: on a scan they are the surface's noise, and their diffraction is weak (a 15° turn
-diffracts 20 dB less than a screen's rim at the same angles).
+out: on a scan they are the surface's noise, and their diffraction is weak (UTD's coefficient
+carries ``sin(π/n)``, ``n = θ_w/π``, which vanishes as the wedge flattens).
 
 Segments that continue one another (collinear, same two planes) are merged into one edge, so a
 wall cut into many triangles still has one edge per corner. A scan may have thousands of
