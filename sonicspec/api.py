@@ -39,7 +39,7 @@ from sonicspec.acoustics.engine import (
     load_hrirs,
     rir_results,
 )
-from sonicspec.errors import AcousticsError, GeometryError
+from sonicspec.errors import GeometryError
 from sonicspec.geometry.materials import MaterialLibrary, assign_materials, material_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec
@@ -67,9 +67,6 @@ class RirSettings(AcousticsSpec):
 
     def simulation_settings(self) -> SimulationSettings:
         """The engine's settings (``bands_hz: auto`` resolved for the sample rate)."""
-        if self.diffraction:
-            raise AcousticsError("RirSettings.diffraction: expected False, got True; edge "
-                                 "diffraction is not supported by this version's tracer")
         return SimulationSettings.from_spec(self.model_dump(mode="json"), self.sample_rate_hz,
                                             self.speed_of_sound_m_s)
 

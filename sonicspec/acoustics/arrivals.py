@@ -22,12 +22,15 @@ import numpy as np
 
 from sonicspec.errors import AcousticsError
 
-__all__ = ["KIND_DIRECT", "KIND_SPECULAR", "Arrivals", "EnergyHistogram", "TraceResult"]
+__all__ = ["KIND_DIFFRACTED", "KIND_DIRECT", "KIND_SPECULAR", "Arrivals", "EnergyHistogram",
+           "TraceResult"]
 
 #: ``Arrivals.kind`` code of the direct sound (possibly through transmitting surfaces).
 KIND_DIRECT = 0
 #: ``Arrivals.kind`` code of a specular reflection found by the image-source method.
 KIND_SPECULAR = 1
+#: ``Arrivals.kind`` code of an edge-diffracted path (:mod:`sonicspec.acoustics.edge_paths`).
+KIND_DIFFRACTED = 2
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -50,9 +53,10 @@ class Arrivals:
     directions : (n, 3) float64
         Unit direction of arrival at the receiver (pointing towards the apparent source).
     order : (n,) int64
-        Number of reflections of the path (0 for the direct sound).
+        Number of reflections of the path (0 for the direct sound; for a diffracted path, the
+        number of edges it bends round).
     kind : (n,) int8
-        :data:`KIND_DIRECT` or :data:`KIND_SPECULAR`.
+        :data:`KIND_DIRECT`, :data:`KIND_SPECULAR` or :data:`KIND_DIFFRACTED`.
     path_length_m : (n,) float64
         Unfolded path length in metres.
     """

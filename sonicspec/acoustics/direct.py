@@ -66,8 +66,9 @@ def direct_sound(
         One per receiver, with zero or one arrival of amplitude
         ``exp(-m·r/2) · Π√τ / (4πr)`` per band at the fractional delay ``r/c`` (``τ``: energy
         transmission coefficient of each surface crossed, so ``√τ`` in pressure). A path
-        through an opaque surface (``τ = 0`` in every band) yields no arrival. Diffraction
-        around the occluder is not modelled.
+        through an opaque surface (``τ = 0`` in every band) yields no arrival; the sound
+        bent round the occluder's edges is
+        :func:`~sonicspec.acoustics.edge_paths.diffracted_sound`'s.
     """
     source = check_points("source", source)
     if len(source) != 1:

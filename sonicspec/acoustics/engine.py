@@ -34,6 +34,8 @@ from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
 from sonicspec.acoustics.direct import direct_sound
+from sonicspec.acoustics.edge_paths import close_pairs, diffracted_sound
+from sonicspec.acoustics.edges import DiffractingEdges, diffracting_edges
 from sonicspec.acoustics.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.metrics import (
     RoomAcousticFigures,
@@ -60,12 +62,14 @@ __all__ = [
     "acoustic_scene",
     "check_inside",
     "check_receiver",
+    "diffraction_arrivals",
     "early_part",
     "late_envelope",
     "load_hrirs",
     "ray_trace_settings",
     "receiver_renderer",
     "rir_results",
+    "scene_edges",
     "simulate_rirs",
     "traced_geometry",
     "warn_cut_tails",
@@ -109,6 +113,8 @@ class SimulationSettings:
     roulette_db: float = 0.0
     horizontal_guiding: float = 0.0
     simplify_tolerance_m: float = 0.0
+    diffraction: bool = False
+    diffraction_max_edges: int = 256
     max_rir_cap_s: float = 10.0
 
     def __post_init__(self) -> None:
@@ -269,20 +275,23 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     where : str
         What the cap warning calls the scene (``"scene 'flat'"``).
     keep_arrivals : bool
-        Add each RIR's exact early arrivals (:class:`Arrivals`, as rendered into it) to its
-        facts as ``"early_arrivals"``: a moving source's paths are rendered from them
-        (:class:`~sonicspec.acoustics.moving.PathSet`), its late part is the RIR less
-        :func:`early_part`. Mono receivers only.
+        Add each RIR's direct sound and image-source arrivals (:class:`Arrivals`, as rendered
+        into it) to its facts as ``"early_arrivals"``: a moving source's paths are rendered
+        from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late part is the RIR
+        less :func:`early_part` (edge-diffracted paths, which bend at an edge and so have no
+        fixed image, stay in the late part). Mono receivers only.
 
     Returns
     -------
     rirs : list of (channels, samples) float32 arrays
         One per source position.
     facts : list of dict
-        Per position: ``arrivals`` (early arrivals: direct sound and image sources),
-        ``direct`` (``"visible"``, ``"through walls"`` or ``"blocked"``),
-        ``image_source_order`` (completed), ``escaped_ray_fraction``, ``tail`` (how the
-        length was chosen: :meth:`~sonicspec.acoustics.tails.TailReport.to_dict`).
+        Per position: ``arrivals`` (early arrivals: direct sound, image sources and
+        diffracted paths), ``direct`` (``"visible"``, ``"through walls"``, ``"diffracted"``:
+        out of sight and heard round edges, or ``"blocked"``), ``diffracted_paths`` (with
+        diffraction on), ``image_source_order`` (completed), ``escaped_ray_fraction``,
+        ``tail`` (how the length was chosen:
+        :meth:`~sonicspec.acoustics.tails.TailReport.to_dict`).
 
     Warns
     -----
@@ -312,32 +321,59 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    diffracted = diffraction_arrivals(scene, mic, points, settings, regions)
     render = receiver_renderer(microphone, settings, hrirs)
     rirs, facts, reports = [], [], []
     for k in range(len(points)):
         if microphone["kind"] == "mono":
-            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k], diffracted[k]])
         else:  # the same paths, traced towards the mic: directions of arrival at the mic
             (d,) = direct_sound(scene, points[k], mic[None], air, c)
             early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
                                   max_path_length_m=c * settings.rir_limit_s)
-            arrivals = Arrivals.concatenate([d, early.arrivals[0]])
+            arrivals = Arrivals.concatenate([d, early.arrivals[0], diffracted[k]])
         late, report = late_envelope(traces[k].histogram, settings)
         reports.append(report)
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
-            "through walls" if len(direct[k]) else "blocked")
+            "through walls" if len(direct[k]) else
+            "diffracted" if len(diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": ism.max_order,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction,
                       "tail": report.to_dict()})
+        if settings.diffraction:
+            facts[-1]["diffracted_paths"] = len(diffracted[k])
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
-        if keep_arrivals:
-            facts[-1]["early_arrivals"] = arrivals
+        if keep_arrivals:  # diffracted paths bend at an edge: no fixed image, left in the late
+            facts[-1]["early_arrivals"] = Arrivals.concatenate([direct[k], ism.arrivals[k]])
     warn_cut_tails(reports, where)
     return rirs, facts
+
+
+def scene_edges(scene: AcousticScene, max_edges: int) -> DiffractingEdges:
+    """The traced scene's diffracting edges, the longest ``max_edges`` (memoized per scene)."""
+    return scene.memoized(f"diffracting_edges:{max_edges}", lambda: diffracting_edges(
+        scene.vertices, scene.faces, scene.normals, max_edges=max_edges))
+
+
+def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                         settings: SimulationSettings, regions=None) -> list[Arrivals]:
+    """Edge-diffracted arrivals from every source position at the microphone (empty ones
+    when ``settings.diffraction`` is off): over one edge, two edges, and one edge with a
+    reflection (:mod:`~sonicspec.acoustics.edge_paths`), directions of arrival at the
+    microphone."""
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    if not settings.diffraction:
+        return [Arrivals.empty(scene.n_bands) for _ in points]
+    edges = scene_edges(scene, settings.diffraction_max_edges)
+    pairs = scene.memoized(f"diffracting_edge_pairs:{settings.diffraction_max_edges}",
+                           lambda: close_pairs(edges))
+    return diffracted_sound(scene, edges, points, np.asarray(mic_m, dtype=np.float64),
+                            settings.bands_hz, settings.air(), settings.speed_of_sound_m_s,
+                            regions=regions, pairs=pairs)
 
 
 def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int) -> np.ndarray:
@@ -392,9 +428,11 @@ class RirResult:
     source_m, mic_m : tuple of float
         The positions, metres.
     arrivals : int
-        Early arrivals rendered exactly: the direct sound and the image sources.
-    direct : {"visible", "through walls", "blocked"}
-        The direct path: in sight, heard through transmitting surfaces, or absent.
+        Early arrivals rendered exactly: the direct sound, the image sources and the
+        edge-diffracted paths.
+    direct : {"visible", "through walls", "diffracted", "blocked"}
+        The direct path: in sight, heard through transmitting surfaces, heard round edges
+        (out of sight, with ``acoustics.diffraction``), or absent.
     image_source_order : int
         The image-source order completed (lower than asked when a scene has too many).
     escaped_ray_fraction : float
@@ -409,6 +447,8 @@ class RirResult:
         the rule (``auto`` or ``fixed``), the longest RIR allowed, per band when the decay
         is 60 dB down, where a fitted continuation starts (the rays ran out before), and the
         level a cut band reached at the limit.
+    diffracted_paths : int
+        Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
     """
 
     rir: np.ndarray
@@ -423,6 +463,7 @@ class RirResult:
     expected: dict[str, Any]
     traced_faces: int
     tail: dict[str, Any] = field(default_factory=dict)
+    diffracted_paths: int = 0
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -467,7 +508,8 @@ class RirResult:
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
-                "traced_triangles": self.traced_faces, "figures": self.figures.to_dict(),
+                "traced_triangles": self.traced_faces, "diffracted_paths": self.diffracted_paths,
+                "figures": self.figures.to_dict(),
                 "length_s": self.rir.shape[-1] / self.sample_rate_hz, "tail": self.tail}
 
 
@@ -496,7 +538,8 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       arrivals=f["arrivals"], direct=f["direct"],
                       image_source_order=f["image_source_order"],
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
-                      traced_faces=scene.n_faces, tail=f["tail"])
+                      traced_faces=scene.n_faces, tail=f["tail"],
+                      diffracted_paths=f.get("diffracted_paths", 0))
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 

@@ -100,7 +100,8 @@ Model (every approximation is listed here)
   per fixed batch of rays); batches may run on a thread pool but their histograms are summed
   in batch order, so the bytes of the result depend only on the inputs and the generator's
   state, never on the thread count.
-* **Not modelled**: diffraction (occluded paths get no bent sound), angle-dependent
+* **Not modelled**: diffraction in the traced late field (the engine adds the early
+  edge-diffracted paths, :mod:`sonicspec.acoustics.edge_paths`), angle-dependent
   absorption, diffuse (scattered) transmission, phase/interference (energy only; the image
   sources carry the coherent early part), and surfaces thinner than ``AcousticScene.eps_m``.
 """

@@ -68,9 +68,18 @@ class AcousticsSpec(SpecModel):
         True, description="Let sound pass through surfaces by their transmission coefficient."
     )
     diffraction: bool = Field(
-        False,
-        description="Add edge-diffracted sound around occluders (not yet supported: "
-        "must be false).",
+        True,
+        description="Add edge-diffracted sound (UTD, first and second order, and one edge "
+        "with one reflection) round the diffracting edges of the traced mesh: the sound of a "
+        "source out of sight, and the wave that keeps the level continuous at every shadow "
+        "boundary. Costs about +20 % per RIR in a furnished apartment.",
+    )
+    diffraction_max_edges: int = Field(
+        256,
+        ge=0,
+        le=100_000,
+        description="Edge budget of diffraction: at most this many diffracting edges, the "
+        "longest, are used (a scan can have thousands of creases).",
     )
     detection: Literal["diffuse_rain", "receiver_volume"] = Field(
         "diffuse_rain",

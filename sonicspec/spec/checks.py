@@ -479,11 +479,6 @@ def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:
                 )
         if len(set(a.bands_hz)) != len(a.bands_hz):
             yield _err(("acoustics", "bands_hz"), "bands are listed more than once")
-    if a.diffraction:
-        yield _err(
-            ("acoustics", "diffraction"),
-            "edge diffraction is not supported by this version's tracer; set it to false",
-        )
     if a.rays < MIN_RAYS_WITHOUT_WARNING:
         yield _warn(
             ("acoustics", "rays"),

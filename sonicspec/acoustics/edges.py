@@ -1,0 +1,218 @@
+"""The diffracting edges of a triangle mesh: wedges that stick out into the air.
+
+An edge between two faces diffracts when the air around it spans more than a half turn
+(``θ_w > π``: a box's corners seen from the room, a door jamb, a wall's end); a concave crease
+(``θ_w < π``, a room's corners) does not (its sound is the reflections'), and a flat one
+(``θ_w = π``) diffracts nothing (``sin(π/n) = 0``). An edge with one face is the free rim of a
+thin sheet, a half-plane (``θ_w = 2π``). Edges bent by less than :data:`MIN_TURN_DEG` are left
+out: on a scan they are the surface's noise, and their diffraction is weak (UTD's coefficient
+carries ``sin(π/n)``, ``n = θ_w/π``, which vanishes as the wedge flattens).
+
+Segments that continue one another (collinear, same two planes) are merged into one edge, so a
+wall cut into many triangles still has one edge per corner. A scan may have thousands of
+creases: ``max_edges`` keeps the longest (the budget the RIR stage passes), and the result says
+how many were found.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sonicspec.errors import AcousticsError
+
+__all__ = ["MIN_TURN_DEG", "DiffractingEdges", "diffracting_edges"]
+
+#: Smallest turn of the surface (θ_w − π, degrees) that counts as a diffracting edge.
+MIN_TURN_DEG = 15.0
+_PARALLEL_COS = math.cos(math.radians(0.5))
+
+
+@dataclass(frozen=True, eq=False)
+class DiffractingEdges:
+    """Finite straight edges, each a wedge in the convention of ``theory.Wedge``.
+
+    Attributes
+    ----------
+    start, end : (m, 3) float
+        End points, metres; ``end − start`` is along ``direction``.
+    direction : (m, 3) float
+        Unit edge direction ``e``; face 1 is face 0 turned by ``open_angle`` about ``e``.
+    face0 : (m, 3) float
+        Unit vector from the edge into face 0, perpendicular to the edge.
+    open_angle : (m,) float
+        Air angle θ_w, radians, in (π, 2π].
+    faces : (m, 2) int
+        A mesh face on side 0 and on side 1 (−1 for a half-plane's missing second face): the
+        materials of the edge.
+    n_found : int
+        Diffracting edges found before the ``max_edges`` budget.
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    direction: np.ndarray
+    face0: np.ndarray
+    open_angle: np.ndarray
+    faces: np.ndarray
+    n_found: int
+
+    def __len__(self) -> int:
+        return len(self.open_angle)
+
+    @property
+    def length_m(self) -> np.ndarray:
+        return np.linalg.norm(self.end - self.start, axis=1)
+
+
+def _empty(n_found: int = 0) -> DiffractingEdges:
+    z3 = np.zeros((0, 3))
+    return DiffractingEdges(z3, z3, z3, z3, np.zeros(0), np.zeros((0, 2), np.int64), n_found)
+
+
+def diffracting_edges(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, *,
+                      max_edges: int | None = None, min_turn_deg: float = MIN_TURN_DEG,
+                      min_length_m: float = 0.0) -> DiffractingEdges:
+    """Find the diffracting edges of a mesh whose face normals point into the air.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Vertex positions, metres.
+    faces : (F, 3) int
+        Triangles.
+    normals : (F, 3) float
+        Unit normals into the air (``AcousticScene.normals``).
+    max_edges : int, optional
+        Keep at most this many edges, the longest; None keeps all.
+    min_turn_deg : float
+        Smallest ``θ_w − 180°`` that diffracts.
+    min_length_m : float
+        Merged edges shorter than this are dropped (a scan's crumbs).
+
+    Returns
+    -------
+    DiffractingEdges
+        Longest first. Edges with more than two faces (non-manifold) are skipped.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    normals = np.asarray(normals, dtype=np.float64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or normals.shape != faces.shape:
+        raise AcousticsError(f"faces/normals: expected (F, 3) arrays of equal shape, got "
+                             f"{faces.shape} and {normals.shape}")
+    if max_edges is not None and (not isinstance(max_edges, int) or max_edges < 0):
+        raise AcousticsError(f"max_edges: expected an integer >= 0 or None, got {max_edges!r}")
+    if not (0 < min_turn_deg < 180):
+        raise AcousticsError(f"min_turn_deg: expected a value in (0, 180), got {min_turn_deg}")
+    if len(faces) == 0:
+        return _empty()
+
+    # Every face's three edges as sorted vertex pairs, with the face and its opposite vertex.
+    pairs = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    opposite = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    owner = np.tile(np.arange(len(faces)), 3)
+    key = np.sort(pairs, axis=1)
+    uniq, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    order = np.argsort(inverse, kind="stable")
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+
+    a, b = vertices[uniq[:, 0]], vertices[uniq[:, 1]]
+    axis = b - a
+    length = np.linalg.norm(axis, axis=1)
+    ok = length > 0
+    axis = axis / np.where(ok, length, 1.0)[:, None]
+
+    def inward(slot: np.ndarray, edge: np.ndarray) -> np.ndarray:
+        """Unit vector from the edge into the face, perpendicular to the edge."""
+        d = vertices[opposite[slot]] - a[edge]
+        d = d - np.einsum("ij,ij->i", d, axis[edge])[:, None] * axis[edge]
+        return d / np.linalg.norm(d, axis=1)[:, None]
+
+    # Two faces: the air angle from the two inward directions and the normals.
+    two = np.flatnonzero((counts == 2) & ok)
+    fa_slot, fb_slot = order[first[two]], order[first[two] + 1]
+    ta, tb = inward(fa_slot, two), inward(fb_slot, two)
+    na, nb = normals[owner[fa_slot]], normals[owner[fb_slot]]
+    between = np.arccos(np.clip(np.einsum("ij,ij->i", ta, tb), -1, 1))
+    # Face B behind face A's air side: the solid is the narrow side, the air the wide one.
+    convex = np.einsum("ij,ij->i", tb, na) < 0
+    open_two = np.where(convex, 2 * math.pi - between, between)
+    # Both faces must see the same air (consistent normals): B's normal, turned into A's
+    # frame, points into the same region.
+    consistent = np.einsum("ij,ij->i", ta, nb) < 1e-9 if len(two) else np.zeros(0, bool)
+    keep = convex & consistent & (open_two > math.pi + math.radians(min_turn_deg))
+    two, ta, na, fa_slot, fb_slot, open_two = (
+        two[keep], ta[keep], na[keep], fa_slot[keep], fb_slot[keep], open_two[keep])
+
+    # One face: the rim of a sheet, a half-plane.
+    one = np.flatnonzero((counts == 1) & ok)
+    one_slot = order[first[one]]
+    t1, n1 = inward(one_slot, one), normals[owner[one_slot]]
+
+    edge_ids = np.concatenate([two, one])
+    t0 = np.concatenate([ta, t1])
+    n0 = np.concatenate([na, n1])
+    tw = np.concatenate([open_two, np.full(len(one), 2 * math.pi)])
+    face_pair = np.column_stack([
+        np.concatenate([owner[fa_slot], owner[one_slot]]),
+        np.concatenate([owner[fb_slot], np.full(len(one), -1)])])
+    if len(edge_ids) == 0:
+        return _empty()
+    # θ grows from face 0 into the air: e = t0 × n0.
+    e = np.cross(t0, n0)
+    e /= np.linalg.norm(e, axis=1)[:, None]
+    p0, p1 = a[edge_ids], b[edge_ids]
+    flip = np.einsum("ij,ij->i", p1 - p0, e) < 0
+    p0, p1 = np.where(flip[:, None], p1, p0), np.where(flip[:, None], p0, p1)
+
+    groups = _merge_collinear(uniq[edge_ids], p0, e, t0, tw)
+    out_start, out_end, out_e, out_t, out_tw, out_faces = [], [], [], [], [], []
+    for members in groups:
+        m0 = members[0]
+        s = np.einsum("ij,j->i", np.concatenate([p0[members], p1[members]]) - p0[m0], e[m0])
+        out_start.append(p0[m0] + s.min() * e[m0])
+        out_end.append(p0[m0] + s.max() * e[m0])
+        out_e.append(e[m0])
+        out_t.append(t0[m0])
+        out_tw.append(tw[m0])
+        out_faces.append(face_pair[m0])
+    start, end = np.array(out_start), np.array(out_end)
+    lengths = np.linalg.norm(end - start, axis=1)
+    keep = np.flatnonzero(lengths >= min_length_m)
+    keep = keep[np.argsort(-lengths[keep], kind="stable")]
+    n_found = len(keep)
+    if max_edges is not None:
+        keep = keep[:max_edges]
+    return DiffractingEdges(start[keep], end[keep], np.array(out_e)[keep], np.array(out_t)[keep],
+                            np.array(out_tw)[keep], np.array(out_faces, np.int64)[keep], n_found)
+
+
+def _merge_collinear(pairs: np.ndarray, p0: np.ndarray, e: np.ndarray, t0: np.ndarray,
+                     tw: np.ndarray) -> list[np.ndarray]:
+    """Groups of segments that share a vertex, lie on one line and join the same two planes."""
+    n = len(pairs)
+    parent = np.arange(n)
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    by_vertex: dict[int, list[int]] = {}
+    for i, (u, v) in enumerate(pairs.tolist()):
+        by_vertex.setdefault(u, []).append(i)
+        by_vertex.setdefault(v, []).append(i)
+    for members in by_vertex.values():
+        for x in range(len(members)):
+            for y in range(x + 1, len(members)):
+                i, j = members[x], members[y]
+                if (np.dot(e[i], e[j]) > _PARALLEL_COS and np.dot(t0[i], t0[j]) > _PARALLEL_COS
+                        and abs(tw[i] - tw[j]) < 1e-3):
+                    parent[find(i)] = find(j)
+    roots = np.array([find(i) for i in range(n)])
+    return [np.flatnonzero(roots == r) for r in np.unique(roots)]
