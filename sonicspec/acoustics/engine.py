@@ -275,11 +275,14 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     where : str
         What the cap warning calls the scene (``"scene 'flat'"``).
     keep_arrivals : bool
-        Add each RIR's direct sound and image-source arrivals (:class:`Arrivals`, as rendered
-        into it) to its facts as ``"early_arrivals"``: a moving source's paths are rendered
-        from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late part is the RIR
-        less :func:`early_part` (edge-diffracted paths, which bend at an edge and so have no
-        fixed image, stay in the late part). Mono receivers only.
+        Add each RIR's direct sound and image-source arrivals to its facts: as traced from
+        the microphone (``"early_arrivals"``, directions at the source point: where each
+        path's image of the microphone is) and towards it (``"early_arrivals_at_mic"``,
+        directions of arrival at the microphone, as rendered into the RIR). A moving source's
+        paths are rendered from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late
+        part is the RIR less :func:`early_part` of the latter (edge-diffracted paths, which
+        bend at an edge and so have no fixed image, stay in the late part). Receivers of
+        :data:`PATH_RECEIVERS`.
 
     Returns
     -------
@@ -307,9 +310,10 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     """
     microphone = microphone or MONO
     check_receiver(microphone, hrirs)
-    if keep_arrivals and microphone["kind"] != "mono":
+    if keep_arrivals and microphone["kind"] not in PATH_RECEIVERS:
         raise AcousticsError(f"keep_arrivals: the early paths of a moving source are rendered "
-                             f"for mono receivers only, got {microphone['kind']!r}")
+                             f"for {', '.join(PATH_RECEIVERS)} receivers, got "
+                             f"{microphone['kind']!r}")
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
@@ -349,6 +353,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
         if keep_arrivals:  # diffracted paths bend at an edge: no fixed image, left in the late
             facts[-1]["early_arrivals"] = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+            facts[-1]["early_arrivals_at_mic"] = (
+                facts[-1]["early_arrivals"] if microphone["kind"] == "mono"
+                else Arrivals.concatenate([d, early.arrivals[0]]))
     warn_cut_tails(reports, where)
     return rirs, facts
 
@@ -376,12 +383,25 @@ def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.
                             regions=regions, pairs=pairs)
 
 
-def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int) -> np.ndarray:
-    """The exact early part a mono RIR of ``n_samples`` holds (its ``arrivals`` synthesised
-    as :func:`~sonicspec.acoustics.synthesis.synthesize_rir` does), float64: the RIR less
-    this is its late, ray-traced part."""
+def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
+               microphone: Mapping[str, Any] = MONO) -> np.ndarray:
+    """The exact early part an RIR of ``n_samples`` holds, ``(channels, n_samples)`` float64:
+    its ``arrivals`` (directions of arrival at the microphone) synthesised as the receiver's
+    renderer does. The RIR less this is its late, ray-traced part. Receivers of
+    :data:`PATH_RECEIVERS`."""
+    from sonicspec.acoustics.receivers import ambisonic_early, array_early
+
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
-    return synthesize_early(arrivals, bank, n_samples)
+    kind = microphone["kind"]
+    if kind == "mono":
+        return synthesize_early(arrivals, bank, n_samples)[None, :]
+    if kind == "ambisonics":
+        return ambisonic_early(arrivals, microphone["order"], bank, n_samples)
+    if kind in PATH_RECEIVERS:
+        return array_early(arrivals, array_offsets(microphone), bank, n_samples,
+                           settings.speed_of_sound_m_s)
+    raise AcousticsError(f"microphone.kind: the early part of {kind!r} receivers is not "
+                         f"separated (expected one of {', '.join(PATH_RECEIVERS)})")
 
 
 # --- where a RIR ends (issue 19): kept apart from the paths above ----------------------------
@@ -551,7 +571,6 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
     """A function ``(arrivals, late histogram, rng) -> (channels, samples)`` for the
     receiver kind of ``microphone`` (the spec's microphone fields)."""
     from sonicspec.acoustics.receivers import (
-        capsule_offsets,
         synthesize_ambisonic_rir,
         synthesize_array_rir,
     )
@@ -581,12 +600,24 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
         return lambda a, h, rng: synthesize_sphere_binaural_rir(
             a, h, head, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **orientation,
             **common)
-    offsets = capsule_offsets(
-        kind, n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
-        radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
-        yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
+    offsets = array_offsets(microphone)
     return lambda a, h, rng: synthesize_array_rir(
         a, h, offsets, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **common)
+
+
+def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
+    """Where an array microphone's capsules are, ``(M, 3)`` offsets from its centre in the
+    scene's frame, metres."""
+    from sonicspec.acoustics.receivers import capsule_offsets
+
+    return capsule_offsets(
+        microphone["kind"], n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
+        radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
+        yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
+
+
+PATH_RECEIVERS = ("mono", "linear_array", "circular_array", "custom", "ambisonics")
+"""Receivers whose early paths a moving source's renderer follows (``keep_arrivals``)."""
 
 
 RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",

@@ -23,10 +23,12 @@ margin at half the cost of ±16.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
+from sonicspec.acoustics._moving_kernels import TABLE_STEPS, accumulate_path
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
@@ -38,7 +40,8 @@ KAISER_BETA = 6.0
 
 def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
                 speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, gain=1.0, n_out: int | None = None,
-                half_width: int = HALF_WIDTH, beta: float = KAISER_BETA) -> np.ndarray:
+                half_width: int = HALF_WIDTH, beta: float = KAISER_BETA,
+                extra_delay_s=None) -> np.ndarray:
     """One propagation path of a moving source to a (moving) receiver, ``(n_out,)``.
 
     Parameters
@@ -59,6 +62,8 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
         Output length; default: up to the last arrival.
     half_width, beta : int, float
         The windowed sinc's half width (taps each side) and Kaiser β.
+    extra_delay_s : (n,) float, optional
+        Added to each emission's travel time (an array capsule's plane-wave offset).
     """
     s = np.asarray(dry, dtype=np.float64)
     if s.ndim != 1 or s.size < 2:
@@ -67,24 +72,28 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     t_a, r = moving_arrival_times(source_m, receiver_m, s.size, fs, speed_of_sound_m_s)
     if np.any(r <= 0):
         raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
+    if extra_delay_s is not None:
+        t_a = t_a + np.asarray(extra_delay_s, dtype=np.float64)
     tau = t_a * fs  # arrival of each emission, output samples (increasing)
     if n_out is None:
         n_out = int(np.ceil(tau[-1])) + half_width + 1
-    j = np.arange(n_out, dtype=np.float64)
-    k = np.arange(s.size, dtype=np.float64)
-    u = np.interp(j, tau, k)  # emission index heard at each output sample
-    density = np.interp(j, tau, 1.0 / np.gradient(tau))
     amp = np.broadcast_to(np.asarray(gain, dtype=np.float64), s.shape) / (4 * np.pi * r)
-    acc = np.zeros(n_out)
-    base = np.floor(u).astype(np.int64)
-    for offset in range(-half_width + 1, half_width + 1):
-        m = base + offset
-        ok = (m >= 0) & (m < s.size)
-        acc[ok] += s[m[ok]] * windowed_sinc(u[ok] - m[ok], half_width, beta)
-    # Before the first arrival and after the last the path is silent (u is clamped there;
-    # the sinc's own reach covers the edges).
-    heard = (j >= tau[0] - half_width) & (j <= tau[-1] + half_width)
-    return np.where(heard, acc * np.interp(u, k, amp) * density, 0.0)
+    out = np.zeros(n_out)
+    # Before the first arrival and after the last the path is silent (the sinc's own reach
+    # covers the edges).
+    accumulate_path(s, tau, 1.0 / np.gradient(tau), np.ascontiguousarray(amp),
+                    _sinc_table(half_width, beta), half_width, out)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _sinc_table(half_width: int, beta: float) -> np.ndarray:
+    """The windowed sinc on ``[-half, half]`` at ``TABLE_STEPS`` points per sample (and one
+    zero beyond, so the kernel's linear interpolation may read past the end)."""
+    x = np.arange(2 * half_width * TABLE_STEPS + 2) / TABLE_STEPS - half_width
+    table = windowed_sinc(x, half_width, beta)
+    table.setflags(write=False)
+    return table
 
 
 # --------------------------------------------------------------------------- a source's paths
@@ -115,18 +124,24 @@ class PathSet:
     images_m: np.ndarray
     weights: np.ndarray
     order: np.ndarray
+    directions: np.ndarray | None = None
+    """(K, N, 3): each path's direction of arrival at the microphone at each point (zero
+    where the path is not valid); for directional receivers."""
 
     def __len__(self) -> int:
         return int(self.images_m.shape[0])
 
     @staticmethod
-    def identify(points_m, arrivals: list[Arrivals], *, tolerance_m: float = 1e-4) -> PathSet:
+    def identify(points_m, arrivals: list[Arrivals], *, tolerance_m: float = 1e-4,
+                 at_mic: list[Arrivals] | None = None) -> PathSet:
         """The paths of ``arrivals[j]`` (the early arrivals at ``points_m[j]``, directions
         pointing to the apparent source, as the engine gives them) matched across points.
 
         Two arrivals belong to one path when their images lie within ``tolerance_m`` (images
         of distinct paths are at least twice a wall's distance to the microphone apart;
-        rounding errors are ~1e-12 m).
+        rounding errors are ~1e-12 m). ``at_mic[j]``: the same paths traced towards the
+        microphone (directions of arrival there), paired by :func:`matched_paths`, for
+        :attr:`directions` (zero where a path grazing an edge was found from one end only).
         """
         points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
         if len(arrivals) != len(points):
@@ -136,30 +151,70 @@ class PathSet:
         index: dict[tuple[int, int, int], int] = {}
         images: list[np.ndarray] = []
         orders: list[int] = []
-        entries: list[tuple[int, int, np.ndarray]] = []
+        entries: list[tuple[int, int, np.ndarray, np.ndarray | None]] = []
         for j, (p, a) in enumerate(zip(points, arrivals, strict=True)):
             where = p[None, :] + a.directions * a.path_length_m[:, None]
             factor = a.amplitudes * (4 * np.pi * a.path_length_m[:, None])
+            pairs = dict(zip(*matched_paths(a, at_mic[j], tolerance_m), strict=True)
+                         ) if at_mic is not None else None
             for i in range(len(a)):
                 key = tuple(np.round(where[i] / tolerance_m).astype(np.int64).tolist())
                 if key not in index:
                     index[key] = len(images)
                     images.append(where[i])
                     orders.append(int(a.order[i]))
-                entries.append((index[key], j, factor[i]))
+                direction = None
+                if pairs is not None and i in pairs:  # else zero: read from a neighbour
+                    direction = at_mic[j].directions[pairs[i]]
+                entries.append((index[key], j, factor[i], direction))
         weights = np.zeros((len(images), len(points), bands))
-        for k, j, factor in entries:
+        directions = None if at_mic is None else np.zeros((len(images), len(points), 3))
+        for k, j, factor, direction in entries:
             weights[k, j] += factor
+            if direction is not None:
+                directions[k, j] = direction
         return PathSet(np.asarray(images).reshape(-1, 3), weights,
-                       np.asarray(orders, dtype=np.int64))
+                       np.asarray(orders, dtype=np.int64), directions)
 
     def select(self, keep: np.ndarray) -> PathSet:
-        return PathSet(self.images_m[keep], self.weights[keep], self.order[keep])
+        return PathSet(self.images_m[keep], self.weights[keep], self.order[keep],
+                       None if self.directions is None else self.directions[keep])
+
+    def with_weights(self, weights: np.ndarray) -> PathSet:
+        return PathSet(self.images_m, weights, self.order, self.directions)
+
+
+def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-4
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(i, m)`` pairing the arrivals traced from the microphone with the same paths
+    traced towards it (equal length within ``tolerance_m`` and equal order). The two image
+    searches agree but for paths that graze an edge, which one side may count and the other
+    not; paths of equal length and order (two images equidistant from the point) cannot be
+    told apart by these: both are left unpaired."""
+    pairs_i, pairs_m = [], []
+    for i in range(len(from_mic)):
+        same = np.flatnonzero((np.abs(at_mic.path_length_m - from_mic.path_length_m[i])
+                               <= tolerance_m) & (at_mic.order == from_mic.order[i]))
+        rivals = np.flatnonzero((np.abs(from_mic.path_length_m - from_mic.path_length_m[i])
+                                 <= tolerance_m) & (from_mic.order == from_mic.order[i]))
+        if same.size == 1 and rivals.size == 1:  # two paths as long as each other: ambiguous
+            pairs_i.append(i)
+            pairs_m.append(int(same[0]))
+    return np.asarray(pairs_i, dtype=np.int64), np.asarray(pairs_m, dtype=np.int64)
+
+
+def subset(arrivals: Arrivals, keep: np.ndarray) -> Arrivals:
+    """The arrivals at indices ``keep``."""
+    return Arrivals(arrivals.times_s[keep], arrivals.amplitudes[keep],
+                    arrivals.directions[keep], arrivals.order[keep], arrivals.kind[keep],
+                    arrivals.path_length_m[keep])
 
 
 def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
-                 speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
-    """The early part heard from a source walking through its RIR points, ``(n_out,)``.
+                 speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                 receiver: Receiver | None = None) -> np.ndarray:
+    """The early part heard from a source walking through its RIR points, ``(channels,
+    n_out)``.
 
     Every path of ``paths`` is rendered by :func:`render_path` from the source's position at
     each emission (``points_m`` read at the fractional ``point_index`` of each dry sample) to
@@ -167,6 +222,13 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     are exact at every sample. Its band factors are read at the same fractional index (a
     path that becomes invalid between two points fades over that stretch) and applied to the
     dry signal's octave bands (``bank.split``, which sums back to the signal) at emission.
+    A directional ``receiver`` needs each path's direction of arrival at the microphone: from
+    the path's mirrors (:func:`_image_map`: the direction from the image to the source,
+    mapped back, exact at every emission), or where those cannot be told from the data (a
+    static source's paths of order >= 2) interpolated between the points
+    (``paths.directions``). Ambisonic channels weight the path by their spherical harmonics;
+    array capsules hear it from their own image (the capsule's offset mapped by the mirrors),
+    or with the plane-wave lead ``d · p / c`` the array's RIRs use.
 
     Parameters
     ----------
@@ -175,22 +237,29 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         Fractional index into ``points_m`` of the source at each dry sample.
     points_m : (N, 3) float
     paths : PathSet
-        Of these points (:meth:`PathSet.identify`).
+        Of these points (:meth:`PathSet.identify`; with ``at_mic`` for a directional
+        receiver).
     bank : OctaveFilterBank
         The bands of ``paths.weights`` (the RIRs' bands).
     n_out : int
         Output length.
+    receiver : Receiver, optional
+        Mono (default), ambisonics or an array.
     """
     s = np.asarray(dry, dtype=np.float64)
     index = np.asarray(point_index, dtype=np.float64)
     points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    receiver = receiver or Receiver()
     if index.shape != s.shape:
         raise AcousticsError(f"point_index: expected one index per dry sample {s.shape}, got "
                              f"{index.shape}")
     if paths.weights.shape[1:] != (len(points), bank.n_bands):
         raise AcousticsError(f"paths: expected weights for {len(points)} points and "
                              f"{bank.n_bands} bands, got {paths.weights.shape[1:]}")
-    out = np.zeros(n_out)
+    if receiver.kind != "mono" and paths.directions is None:
+        raise AcousticsError(f"paths: a {receiver.kind} receiver needs the paths' directions "
+                             "at the microphone (PathSet.identify(..., at_mic=...))")
+    out = np.zeros((receiver.channels, n_out))
     if len(paths) == 0 or not np.any(s):
         return out
     at = np.arange(len(points), dtype=np.float64)
@@ -204,10 +273,110 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         if not np.any(w):
             continue
         if static:
-            x = w[int(np.rint(index[0]))] @ band_dry
+            at_point = int(np.rint(index[0]))
+            x = w[at_point] @ band_dry
         else:  # band factors at each emission, linear between points
             x = ((w[lo].T * (1 - frac) + w[hi].T * frac) * band_dry).sum(axis=0)
         source = track[0] if static else track
-        out += render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
-                           speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out)
+
+        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k):
+            return render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
+                               speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out, gain=gain,
+                               extra_delay_s=extra_delay_s)
+
+        if receiver.kind == "mono":
+            out[0] += path()
+            continue
+        mirror = _image_map(paths, k, points, receiver.center_m)
+        if mirror is not None:  # exact: the direction the image sees the source in, mapped back
+            away = np.atleast_2d(source) - paths.images_m[k]
+            d = (away / np.linalg.norm(away, axis=1, keepdims=True)) @ mirror
+        else:
+            d = _directions_at(paths.directions[k], lo, hi, frac, static)
+        if receiver.kind == "ambisonics":
+            from sonicspec.acoustics.receivers import sh_sn3d
+
+            gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
+            for ch in range(receiver.channels):
+                out[ch] += path(gain=gains[:, ch] if not static else float(gains[0, ch]))
+        else:
+            for m, offset in enumerate(receiver.offsets_m):
+                if mirror is not None:  # the capsule's own image: exact
+                    out[m] += render_path(x, source, paths.images_m[k] + mirror @ offset,
+                                          bank.sample_rate_hz,
+                                          speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out)
+                else:
+                    lead = -(d @ offset) / speed_of_sound_m_s
+                    out[m] += path(extra_delay_s=np.broadcast_to(lead, s.shape))
     return out
+
+
+def _image_map(paths: PathSet, k: int, points: np.ndarray, center_m) -> np.ndarray | None:
+    """The linear part ``M`` of the isometry that maps the microphone to path ``k``'s image
+    (so a capsule at offset ``o`` has its image at ``image + M o``), or None where the data
+    do not fix it (then capsules take the plane-wave lead).
+
+    Order 0: the identity. Order 1: the mirror in the wall, whose normal joins the microphone
+    and its image. Higher orders: the orthogonal map with determinant ``(-1)^order`` taking
+    the directions of arrival at the microphone to the directions from the image to the
+    source points (Kabsch), when the points see the path from at least two directions.
+    """
+    order = int(paths.order[k])
+    image = paths.images_m[k]
+    if order == 0:
+        return np.eye(3)
+    if center_m is None:
+        return None
+    if order == 1:
+        normal = np.asarray(center_m, dtype=np.float64) - image
+        normal /= np.linalg.norm(normal)
+        return np.eye(3) - 2.0 * np.outer(normal, normal)
+    valid = np.any(paths.weights[k] > 0, axis=1) & np.any(paths.directions[k] != 0, axis=1)
+    e = paths.directions[k, valid]
+    u = points[valid] - image
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    if len(e) < 2 or np.linalg.matrix_rank(e, tol=1e-3) < 2:
+        return None
+    a, _, bt = np.linalg.svd(u.T @ e)
+    sign = np.sign(np.linalg.det(a @ bt)) * (-1) ** order
+    mirror = a @ np.diag([1.0, 1.0, sign]) @ bt
+    return mirror if np.max(np.abs(e @ mirror.T - u)) < 1e-6 else None
+
+
+@dataclass(frozen=True)
+class Receiver:
+    """What :func:`render_paths` renders for: ``mono``, ``ambisonics`` of ``order``, or an
+    ``array`` of omni capsules at ``offsets_m`` (``(M, 3)`` from the centre ``center_m``,
+    scene frame)."""
+
+    kind: str = "mono"
+    order: int = 0
+    offsets_m: np.ndarray | None = None
+    center_m: np.ndarray | None = None
+    """The microphone's position (the paths were traced from it): with it each path's
+    mirrors are known (:func:`_image_map`), so each capsule hears its own image and
+    directions of arrival are exact at every sample; without, directions are interpolated
+    between the points and capsules take the plane-wave lead ``d · p / c``."""
+
+    @property
+    def channels(self) -> int:
+        if self.kind == "ambisonics":
+            return (self.order + 1) ** 2
+        if self.kind == "array":
+            return len(self.offsets_m)
+        return 1
+
+
+def _directions_at(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, frac: np.ndarray,
+                   static: bool) -> np.ndarray:
+    """A path's direction of arrival at each emission, ``(T, 3)`` (``(1, 3)`` if static):
+    linear between points and normalised; where the path is not valid at one of the two
+    points (a zero direction), the other's."""
+    if static:
+        return directions[int(np.rint(lo[0]))][None, :]
+    a, b = directions[lo], directions[hi]
+    a = np.where(np.any(a, axis=1, keepdims=True), a, b)
+    b = np.where(np.any(b, axis=1, keepdims=True), b, a)
+    d = a * (1 - frac)[:, None] + b * frac[:, None]
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    return np.divide(d, norm, out=np.zeros_like(d), where=norm > 0)

@@ -109,6 +109,32 @@ def _scaled(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arri
                     arrivals.directions, arrivals.order, arrivals.kind, arrivals.path_length_m)
 
 
+def array_early(arrivals: Arrivals, offsets_m: np.ndarray, bank: OctaveFilterBank,
+                n_samples: int, speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """The early part of an array's RIRs, ``(M, n_samples)``: each arrival reaches capsule
+    ``p`` earlier by ``d · p / c`` (a plane wave from its direction ``d``)."""
+    offsets = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros((len(offsets), n_samples))
+    for m, p in enumerate(offsets):
+        delays = -(arrivals.directions @ p) / speed_of_sound_m_s
+        out[m] = synthesize_early(_scaled(arrivals, np.ones(len(arrivals)), delays), bank,
+                                  n_samples, taps)
+    return out
+
+
+def ambisonic_early(arrivals: Arrivals, order: int, bank: OctaveFilterBank, n_samples: int,
+                    taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """The early part of an ambisonic RIR, ``((order + 1)², n_samples)``, ACN/SN3D."""
+    gains = sh_sn3d(order, arrivals.directions) if len(arrivals) else np.zeros(
+        (0, (order + 1) ** 2))
+    out = np.zeros(((order + 1) ** 2, n_samples))
+    for ch in range(out.shape[0]):
+        out[ch] = synthesize_early(_scaled(arrivals, gains[:, ch], np.zeros(len(arrivals))),
+                                   bank, n_samples, taps)
+    return out
+
+
 def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
                          offsets_m: np.ndarray, sample_rate_hz: float,
                          rng: np.random.Generator, *,
@@ -121,11 +147,7 @@ def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
     reach = float(np.max(np.linalg.norm(offsets, axis=1))) / speed_of_sound_m_s
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s + reach, taps,
                            bank.padding() // 4)
-    out = np.zeros((len(offsets), n))
-    for m, p in enumerate(offsets):
-        delays = -(arrivals.directions @ p) / speed_of_sound_m_s
-        out[m] = synthesize_early(_scaled(arrivals, np.ones(len(arrivals)), delays), bank, n,
-                                  taps)
+    out = array_early(arrivals, offsets, bank, n, speed_of_sound_m_s, taps)
     if histogram is not None:
         tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in offsets])
         out += diffuse_coherence(tails, offsets, sample_rate_hz, speed_of_sound_m_s)
@@ -192,12 +214,8 @@ def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | No
     bank = OctaveFilterBank(sample_rate_hz, bands_hz)
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s, taps,
                            bank.padding() // 4)
-    gains = sh_sn3d(order, arrivals.directions) if len(arrivals) else np.zeros(
-        (0, (order + 1) ** 2))
-    out = np.zeros(((order + 1) ** 2, n))
+    out = ambisonic_early(arrivals, order, bank, n, taps)
     for ch in range(out.shape[0]):
-        out[ch] = synthesize_early(_scaled(arrivals, gains[:, ch], np.zeros(len(arrivals))),
-                                   bank, n, taps)
         if histogram is not None:
             degree = math.isqrt(ch)
             out[ch] += synthesize_late(histogram, bank, n, rng) / math.sqrt(2 * degree + 1)

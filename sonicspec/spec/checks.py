@@ -455,10 +455,10 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
     if m.interpolation == "paths":
-        if spec.microphone.kind != "mono":
+        if spec.microphone.kind == "binaural":
             yield _err(("mixture", "interpolation"),
-                       f"'paths' renders mono microphones in this version; microphone.kind is "
-                       f"{spec.microphone.kind!r} (use 'sample_crossfade')")
+                       "'paths' renders mono, array and ambisonic microphones in this "
+                       "version; microphone.kind is 'binaural' (use 'sample_crossfade')")
         elif not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
             yield _err(("mixture", "interpolation"),
                        "'paths' renders a static microphone in this version; "

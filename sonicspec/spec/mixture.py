@@ -121,10 +121,11 @@ class MixtureSpec(SpecModel):
         description="How a moving source is heard along its path. 'paths': the direct sound and "
         "every image-source reflection as a time-varying delay from where the source is at "
         "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
-        "between RIR points; mono microphones). Or the RIRs along the path are blended: "
-        "per-sample crossfade of neighbouring convolutions (SonicSet), STFT-domain "
-        "interpolation (DCASE/SpatialScaper), or one RIR per segment with overlap-added tails "
-        "(gpuRIR); blends comb-filter the direct sound (bench/bench_motion.py).",
+        "between RIR points; mono, array and ambisonic microphones). Or the RIRs along the "
+        "path are blended: per-sample crossfade of neighbouring convolutions (SonicSet), "
+        "STFT-domain interpolation (DCASE/SpatialScaper), or one RIR per segment with "
+        "overlap-added tails (gpuRIR); blends comb-filter the direct sound "
+        "(bench/bench_motion.py).",
     )
     targets: list[Literal["dry", "direct", "early"]] = Field(
         default_factory=list,

@@ -309,14 +309,22 @@ class MixData(_Data):
 
 
 def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
-    return {f"{prefix}_images": paths.images_m, f"{prefix}_weights": paths.weights,
-            f"{prefix}_order": paths.order}
+    """A source's :class:`~sonicspec.acoustics.moving.PathSet` as arrays ``<prefix>_images``,
+    ``_weights``, ``_order`` and, for directional receivers, ``_directions``."""
+    out = {f"{prefix}_images": paths.images_m, f"{prefix}_weights": paths.weights,
+           f"{prefix}_order": paths.order}
+    if paths.directions is not None:
+        out[f"{prefix}_directions"] = paths.directions
+    return out
 
 
 def read_path_set(arrays, prefix: str) -> PathSet:
+    """The :class:`~sonicspec.acoustics.moving.PathSet` :func:`path_set_arrays` stored."""
+    directions = arrays.get(f"{prefix}_directions")
     return PathSet(np.asarray(arrays[f"{prefix}_images"], dtype=np.float64),
                    np.asarray(arrays[f"{prefix}_weights"], dtype=np.float64),
-                   np.asarray(arrays[f"{prefix}_order"], dtype=np.int64))
+                   np.asarray(arrays[f"{prefix}_order"], dtype=np.int64),
+                   None if directions is None else np.asarray(directions, dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.moving import PathSet, render_paths
+from sonicspec.acoustics.engine import array_offsets
+from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
 from sonicspec.audio.arrange import Segment, assemble, speech_span
 from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import render_moving, split_rir, walk_index
@@ -76,7 +77,7 @@ def track_audio(track: ArrangedTrack, segments: list[Segment], cache: _AudioCach
 def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement,
                  mic_m: np.ndarray, params: RenderParams, cache: _AudioCache,
                  clip_samples: int, corpus_root: Path,
-                 paths: tuple[PathSet, np.ndarray, OctaveFilterBank] | None = None
+                 paths: tuple[PathSet, np.ndarray, OctaveFilterBank, Receiver] | None = None
                  ) -> dict[str, np.ndarray]:
     """``{"reverberant", "dry", and any targets}`` arrays of one track. ``paths``: the
     source's exact early paths, its late RIRs and their bands (``interpolation: paths``)."""
@@ -102,11 +103,12 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
                 if name in wanted:
                     out[name] = render_moving(dry, h, position, method)[:, :clip_samples]
     else:
-        found, late, bank = paths
+        found, late, bank, receiver = paths
 
         def heard(subset: PathSet) -> np.ndarray:
             return render_paths(dry, position, points, subset, bank, n_out=clip_samples,
-                                speed_of_sound_m_s=params.speed_of_sound_m_s)[None, :]
+                                speed_of_sound_m_s=params.speed_of_sound_m_s,
+                                receiver=receiver)
 
         tail = render_moving(dry, late, position, "sample_crossfade")[:, :clip_samples]
         out["reverberant"] = heard(found) + tail
@@ -121,6 +123,17 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
     return {k: v.astype(np.float32) for k, v in out.items()}
 
 
+def path_receiver(microphone, center_m) -> Receiver:
+    """The receiver :func:`render_paths` renders for a spec's microphone at ``center_m``."""
+    if microphone.kind == "ambisonics":
+        return Receiver("ambisonics", order=microphone.order,
+                        center_m=np.asarray(center_m, dtype=np.float64))
+    if microphone.kind == "mono":
+        return Receiver()
+    return Receiver("array", offsets_m=array_offsets(microphone.model_dump(mode="json")),
+                    center_m=np.asarray(center_m, dtype=np.float64))
+
+
 EARLY_MS = 50.0
 """The ``early`` target: what arrives within this long after the direct sound."""
 
@@ -131,7 +144,7 @@ def _within(paths: PathSet, points: np.ndarray, direct_s: np.ndarray, window_s: 
     sound (a path that crosses the limit between two points fades there)."""
     length = np.linalg.norm(points[None, :, :] - paths.images_m[:, None, :], axis=2)
     inside = (length / speed_of_sound_m_s - direct_s[None, :]) <= window_s
-    return PathSet(paths.images_m, paths.weights * inside[:, :, None], paths.order)
+    return paths.with_weights(paths.weights * inside[:, :, None])
 
 
 def run(ctx: JobContext) -> None:
@@ -143,6 +156,7 @@ def run(ctx: JobContext) -> None:
     cache = _AudioCache(params.sample_rate_hz)
     roots = corpus_roots(ctx)
     bank = OctaveFilterBank(rir.sample_rate_hz, tuple(rir.bands_hz))
+    microphone = ctx.input_params("rir").microphone
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -163,7 +177,7 @@ def run(ctx: JobContext) -> None:
                                      f"group {arr.group} {track.name} hold no early paths")
                 paths = (artifacts.read_path_set(rir_art.arrays, entry.paths),
                          np.asarray(rir_art.arrays[f"{entry.paths}_late"], dtype=np.float64),
-                         bank)
+                         bank, path_receiver(microphone, placement.mic_m))
             signals = render_track(track, rirs, placement.source(track.name), mic, params,
                                    cache, arr.clip_samples, roots[track.role], paths)
             keys = {}

@@ -209,12 +209,16 @@ def run(ctx) -> None:
             paths = None
             if params.early_paths:
                 paths = f"{key}_paths"
-                early = [f["early_arrivals"] for f in facts[start:start + len(pts)]]
-                arrays.update(artifacts.path_set_arrays(paths, PathSet.identify(pts, early)))
+                facts_s = facts[start:start + len(pts)]
+                from_mic = [f["early_arrivals"] for f in facts_s]
+                at_mic = [f["early_arrivals_at_mic"] for f in facts_s]
+                directional = microphone["kind"] != "mono"
+                arrays.update(artifacts.path_set_arrays(paths, PathSet.identify(
+                    pts, from_mic, at_mic=at_mic if directional else None)))
                 late = stack.astype(np.float64)
-                for i, a in enumerate(early):  # each as long as its own RIR was made
+                for i, early in enumerate(at_mic):  # each as long as its own RIR was made
                     n = block[i].shape[-1]
-                    late[i, 0, :n] -= early_part(a, settings, n)
+                    late[i, :, :n] -= early_part(early, settings, n, microphone)
                 arrays[f"{paths}_late"] = late.astype(np.float32)
             first = room_acoustic_figures(block[0][0], settings.sample_rate_hz,
                                           settings.bands_hz)
