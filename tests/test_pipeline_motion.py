@@ -103,3 +103,23 @@ def test_an_ambisonic_microphone_hears_the_walk_exactly_in_every_channel(tmp_pat
     # Channel 3 (X): the walk runs along x, so X swings from +1 to -1 through the line.
     snr, dips = _figures("paths", tmp_path / "foa", microphone="ambisonics", channel=3)
     assert snr >= 30 and dips["worst_db"] >= -1.0, (snr, dips)
+
+
+def test_a_sphere_head_hears_the_walk_on_its_right(tmp_path: Path) -> None:
+    # The walk runs at y = 3, the head at y = 4 faces +x: the source is on its right all
+    # along, so the right ear's direct stem is the louder, in every 0.5 s stretch.
+    folder = tmp_path / "head"
+    folder.mkdir()
+    (folder / "spec.yaml").write_text(SPEC.replace("METHOD", "paths").replace(
+        "microphone: {kind: mono,", "microphone: {kind: binaural,"))
+    assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) == 0
+    direct, fs = sf.read(folder / "out" / "train" / "000000" / "source1_direct.wav")
+    assert direct.shape[1] == 2
+    meta = json.loads((folder / "out" / "train" / "000000" / "metadata.json").read_text())
+    spans = meta["source1"]["start_end_points"]
+    ratios = []
+    for a in range(spans[0][0], spans[-1][1] - fs // 2, fs // 2):
+        left, right = (np.sum(direct[a:a + fs // 2, ear] ** 2) for ear in (0, 1))
+        ratios.append(right / left)
+    # Widest as the source passes the head's side at x = 6, least behind and ahead of it.
+    assert min(ratios) > 1.3 and max(ratios) > 2.5, ratios

@@ -310,7 +310,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     """
     microphone = microphone or MONO
     check_receiver(microphone, hrirs)
-    if keep_arrivals and microphone["kind"] not in PATH_RECEIVERS:
+    if keep_arrivals and (microphone["kind"] not in PATH_RECEIVERS or (
+            microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] != "sphere")):
         raise AcousticsError(f"keep_arrivals: the early paths of a moving source are rendered "
                              f"for {', '.join(PATH_RECEIVERS)} receivers, got "
                              f"{microphone['kind']!r}")
@@ -397,7 +398,14 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
         return synthesize_early(arrivals, bank, n_samples)[None, :]
     if kind == "ambisonics":
         return ambisonic_early(arrivals, microphone["order"], bank, n_samples)
-    if kind in PATH_RECEIVERS:
+    if kind == "binaural" and microphone["hrtf"]["kind"] == "sphere":
+        from sonicspec.acoustics.hrtf import sphere_binaural_early
+
+        return sphere_binaural_early(arrivals, sphere_head(microphone), bank, n_samples,
+                                     yaw_deg=microphone["yaw_deg"],
+                                     pitch_deg=microphone["pitch_deg"],
+                                     speed_of_sound_m_s=settings.speed_of_sound_m_s)
+    if kind in PATH_RECEIVERS and kind != "binaural":
         return array_early(arrivals, array_offsets(microphone), bank, n_samples,
                            settings.speed_of_sound_m_s)
     raise AcousticsError(f"microphone.kind: the early part of {kind!r} receivers is not "
@@ -585,7 +593,6 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
                                                           **common)
     if kind == "binaural":
         from sonicspec.acoustics.hrtf import (
-            SphereHead,
             synthesize_hrir_binaural_rir,
             synthesize_sphere_binaural_rir,
         )
@@ -595,8 +602,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
         if hrtf["kind"] == "sofa":
             return lambda a, h, rng: synthesize_hrir_binaural_rir(
                 a, h, hrirs, fs, rng, **orientation, **common)
-        head = SphereHead(head_radius_m=hrtf["head_radius_m"],
-                          ear_angle_deg=hrtf["ear_angle_deg"])
+        head = sphere_head(microphone)
         return lambda a, h, rng: synthesize_sphere_binaural_rir(
             a, h, head, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **orientation,
             **common)
@@ -616,8 +622,19 @@ def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
         yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
 
 
-PATH_RECEIVERS = ("mono", "linear_array", "circular_array", "custom", "ambisonics")
-"""Receivers whose early paths a moving source's renderer follows (``keep_arrivals``)."""
+PATH_RECEIVERS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
+                  "binaural")
+"""Receivers whose early paths a moving source's renderer follows (``keep_arrivals``);
+binaural with the sphere-head model (not a SOFA HRTF set)."""
+
+
+def sphere_head(microphone: Mapping[str, Any]):
+    """The :class:`~sonicspec.acoustics.hrtf.SphereHead` of a binaural microphone with the
+    sphere-head model."""
+    from sonicspec.acoustics.hrtf import SphereHead
+
+    hrtf = microphone["hrtf"]
+    return SphereHead(head_radius_m=hrtf["head_radius_m"], ear_angle_deg=hrtf["ear_angle_deg"])
 
 
 RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",

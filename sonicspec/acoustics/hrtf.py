@@ -162,14 +162,14 @@ def shadow_alpha(cos_theta: np.ndarray) -> np.ndarray:
         np.radians(theta_deg / THETA_MIN_DEG * 180.0))
 
 
-def _ear_axes(head: SphereHead, yaw_deg: float, pitch_deg: float) -> np.ndarray:
+def ear_axes(head: SphereHead, yaw_deg: float, pitch_deg: float) -> np.ndarray:
     """Left and right ear unit vectors in the scene frame, ``(2, 3)``."""
     e = math.radians(head.ear_angle_deg)
     local = np.array([[math.cos(e), math.sin(e), 0.0], [math.cos(e), -math.sin(e), 0.0]])
     return local @ rotation(yaw_deg, pitch_deg).T
 
 
-def _shadow_filters(head: SphereHead, sample_rate_hz: float, speed_of_sound_m_s: float
+def shadow_filters(head: SphereHead, sample_rate_hz: float, speed_of_sound_m_s: float
                     ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Bilinear-transformed low- and high-pass halves ``(b, a)`` of H(s): ``H = LP + α·HP``."""
     w0 = speed_of_sound_m_s / head.head_radius_m
@@ -186,6 +186,27 @@ def _with(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arriva
 def _check(sample_rate_hz: float) -> None:
     if not sample_rate_hz > 0:
         raise AcousticsError(f"sample_rate_hz: expected > 0, got {sample_rate_hz!r}")
+
+
+def sphere_binaural_early(arrivals: Arrivals, head: SphereHead, bank: OctaveFilterBank,
+                          n_samples: int, *, yaw_deg: float = 0.0, pitch_deg: float = 0.0,
+                          speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                          taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """The early part of a sphere-head binaural RIR, ``(2, n_samples)``: each arrival at each
+    ear delayed by Woodworth's path round the head, through the Brown–Duda shadow filter
+    ``H = LP + α(θ)·HP`` (:func:`shadow_filters`)."""
+    (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(head, bank.sample_rate_hz, speed_of_sound_m_s)
+    out = np.zeros((2, n_samples))
+    for ear, axis in enumerate(ear_axes(head, yaw_deg, pitch_deg)):
+        if len(arrivals):
+            cos_t = arrivals.directions @ axis
+            delays = woodworth_delays_s(cos_t, head.head_radius_m, speed_of_sound_m_s)
+            plain = synthesize_early(_with(arrivals, np.ones(len(arrivals)), delays), bank,
+                                     n_samples, taps)
+            shaded = synthesize_early(_with(arrivals, shadow_alpha(cos_t), delays), bank,
+                                      n_samples, taps)
+            out[ear] = signal.lfilter(b_lp, a_lp, plain) + signal.lfilter(b_hp, a_hp, shaded)
+    return out
 
 
 def synthesize_sphere_binaural_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
@@ -221,17 +242,8 @@ def synthesize_sphere_binaural_rir(arrivals: Arrivals, histogram: EnergyHistogra
     reach = 2 * head.head_radius_m / speed_of_sound_m_s
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s + reach, taps,
                            bank.padding() // 4)
-    (b_lp, a_lp), (b_hp, a_hp) = _shadow_filters(head, sample_rate_hz, speed_of_sound_m_s)
-    out = np.zeros((2, n))
-    for ear, axis in enumerate(_ear_axes(head, yaw_deg, pitch_deg)):
-        if len(arrivals):
-            cos_t = arrivals.directions @ axis
-            delays = woodworth_delays_s(cos_t, head.head_radius_m, speed_of_sound_m_s)
-            plain = synthesize_early(_with(arrivals, np.ones(len(arrivals)), delays), bank, n,
-                                     taps)
-            shaded = synthesize_early(_with(arrivals, shadow_alpha(cos_t), delays), bank, n,
-                                      taps)
-            out[ear] = signal.lfilter(b_lp, a_lp, plain) + signal.lfilter(b_hp, a_hp, shaded)
+    out = sphere_binaural_early(arrivals, head, bank, n, yaw_deg=yaw_deg, pitch_deg=pitch_deg,
+                                speed_of_sound_m_s=speed_of_sound_m_s, taps=taps)
     if histogram is not None:
         tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in range(2)])
         out += diffuse_binaural_tails(tails, head, sample_rate_hz,
@@ -357,11 +369,11 @@ def sphere_head_coherence(head: SphereHead, freqs_hz: np.ndarray, sample_rate_hz
     f = _check_freqs(freqs_hz, sample_rate_hz)
     if n_directions < 1:
         raise AcousticsError(f"n_directions: expected >= 1, got {n_directions!r}")
-    (b_lp, a_lp), (b_hp, a_hp) = _shadow_filters(head, sample_rate_hz, speed_of_sound_m_s)
+    (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(head, sample_rate_hz, speed_of_sound_m_s)
     lp = signal.freqz(b_lp, a_lp, worN=f, fs=sample_rate_hz)[1]
     hp = signal.freqz(b_hp, a_hp, worN=f, fs=sample_rate_hz)[1]
     dirs = fibonacci_sphere(n_directions)
-    cos_l, cos_r = (dirs @ axis for axis in _ear_axes(head, 0.0, 0.0))
+    cos_l, cos_r = (dirs @ axis for axis in ear_axes(head, 0.0, 0.0))
     dtau = (woodworth_delays_s(cos_l, head.head_radius_m, speed_of_sound_m_s)
             - woodworth_delays_s(cos_r, head.head_radius_m, speed_of_sound_m_s))
     al, ar = shadow_alpha(cos_l), shadow_alpha(cos_r)

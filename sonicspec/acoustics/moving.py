@@ -228,7 +228,9 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     static source's paths of order >= 2) interpolated between the points
     (``paths.directions``). Ambisonic channels weight the path by their spherical harmonics;
     array capsules hear it from their own image (the capsule's offset mapped by the mirrors),
-    or with the plane-wave lead ``d · p / c`` the array's RIRs use.
+    or with the plane-wave lead ``d · p / c`` the array's RIRs use; each ear of a sphere head
+    hears it Woodworth's delay later, through the shadow filter ``LP + α(θ)·HP`` (linear in
+    ``α``, so a time-varying ``α`` weights the path before the filters).
 
     Parameters
     ----------
@@ -260,6 +262,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         raise AcousticsError(f"paths: a {receiver.kind} receiver needs the paths' directions "
                              "at the microphone (PathSet.identify(..., at_mic=...))")
     out = np.zeros((receiver.channels, n_out))
+    shaded = np.zeros_like(out)  # the sphere head's α-weighted part, before its filters
     if len(paths) == 0 or not np.any(s):
         return out
     at = np.arange(len(points), dtype=np.float64)
@@ -299,6 +302,16 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
             for ch in range(receiver.channels):
                 out[ch] += path(gain=gains[:, ch] if not static else float(gains[0, ch]))
+        elif receiver.kind == "sphere_head":
+            from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
+
+            for ear, axis in enumerate(receiver.ear_axes):
+                cos_t = d @ axis
+                delay = np.broadcast_to(woodworth_delays_s(
+                    cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), s.shape)
+                alpha = np.broadcast_to(shadow_alpha(cos_t), s.shape)
+                out[ear] += path(extra_delay_s=delay)
+                shaded[ear] += path(gain=alpha, extra_delay_s=delay)
         else:
             for m, offset in enumerate(receiver.offsets_m):
                 if mirror is not None:  # the capsule's own image: exact
@@ -308,6 +321,15 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 else:
                     lead = -(d @ offset) / speed_of_sound_m_s
                     out[m] += path(extra_delay_s=np.broadcast_to(lead, s.shape))
+    if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
+        from scipy import signal
+
+        from sonicspec.acoustics.hrtf import shadow_filters
+
+        (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(receiver.head, bank.sample_rate_hz,
+                                                    speed_of_sound_m_s)
+        out = signal.lfilter(b_lp, a_lp, out, axis=1) + signal.lfilter(b_hp, a_hp, shaded,
+                                                                       axis=1)
     return out
 
 
@@ -345,13 +367,16 @@ def _image_map(paths: PathSet, k: int, points: np.ndarray, center_m) -> np.ndarr
 
 @dataclass(frozen=True)
 class Receiver:
-    """What :func:`render_paths` renders for: ``mono``, ``ambisonics`` of ``order``, or an
+    """What :func:`render_paths` renders for: ``mono``, ``ambisonics`` of ``order``, an
     ``array`` of omni capsules at ``offsets_m`` (``(M, 3)`` from the centre ``center_m``,
-    scene frame)."""
+    scene frame), or a ``sphere_head`` (Brown–Duda: Woodworth delays and the head-shadow
+    filter per ear, as the binaural RIRs have; ``head`` and the ``ear_axes``, ``(2, 3)``)."""
 
     kind: str = "mono"
     order: int = 0
     offsets_m: np.ndarray | None = None
+    head: object | None = None
+    ear_axes: np.ndarray | None = None
     center_m: np.ndarray | None = None
     """The microphone's position (the paths were traced from it): with it each path's
     mirrors are known (:func:`_image_map`), so each capsule hears its own image and
@@ -364,6 +389,8 @@ class Receiver:
             return (self.order + 1) ** 2
         if self.kind == "array":
             return len(self.offsets_m)
+        if self.kind == "sphere_head":
+            return 2
         return 1
 
 

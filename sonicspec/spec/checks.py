@@ -455,10 +455,10 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
     if m.interpolation == "paths":
-        if spec.microphone.kind == "binaural":
+        if spec.microphone.kind == "binaural" and spec.microphone.hrtf.kind != "sphere":
             yield _err(("mixture", "interpolation"),
-                       "'paths' renders mono, array and ambisonic microphones in this "
-                       "version; microphone.kind is 'binaural' (use 'sample_crossfade')")
+                       "'paths' renders binaural microphones with the sphere-head model in "
+                       "this version; microphone.hrtf is a SOFA set (use 'sample_crossfade')")
         elif not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
             yield _err(("mixture", "interpolation"),
                        "'paths' renders a static microphone in this version; "

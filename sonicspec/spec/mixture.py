@@ -121,7 +121,7 @@ class MixtureSpec(SpecModel):
         description="How a moving source is heard along its path. 'paths': the direct sound and "
         "every image-source reflection as a time-varying delay from where the source is at "
         "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
-        "between RIR points; mono, array and ambisonic microphones). Or the RIRs along the "
+        "between RIR points; not SOFA HRTFs or moving microphones). Or the RIRs along the "
         "path are blended: per-sample crossfade of neighbouring convolutions (SonicSet), "
         "STFT-domain interpolation (DCASE/SpatialScaper), or one RIR per segment with "
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.engine import array_offsets
+from sonicspec.acoustics.engine import array_offsets, sphere_head
+from sonicspec.acoustics.hrtf import ear_axes
 from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
 from sonicspec.audio.arrange import Segment, assemble, speech_span
 from sonicspec.audio.corpora import load_audio
@@ -80,7 +81,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
                  paths: tuple[PathSet, np.ndarray, OctaveFilterBank, Receiver] | None = None
                  ) -> dict[str, np.ndarray]:
     """``{"reverberant", "dry", and any targets}`` arrays of one track. ``paths``: the
-    source's exact early paths, its late RIRs and their bands (``interpolation: paths``)."""
+    source's exact early paths, its late RIRs and their bands (``interpolation: paths``);
+    a static source is heard through its RIR, as its paths and late part sum to it."""
     rate = params.sample_rate_hz
     segments = track.segment_list()
     dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
@@ -94,6 +96,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
     distance = np.linalg.norm(points - mic_m[None, :], axis=1)
     delays = distance / params.speed_of_sound_m_s * rate
     out = {"dry": dry[None, :].astype(np.float32)}
+    if len(points) == 1:  # a static source: its RIR is its paths (and needs no pairing)
+        paths = None
     if paths is None:
         method = params.interpolation
         out["reverberant"] = render_moving(dry, rirs, position, method)[:, :clip_samples]
@@ -130,6 +134,11 @@ def path_receiver(microphone, center_m) -> Receiver:
                         center_m=np.asarray(center_m, dtype=np.float64))
     if microphone.kind == "mono":
         return Receiver()
+    if microphone.kind == "binaural":  # the sphere head (validate rejects SOFA HRTFs)
+        mic = microphone.model_dump(mode="json")
+        head = sphere_head(mic)
+        return Receiver("sphere_head", head=head, center_m=np.asarray(center_m, dtype=float),
+                        ear_axes=ear_axes(head, microphone.yaw_deg, microphone.pitch_deg))
     return Receiver("array", offsets_m=array_offsets(microphone.model_dump(mode="json")),
                     center_m=np.asarray(center_m, dtype=np.float64))
 
