@@ -1,11 +1,11 @@
 """The SonicSim paper's separation and enhancement metrics, on arrays.
 
-SI-SNR is written here (a projection and a ratio); SDR is BSS Eval's, through
+SI-SNR is written here (a projection and a ratio). SDR is BSS Eval's through
 ``fast_bss_eval`` (``sdr``: the estimate projected on its reference through a 512-tap
-distortion filter, as ``mir_eval.separation.bss_eval_sources`` computes it); PESQ is ITU-T P.862 through ``pesq``
-(narrow band P.862.1 at 8 or 16 kHz, wide band P.862.2 at 16 kHz; other rates are resampled
-to 16 kHz first); STOI through ``pystoi``. Long clips are scored the paper's way: 6 s windows
-every 3 s, each metric averaged over the windows (:func:`windows`).
+distortion filter, as ``mir_eval.separation.bss_eval_sources`` computes it). PESQ is ITU-T
+P.862 through ``pesq`` (narrow band P.862.1 at 8 or 16 kHz, wide band P.862.2 at 16 kHz;
+other rates are resampled to 16 kHz first); STOI through ``pystoi``. Long clips are scored the
+paper's way: 6 s windows every 3 s, each metric averaged over the windows (:func:`windows`).
 
 The packages are optional (the ``eval`` extra) and imported when a metric is asked for.
 """

@@ -107,6 +107,24 @@ def rms_db(x: np.ndarray) -> float:
     return 10.0 * math.log10(max(1e-20, float(np.mean(np.square(x, dtype=np.float64)))))
 
 
+@dataclass(frozen=True)
+class Draw:
+    """One item's draws: its group and mixture, the target and background tracks, the crop
+    (``start``, ``length`` samples), each track's linear gain, the SIRs and SNR drawn (dB,
+    NaN when not drawn) and the crop's audio before the gains."""
+
+    group: Group
+    mixture: dict[str, Any]
+    targets: tuple[str, ...]
+    background: tuple[str, ...]
+    start: int
+    length: int
+    gains: dict[str, float]
+    sir_db: np.ndarray
+    snr_db: float
+    crop: dict[str, np.ndarray]
+
+
 class SonicspecDataset:
     """Items of one split of a built dataset for one task, as numpy arrays.
 
@@ -219,9 +237,9 @@ class SonicspecDataset:
             return min(gain, 10.0 ** (self.config.max_gain_db / 20.0))
         return 10.0 ** (min(target_db - self._level(x, rate), self.config.max_gain_db) / 20.0)
 
-    def item(self, index: int, epoch: int = 0) -> dict[str, Any]:
-        """Item ``index`` of epoch ``epoch`` (what ``__getitem__`` returns after
-        ``set_epoch(epoch)``)."""
+    def draw(self, index: int, epoch: int = 0) -> Draw:
+        """What item ``index`` of epoch ``epoch`` is made of: the group, the tracks, the crop
+        and the gains (the audio of the crop too, as :meth:`item` uses it)."""
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for {len(self)} items")
         cfg = self.config
@@ -266,23 +284,66 @@ class SonicspecDataset:
                 g = self._gain_to(noise, rate, self._level(speech, rate) - snr)
                 for n in background:
                     gains[n] = g
-        target_arr = np.stack([gains[n] * crop[n] for n in targets]).astype(np.float32)
-        if cfg.dynamic or not mixture.get("file"):
+        return Draw(group, mixture, tuple(targets), tuple(background), start, length, gains,
+                    sir, snr, crop)
+
+    def item(self, index: int, epoch: int = 0) -> dict[str, Any]:
+        """Item ``index`` of epoch ``epoch`` (what ``__getitem__`` returns after
+        ``set_epoch(epoch)``)."""
+        d = self.draw(index, epoch)
+        cfg, group, gains, crop = self.config, d.group, d.gains, d.crop
+        start, length = d.start, d.length
+        target_arr = np.stack([gains[n] * crop[n] for n in d.targets]).astype(np.float32)
+        if cfg.dynamic or not d.mixture.get("file"):
             mix = sum(gains[n] * crop[n].astype(np.float64) for n in crop).astype(np.float32)
         else:
-            mix = group.read(mixture["file"], start, start + length, cfg.channels)
+            mix = group.read(d.mixture["file"], start, start + length, cfg.channels)
         out: dict[str, Any] = {
             "mixture": mix, "targets": target_arr,
-            "tracks": np.array([int(n[6:]) for n in targets], dtype=np.int64),
-            "start": int(start), "sir_db": sir, "snr_db": snr,
-            "group": group_id, "mixture_name": mixture["name"]}
+            "tracks": np.array([int(n[6:]) for n in d.targets], dtype=np.int64),
+            "start": int(start), "sir_db": d.sir_db, "snr_db": d.snr_db,
+            "group": group.id, "mixture_name": d.mixture["name"]}
         for stem in self.stems:
             out[stem] = np.stack([
                 gains[n] * group.read(f"{n}_{stem}", start, start + length, cfg.channels)
-                for n in targets]).astype(np.float32)
+                for n in d.targets]).astype(np.float32)
         if self.labels:
-            out.update(self._labels(group, targets, start, length))
+            out.update(self._labels(group, list(d.targets), start, length))
         return out
+
+    def to_lhotse(self, epoch: int = 0):
+        """The items of ``epoch`` as a Lhotse ``CutSet`` of ``MixedCut`` s: one track per
+        target then per background, each a crop of the track's recording with its drawn gain
+        (``perturb_volume``), so ``cut.load_audio()`` is the item's mixture and
+        ``cut.tracks[i].cut.load_audio()`` target ``i``. Needs ``lhotse``."""
+        try:
+            from lhotse import CutSet, MonoCut, Recording
+            from lhotse.cut import MixedCut, MixTrack
+        except ImportError:
+            raise DatasetError("to_lhotse needs lhotse: pip install lhotse") from None
+        cuts = []
+        recordings: dict[str, Any] = {}
+        for i in range(len(self)):
+            d = self.draw(i, epoch)
+            rate = d.group.sample_rate_hz
+            tracks = []
+            for name in (*d.targets, *d.background):
+                rec_id = f"{d.group.id.replace('/', '_')}_{name}"
+                if rec_id not in recordings:
+                    recordings[rec_id] = Recording.from_file(d.group.track_path(name),
+                                                             recording_id=rec_id)
+                rec = recordings[rec_id]
+                channel = list(self.config.channels) if self.config.channels else \
+                    list(range(rec.num_channels))
+                cut = MonoCut(id=f"{rec_id}-{self.split}-{epoch}-{i}", start=d.start / rate,
+                              duration=d.length / rate,
+                              channel=channel[0] if len(channel) == 1 else channel,
+                              recording=rec)
+                if d.gains[name] != 1.0:
+                    cut = cut.perturb_volume(factor=d.gains[name], affix_id=False)
+                tracks.append(MixTrack(cut=cut))
+            cuts.append(MixedCut(id=f"{self.split}-{self.task}-{epoch}-{i}", tracks=tracks))
+        return CutSet.from_cuts(cuts)
 
     def _draw_start(self, rng: np.random.Generator, whole: dict[str, np.ndarray],
                     targets: list[str], total: int, length: int) -> int:
