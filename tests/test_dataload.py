@@ -253,7 +253,7 @@ def test_lhotse_mixed_cuts_render_the_items(root: Path) -> None:
 
 def test_oracle_mixture_is_the_zero_baseline_and_targets_the_ceiling(root: Path) -> None:
     rows = evaluate(root, "test", "separation", oracle=True,
-                    metrics=["si_snr", "si_snri", "sdr", "sdri", "pesq_wb", "stoi"])
+                    metrics=["si_snr", "si_snri", "sdr", "sdri", "pesq_wb"])
     mix = [r for r in rows if r["method"] == "oracle_mixture"]
     top = [r for r in rows if r["method"] == "oracle_targets"]
     assert len(mix) == len(top) == 3 * 2  # three mixtures of two targets in the test group
@@ -264,7 +264,6 @@ def test_oracle_mixture_is_the_zero_baseline_and_targets_the_ceiling(root: Path)
     for r in top:
         assert r["si_snr"] >= 100.0 and r["sdr"] == 200.0
         assert r["pesq_wb"] == pytest.approx(4.644, abs=1e-3)
-        assert r["stoi"] == pytest.approx(1.0, abs=1e-6)
 
 
 def _write_estimates(root: Path, out: Path, task: str, swap: bool) -> None:

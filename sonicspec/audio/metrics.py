@@ -133,23 +133,23 @@ def score_pair(estimate: np.ndarray, target: np.ndarray, mixture: np.ndarray,
                sample_rate_hz: int, metrics: Sequence[str] = METRICS) -> dict[str, float]:
     """Every metric of one estimate against its target on one window; the improvements are
     against ``mixture`` taken as the estimate."""
+    unknown = [m for m in metrics if m not in METRICS]
+    if unknown:
+        raise AudioError(f"metrics: expected names from {list(METRICS)}, got {unknown[0]!r}")
     out: dict[str, float] = {}
-    for name in metrics:
-        if name == "si_snr":
-            out[name] = si_snr(estimate, target)
-        elif name == "si_snri":
-            out[name] = si_snr(estimate, target) - si_snr(mixture, target)
-        elif name == "sdr":
-            out[name] = sdr(estimate, target)
-        elif name == "sdri":
-            out[name] = sdr(estimate, target) - sdr(mixture, target)
-        elif name in ("pesq_nb", "pesq_wb"):
-            out[name] = pesq(estimate, target, sample_rate_hz, name[-2:])
-        elif name == "stoi":
-            out[name] = stoi(estimate, target, sample_rate_hz)
-        else:
-            raise AudioError(f"metrics: expected names from {list(METRICS)}, got {name!r}")
-    return out
+    for base, fn in (("si_snr", si_snr), ("sdr", sdr)):
+        if base in metrics or f"{base}i" in metrics:
+            value = fn(estimate, target)
+            if base in metrics:
+                out[base] = value
+            if f"{base}i" in metrics:
+                out[f"{base}i"] = value - fn(mixture, target)
+    for mode in ("nb", "wb"):
+        if f"pesq_{mode}" in metrics:
+            out[f"pesq_{mode}"] = pesq(estimate, target, sample_rate_hz, mode)
+    if "stoi" in metrics:
+        out["stoi"] = stoi(estimate, target, sample_rate_hz)
+    return {m: out[m] for m in metrics}
 
 
 def windowed_scores(estimate: np.ndarray, target: np.ndarray, mixture: np.ndarray,
