@@ -260,13 +260,9 @@ class SonicspecDataset:
                 if missing:
                     raise DatasetError(f"{group.root / group.id}: background {choice!r} needs "
                                        f"{' and '.join(missing)}, which the group lacks")
-        # Only the targets are read whole (a crop is re-drawn until each is heard in it).
-        whole = ({n: group.read(n, channels=cfg.channels) for n in targets}
-                 if cfg.dynamic and length < group.num_samples else {})
-        start = self._draw_start(rng, whole, targets, group.num_samples, length)
-        crop = {n: (whole[n][:, start:start + length] if n in whole
-                    else group.read(n, start, start + length, cfg.channels))
-                for n in [*targets, *background]}
+        start, crop = self._draw_crop(rng, group, targets, length)
+        crop.update({n: group.read(n, start, start + length, cfg.channels)
+                     for n in background})
         sir = np.full(max(len(targets) - 1, 0), np.nan)
         snr = math.nan
         gains = dict.fromkeys(crop, 1.0)
@@ -345,21 +341,22 @@ class SonicspecDataset:
             cuts.append(MixedCut(id=f"{self.split}-{self.task}-{epoch}-{i}", tracks=tracks))
         return CutSet.from_cuts(cuts)
 
-    def _draw_start(self, rng: np.random.Generator, whole: dict[str, np.ndarray],
-                    targets: list[str], total: int, length: int) -> int:
-        """A crop start in ``[0, total - length]``; with dynamic mixing re-drawn (up to
-        ``crop_tries`` times, as the recipe does) until every target is heard in it."""
-        if length >= total:
-            return 0
+    def _draw_crop(self, rng: np.random.Generator, group: Group, targets: list[str],
+                   length: int) -> tuple[int, dict[str, np.ndarray]]:
+        """A crop start in ``[0, clip - length]`` and the targets' crops; with dynamic mixing
+        re-drawn (up to ``crop_tries`` times, as the recipe does) until every target is heard
+        in it. Only the crops are read (FLAC and WAV seek)."""
+        total, channels = group.num_samples, self.config.channels
         start = int(rng.integers(0, total - length + 1))
-        if not self.config.dynamic:
-            return start
+        crop = {n: group.read(n, start, start + length, channels) for n in targets}
+        if not self.config.dynamic or length >= total:
+            return start, crop
         for _ in range(self.config.crop_tries):
-            if all(rms_db(whole[n][0, start:start + length]) >= SILENCE_RMS_DB
-                   for n in targets):
+            if all(rms_db(crop[n][0]) >= SILENCE_RMS_DB for n in targets):
                 break
             start = int(rng.integers(0, total - length + 1))
-        return start
+            crop = {n: group.read(n, start, start + length, channels) for n in targets}
+        return start, crop
 
     def _labels(self, group: Group, targets: list[str], start: int,
                 length: int) -> dict[str, np.ndarray]:
