@@ -126,3 +126,18 @@ def test_unknown_metric_is_named() -> None:
     x = speechlike(1.0)
     with pytest.raises(AudioError, match="got 'snr'"):
         metrics.score_pair(x, x, x, RATE, ["snr"])
+
+
+def test_windows_where_the_target_is_silent_are_not_scored() -> None:
+    """A target silent for its first 6 s (a speaker who starts late): only the windows that
+    hear it count; scoring the silent one would add about -200 dB to the mean."""
+    x = speechlike(12.0, seed=8)
+    x[:6 * RATE] = 0.0
+    est = x + 0.01 * np.random.default_rng(9).standard_normal(x.size)
+    scores = metrics.windowed_scores(est, x, est, RATE, ["si_snr"])
+    assert (scores["windows"], scores["scored"]) == (3, 2)
+    by_hand = np.mean([metrics.si_snr(est[a:b], x[a:b])
+                       for a, b in [(3 * RATE, 9 * RATE), (6 * RATE, 12 * RATE)]])
+    assert scores["si_snr"] == pytest.approx(by_hand, abs=1e-9)
+    silent = metrics.windowed_scores(est, np.zeros_like(x), est, RATE, ["si_snr"])
+    assert math.isnan(silent["si_snr"]) and silent["scored"] == 0

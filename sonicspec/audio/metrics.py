@@ -22,6 +22,7 @@ from sonicspec.errors import AudioError
 
 EPS = 1e-12
 SDR_MAX_DB = 200.0
+SILENT_TARGET_DB = -70.0  # RMS, dBFS: a window whose target is quieter is not scored
 METRICS = ("si_snr", "si_snri", "sdr", "sdri", "pesq_nb", "pesq_wb", "stoi")
 _INSTALL = "pip install 'sonicspec[eval]'"
 
@@ -155,14 +156,25 @@ def score_pair(estimate: np.ndarray, target: np.ndarray, mixture: np.ndarray,
 def windowed_scores(estimate: np.ndarray, target: np.ndarray, mixture: np.ndarray,
                     sample_rate_hz: int, metrics: Sequence[str] = METRICS,
                     window_s: float = 6.0, hop_s: float = 3.0) -> dict[str, float]:
-    """:func:`score_pair` on every window of the clip, averaged per metric (windows where a
-    metric is undefined, NaN, are left out; ``windows`` counts them all)."""
+    """:func:`score_pair` on every window of the clip, averaged per metric.
+
+    A window where the target is silent (RMS below ``SILENT_TARGET_DB``: the speaker has not
+    begun or has finished) scores nothing, as do windows where a metric is undefined (NaN):
+    they are left out of that mean. ``windows`` counts every window, ``scored`` those of a
+    heard target.
+    """
     spans = windows(len(target), sample_rate_hz, window_s, hop_s)
     rows = [score_pair(estimate[a:b], target[a:b], mixture[a:b], sample_rate_hz, metrics)
+            if _level_db(target[a:b]) >= SILENT_TARGET_DB else dict.fromkeys(metrics, math.nan)
             for a, b in spans]
     out = {}
     for name in metrics:
         values = np.array([r[name] for r in rows], dtype=np.float64)
         out[name] = float(np.nanmean(values)) if np.any(np.isfinite(values)) else math.nan
     out["windows"] = len(spans)
+    out["scored"] = sum(_level_db(target[a:b]) >= SILENT_TARGET_DB for a, b in spans)
     return out
+
+
+def _level_db(x: np.ndarray) -> float:
+    return 10.0 * math.log10(max(1e-30, float(np.mean(np.square(x, dtype=np.float64)))))
