@@ -9,7 +9,8 @@ only the export differs), then:
 - the loader, ``SonicspecDataset(..., "separation")``, 3 s crops: static (the built mixture)
   and dynamic mixing (the ``paper`` preset), with 0, 1 and 2 workers. Workers are
   ``torch.utils.data.DataLoader`` workers (batch size 8) when torch imports, otherwise a
-  ``multiprocessing`` pool sharding batches the way DataLoader does; the table says which;
+  ``multiprocessing`` pool sharding batches the way DataLoader does; the table says which
+  (torch runs on one thread, as in DataLoader's workers);
 - ``evaluate``: the mixture copied as the estimates (one method), every metric, and without
   PESQ and STOI; seconds per group-hour of mixtures scored (a group-hour: one hour of one
   mixture with its targets).
@@ -90,7 +91,7 @@ def _items(args: tuple[str, str, list[int]]) -> int:
 def loader_rate(root: Path, mode: str, workers: int, n: int) -> tuple[float, str]:
     """Items (3 s crops) per second with ``workers`` workers."""
     try:
-        import torch  # noqa: F401
+        import torch
         from torch.utils.data import DataLoader, Dataset
     except ImportError:
         DataLoader = None
@@ -98,6 +99,10 @@ def loader_rate(root: Path, mode: str, workers: int, n: int) -> tuple[float, str
 
     config = "paper" if mode == "dynamic" else MixingConfig(dynamic=False, crop_s=3.0)
     if DataLoader is not None:
+        # DataLoader's workers run torch on one thread; the main process would use every
+        # core's intra-op thread for collation, which on 2 busy cores made the 0-worker case
+        # 3x slower than 1 worker. Load as the workers do.
+        torch.set_num_threads(1)
         base = SonicspecDataset(root, "train", "separation", config=config)
 
         class Repeat(Dataset):  # n items cycling over the split, a new epoch each round
