@@ -113,6 +113,9 @@ def test_crops_lie_inside_the_clip_and_every_speaker_is_heard(root: Path) -> Non
             assert item["mixture"].shape == (1, 64000) and item["targets"].shape == (2, 1, 64000)
             d = ds.draw(i, e)
             assert all(rms_db(d.crop[n][0]) >= -40.0 for n in d.targets)
+            for n in d.targets:  # drawn where each target speaks
+                spans = d.group.metadata[n]["start_end_points"]
+                assert any(a < d.start + d.length and d.start < b for a, b in spans)
 
 
 @pytest.mark.parametrize("level", ["rms", "lufs"])

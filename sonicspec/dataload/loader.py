@@ -111,7 +111,8 @@ def rms_db(x: np.ndarray) -> float:
 class Draw:
     """One item's draws: its group and mixture, the target and background tracks, the crop
     (``start``, ``length`` samples), each track's linear gain, the SIRs and SNR drawn (dB,
-    NaN when not drawn) and the crop's audio before the gains."""
+    NaN when not drawn) and the crops read, before the gains (the targets', and the
+    background's unless the built mixture is read instead)."""
 
     group: Group
     mixture: dict[str, Any]
@@ -261,11 +262,12 @@ class SonicspecDataset:
                     raise DatasetError(f"{group.root / group.id}: background {choice!r} needs "
                                        f"{' and '.join(missing)}, which the group lacks")
         start, crop = self._draw_crop(rng, group, targets, length)
-        crop.update({n: group.read(n, start, start + length, cfg.channels)
-                     for n in background})
+        if cfg.dynamic or not mixture.get("file"):  # else the built mixture is read instead
+            crop.update({n: group.read(n, start, start + length, cfg.channels)
+                         for n in background})
         sir = np.full(max(len(targets) - 1, 0), np.nan)
         snr = math.nan
-        gains = dict.fromkeys(crop, 1.0)
+        gains = dict.fromkeys([*targets, *background], 1.0)
         if cfg.dynamic:
             ref = crop[targets[0]][0]
             if cfg.sir_db is not None and len(targets) > 1:
@@ -343,20 +345,47 @@ class SonicspecDataset:
 
     def _draw_crop(self, rng: np.random.Generator, group: Group, targets: list[str],
                    length: int) -> tuple[int, dict[str, np.ndarray]]:
-        """A crop start in ``[0, clip - length]`` and the targets' crops; with dynamic mixing
-        re-drawn (up to ``crop_tries`` times, as the recipe does) until every target is heard
-        in it. Only the crops are read (FLAC and WAV seek)."""
+        """A crop start in ``[0, clip - length]`` and the targets' crops.
+
+        With dynamic mixing the crop must hear every target (RMS of at least −40 dB, the
+        recipe's test). The recipe re-draws blind, reading audio each time; here the start is
+        drawn among those whose crop overlaps an utterance of every target (the metadata's
+        ``start_end_points``), then checked on the audio, and re-drawn (up to ``crop_tries``)
+        only if the check fails. Only the crops are read (FLAC and WAV seek).
+        """
         total, channels = group.num_samples, self.config.channels
-        start = int(rng.integers(0, total - length + 1))
+        candidates = (self._speech_starts(group, targets, length)
+                      if self.config.dynamic and length < total else None)
+
+        def draw() -> int:
+            if candidates is not None and candidates.size:
+                return int(candidates[rng.integers(candidates.size)])
+            return int(rng.integers(0, total - length + 1))
+
+        start = draw()
         crop = {n: group.read(n, start, start + length, channels) for n in targets}
         if not self.config.dynamic or length >= total:
             return start, crop
         for _ in range(self.config.crop_tries):
             if all(rms_db(crop[n][0]) >= SILENCE_RMS_DB for n in targets):
                 break
-            start = int(rng.integers(0, total - length + 1))
+            start = draw()
             crop = {n: group.read(n, start, start + length, channels) for n in targets}
         return start, crop
+
+    @staticmethod
+    def _speech_starts(group: Group, targets: list[str], length: int) -> np.ndarray:
+        """Crop starts (every 10 ms) whose crop overlaps an utterance of every target."""
+        hop = max(1, group.sample_rate_hz // 100)
+        starts = np.arange(0, group.num_samples - length + 1, hop)
+        ok = np.ones(starts.size, dtype=bool)
+        for name in targets:
+            spans = group.metadata[name].get("start_end_points") or []
+            heard = np.zeros(starts.size, dtype=bool)
+            for a, b in spans:  # [start, start + length) meets [a, b)
+                heard |= (starts < b) & (starts + length > a)
+            ok &= heard
+        return starts[ok]
 
     def _labels(self, group: Group, targets: list[str], start: int,
                 length: int) -> dict[str, np.ndarray]:
