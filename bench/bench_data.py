@@ -16,8 +16,8 @@ only the export differs), then:
   mixture with its targets).
 
 Reproduce:
-    python bench/bench_data.py                 # about 5 min on 2 cores
-    python bench/bench_data.py --items 400
+    python bench/bench_data.py                 # about 6 min on 2 cores
+    python bench/bench_data.py --items 240     # quicker; worker start-up then weighs in
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def evaluate_cost(root: Path, tmp: Path, metrics: list[str]) -> tuple[float, flo
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--items", type=int, default=240, help="items per measurement")
+    parser.add_argument("--items", type=int, default=1000, help="items per measurement")
     args = parser.parse_args()
     print(f"python {platform.python_version()}, {multiprocessing.cpu_count()} cores")
     with tempfile.TemporaryDirectory() as name:
