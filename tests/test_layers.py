@@ -9,6 +9,8 @@ functions included. Floors, from the ground up:
 * the libraries ``geometry``, ``acoustics``, ``audio`` stand on the ground floor and on each
   other, never on the spec, the store or anything above;
 * ``stages``, ``plan``, ``export`` and then ``cli`` are above them; nothing below imports up;
+* ``dataload`` (the loader, evaluation and exports) reads built dataset folders: it stands on
+  the ground floor, the libraries and ``export``, never on the spec, the store or the pipeline;
 * ``testing`` holds test fixtures: it may use the libraries, and nothing in the package uses it.
 """
 
@@ -23,7 +25,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "sonicspec"
 ROOT = PACKAGE.parent
 
 LIBRARIES = {"geometry", "acoustics", "audio"}
-UPPER = {"stages", "plan", "export", "cli", "testing"}
+UPPER = {"stages", "plan", "export", "dataload", "cli", "testing"}
 
 KNOWN_CYCLES: list[set[str]] = []
 
@@ -126,6 +128,12 @@ def test_ground_spec_and_store_stand_on_the_ground_floor() -> None:
 def test_libraries_know_nothing_of_the_spec_or_the_store() -> None:
     allowed = {"ground", *LIBRARIES}
     assert _offences({f: allowed for f in LIBRARIES}) == []
+
+
+def test_dataload_reads_folders_not_the_pipeline() -> None:
+    allowed = {"ground", *LIBRARIES, "export", "dataload"}
+    assert _offences({"dataload": allowed}) == []
+    assert "sonicspec.dataload.folder" in {t for t, _ in imports("sonicspec.dataload.loader")}
 
 
 def test_nothing_in_the_package_imports_testing() -> None:

@@ -1,0 +1,170 @@
+"""``sonicspec evaluate``: a model's outputs scored against a dataset's targets.
+
+The estimates folder mirrors the dataset: for each mixture of the task,
+``<estimates>/<split>/<group index>/<mixture name>.wav`` (or ``.flac``), as long as the
+mixture, at its sample rate, with one channel per target (``k`` for separation of ``k``
+speakers, one for enhancement). Targets and mixture are taken at the reference channel
+(``channel``, default 0). Separation outputs are matched to the targets by the permutation
+with the best mean SI-SNR over the whole clip, kept in every window. Each metric is then the
+mean over 6 s windows every 3 s (:func:`sonicspec.audio.metrics.windows`).
+
+``oracle``: the mixture itself as every estimate (SI-SNRi and SDRi are 0 by construction: the
+baseline) and the targets themselves (the ceiling).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.atomic import write_text
+from sonicspec.audio.metrics import METRICS, best_permutation, windowed_scores
+from sonicspec.dataload.folder import DatasetError, DatasetFolder, Group, read_audio
+from sonicspec.dataload.loader import TASKS
+
+AUDIO_EXTENSIONS = (".wav", ".flac")
+
+
+def estimate_path(estimates: Path, group: Group, mixture: dict[str, Any]) -> Path:
+    """The estimate file of a mixture; :class:`DatasetError` naming the group and the file
+    when none is there."""
+    base = estimates / group.id / mixture["name"]
+    for ext in AUDIO_EXTENSIONS:
+        if base.with_suffix(ext).is_file():
+            return base.with_suffix(ext)
+    raise DatasetError(f"group {group.id}: missing estimate {base}.wav (or .flac) for mixture "
+                       f"{mixture['name']} ({len(mixture['targets'])} channel(s), one per "
+                       "target)")
+
+
+def read_estimate(path: Path, group: Group, mixture: dict[str, Any]) -> np.ndarray:
+    """An estimate file, checked against its mixture: rate, length, one channel per target."""
+    import soundfile as sf
+
+    try:
+        info = sf.info(str(path))
+    except (sf.LibsndfileError, RuntimeError, OSError) as exc:
+        raise DatasetError(f"group {group.id}: {path}: unreadable ({exc})") from None
+    k = len(mixture["targets"])
+    if info.samplerate != group.sample_rate_hz:
+        raise DatasetError(f"group {group.id}: {path}: expected {group.sample_rate_hz} Hz, got "
+                           f"{info.samplerate} Hz")
+    if info.channels != k:
+        raise DatasetError(f"group {group.id}: {path}: expected {k} channel(s) (one per target "
+                           f"of {mixture['name']}), got {info.channels}")
+    if info.frames != group.num_samples:
+        raise DatasetError(f"group {group.id}: {path}: expected {group.num_samples} samples "
+                           f"(the mixture's length), got {info.frames}")
+    return read_audio(path).astype(np.float64)
+
+
+def score_mixture(estimates: np.ndarray, targets: np.ndarray, mixture: np.ndarray,
+                  rate: int, *, permute: bool, metrics: Sequence[str] = METRICS,
+                  window_s: float = 6.0, hop_s: float = 3.0) -> list[dict[str, Any]]:
+    """One row per target: its matched estimate's windowed scores."""
+    perm = best_permutation(estimates, targets) if permute else tuple(range(len(targets)))
+    rows = []
+    for i, j in enumerate(perm):
+        row = windowed_scores(estimates[j], targets[i], mixture, rate, metrics,
+                              window_s, hop_s)
+        rows.append({"estimate_channel": int(j), **row})
+    return rows
+
+
+def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path | None = None,
+             oracle: bool = False, channel: int = 0, metrics: Sequence[str] = METRICS,
+             window_s: float = 6.0, hop_s: float = 3.0) -> list[dict[str, Any]]:
+    """Per-target score rows for every mixture of ``task`` in ``split``.
+
+    Each row: ``method`` (``estimates``, ``oracle_mixture``, ``oracle_targets``), ``group``,
+    ``mixture``, ``target``, ``estimate_channel`` and one column per metric.
+    """
+    if task not in TASKS:
+        raise DatasetError(f"task: expected one of {list(TASKS)}, got {task!r}")
+    if estimates is None and not oracle:
+        raise DatasetError("evaluate: give an estimates folder, --oracle, or both")
+    est_root = Path(estimates) if estimates is not None else None
+    if est_root is not None and not est_root.is_dir():
+        raise DatasetError(f"{est_root}: no such estimates folder")
+    folder = DatasetFolder(root)
+    groups = folder.groups(split)
+    todo = [(g, m) for g in groups for m in g.mixtures(task)]
+    if not todo:
+        raise DatasetError(f"{folder.root}: split {split!r} has no {task} mixtures")
+    rows: list[dict[str, Any]] = []
+    for group, m in todo:
+        chans = (channel,)
+        targets = np.stack([group.read(t, channels=chans)[0] for t in m["targets"]]
+                           ).astype(np.float64)
+        mix = (group.read(m["file"], channels=chans)[0] if m.get("file") else
+               sum(group.read(c, channels=chans)[0] for c in m["components"])
+               ).astype(np.float64)
+        runs: list[tuple[str, np.ndarray]] = []
+        if est_root is not None:
+            est = read_estimate(estimate_path(est_root, group, m), group, m)
+            runs.append(("estimates", est))
+        if oracle:
+            runs.append(("oracle_mixture", np.stack([mix] * len(targets))))
+            runs.append(("oracle_targets", targets.copy()))
+        for method, est in runs:
+            scored = score_mixture(est, targets, mix, group.sample_rate_hz,
+                                   permute=task == "separation", metrics=metrics,
+                                   window_s=window_s, hop_s=hop_s)
+            for target, row in zip(m["targets"], scored, strict=True):
+                rows.append({"method": method, "group": group.id, "mixture": m["name"],
+                             "target": target, **row})
+    return rows
+
+
+def _mean(values: list[float]) -> float | None:
+    finite = [v for v in values if v is not None and math.isfinite(v)]
+    return float(np.mean(finite)) if finite else None
+
+
+def summarise(rows: list[dict[str, Any]], metrics: Sequence[str] = METRICS) -> dict[str, Any]:
+    """Means per method, and per method and group."""
+    out: dict[str, Any] = {"per_method": {}, "per_group": {}}
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == method]
+        out["per_method"][method] = {k: _mean([r[k] for r in mine]) for k in metrics}
+        out["per_method"][method]["targets"] = len(mine)
+        out["per_group"][method] = {
+            g: {k: _mean([r[k] for r in mine if r["group"] == g]) for k in metrics}
+            for g in dict.fromkeys(r["group"] for r in mine)}
+    return out
+
+
+def write_results(out_dir: str | Path, rows: list[dict[str, Any]], summary: dict[str, Any],
+                  settings: dict[str, Any]) -> tuple[Path, Path]:
+    """``scores.csv`` (a row per target) and ``summary.json`` (settings, means), atomically."""
+    out = Path(out_dir)
+    columns = list(rows[0]) if rows else []
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    csv_path = write_text(out / "scores.csv", buf.getvalue())
+    json_path = write_text(out / "summary.json", json.dumps(
+        {"settings": settings, **summary}, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    return csv_path, json_path
+
+
+def summary_table(summary: dict[str, Any], metrics: Sequence[str] = METRICS) -> str:
+    """The per-method means as a plain text table."""
+    head = ["method", *metrics, "targets"]
+    lines = [head]
+    for method, values in summary["per_method"].items():
+        lines.append([method, *("-" if values[k] is None else f"{values[k]:.2f}"
+                                for k in metrics), str(values["targets"])])
+    widths = [max(len(row[i]) for row in lines) for i in range(len(head))]
+    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w)
+                               for i, (c, w) in enumerate(zip(row, widths, strict=True)))
+                     for row in lines)

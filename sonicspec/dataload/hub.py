@@ -1,0 +1,200 @@
+"""Exports of a built dataset folder for Hugging Face ``datasets`` and ``webdataset``.
+
+Both hold one record per group: every audio file of the group as written (the FLAC or WAV
+bytes themselves, so the samples are the folder's), and its metadata. Groups go in shards of
+``groups_per_shard``; a shard's name carries the content key of what it holds (the split, its
+groups and the SHA-256 of their files from ``checksums.sha256``, and the export's format
+version), so a second export writes only the shards whose groups changed and removes the
+shards nothing refers to any more.
+
+* ``huggingface``: ``<out>/data/<split>-<key>.parquet``, the layout ``datasets`` reads as a
+  dataset with one split per file prefix: ``datasets.load_dataset("<out>")``. Audio columns
+  are ``datasets.Audio`` features (``{"bytes", "path"}``); the metadata is in columns
+  (``group``, ``split``, ``scene_id``, ``sample_rate_hz``, ``num_samples``, ``speakers``,
+  ``transcripts``, ``t30_s``, ``drr_db``) and whole as JSON (``metadata``).
+* ``webdataset``: ``<out>/<split>-<key>.tar``; each group a sample keyed by its id
+  (``train/000000``) with members ``<key>.<track>.flac`` (``source1``, ``noise``,
+  ``source1_dry``, a mixture's name such as ``sep_s1s2_noise``) and ``<key>.metadata.json``.
+  Tar members carry no time or owner, so the same groups give the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import tarfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from sonicspec.atomic import atomic_path, write_text
+from sonicspec.dataload.folder import DatasetError, DatasetFolder, Group
+from sonicspec.export.checksums import read_checksums
+from sonicspec.hashing import canonical_json, sha256_hex
+
+FORMATS = ("huggingface", "webdataset")
+FORMAT_VERSION = 1
+STATE_NAME = ".sonicspec-export.json"
+_INSTALL = {"huggingface": "pip install 'sonicspec[export]' (datasets)",
+            "webdataset": "pip install 'sonicspec[export]' (webdataset)"}
+
+
+def group_files(group: Group) -> dict[str, str]:
+    """``record name -> path`` (relative to the folder) of every audio file of a group:
+    tracks, stems and mixtures, in a fixed order."""
+    out: dict[str, str] = {}
+    for name in (*group.speakers, *group.backgrounds):
+        entry = group.metadata[name]
+        if entry.get("file"):
+            out[name] = entry["file"]
+        for stem in ("dry", "direct", "early"):
+            for ext in (".flac", ".wav"):
+                rel = f"{group.id}/{name}_{stem}{ext}"
+                if (group.root / rel).is_file():
+                    out[f"{name}_{stem}"] = rel
+    for m in group.mixtures():
+        if m.get("file"):
+            out[m["name"]] = m["file"]
+    return out
+
+
+def _shards(folder: DatasetFolder, split: str, per_shard: int,
+            sums: dict[str, str]) -> Iterator[tuple[str, list[Group]]]:
+    groups = folder.groups(split)
+    for i in range(0, len(groups), per_shard):
+        chunk = groups[i:i + per_shard]
+        content = []
+        for g in chunk:
+            files = {**group_files(g), "metadata": f"{g.id}/metadata.json"}
+            missing = [rel for rel in files.values() if rel not in sums]
+            if missing:
+                raise DatasetError(f"{folder.root}: {missing[0]} is not in checksums.sha256 "
+                                   "(an unfinished or edited build?); run `sonicspec verify`")
+            content.append([g.id, sorted((n, sums[rel]) for n, rel in files.items())])
+        key = sha256_hex(canonical_json({"version": FORMAT_VERSION, "split": split,
+                                         "groups": content}))
+        yield key[:16], chunk
+
+
+def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
+    meta = group.metadata
+    speakers = group.speakers
+    row: dict[str, Any] = {
+        "group": group.id, "split": group.split, "scene_id": meta.get("scene_id"),
+        "sample_rate_hz": group.sample_rate_hz, "num_samples": group.num_samples,
+        "speakers": [str(meta[s].get("speaker")) for s in speakers],
+        "transcripts": [" ".join(meta[s].get("words", [])) for s in speakers],
+        "t30_s": [meta[s].get("t30_s") for s in speakers],
+        "drr_db": [meta[s].get("drr_db") for s in speakers],
+        "metadata": json.dumps(meta, sort_keys=True),
+    }
+    for name, rel in files.items():
+        row[name] = {"bytes": (group.root / rel).read_bytes(), "path": rel}
+    return row
+
+
+def _write_parquet(path: Path, groups: list[Group]) -> None:
+    try:
+        import datasets
+    except ImportError:
+        raise DatasetError(f"the huggingface export needs datasets; {_INSTALL['huggingface']}"
+                           ) from None
+    names = list(group_files(groups[0]))
+    rows = []
+    for g in groups:
+        files = group_files(g)
+        if list(files) != names:
+            raise DatasetError(f"group {g.id}: audio files {sorted(files)} differ from group "
+                               f"{groups[0].id}'s {sorted(names)}; one table needs the same "
+                               "columns")
+        rows.append(_row(g, files))
+    features = datasets.Features({
+        "group": datasets.Value("string"), "split": datasets.Value("string"),
+        "scene_id": datasets.Value("string"), "sample_rate_hz": datasets.Value("int64"),
+        "num_samples": datasets.Value("int64"),
+        "speakers": datasets.Sequence(datasets.Value("string")),
+        "transcripts": datasets.Sequence(datasets.Value("string")),
+        "t30_s": datasets.Sequence(datasets.Value("float64")),
+        "drr_db": datasets.Sequence(datasets.Value("float64")),
+        "metadata": datasets.Value("string"),
+        **{n: datasets.Audio(sampling_rate=groups[0].sample_rate_hz, decode=True)
+           for n in names}})
+    # The table is made with pyarrow against the features' own Arrow schema (which carries
+    # them in its "huggingface" metadata, as datasets writes Parquet): datasets' encoder would
+    # need torchcodec to pass FLAC bytes through unchanged.
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pylist(rows, schema=features.arrow_schema)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, str(tmp))
+
+
+def _write_tar(path: Path, groups: list[Group]) -> None:
+    with atomic_path(path) as tmp, tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
+        for g in groups:
+            members = [(f"{name}{Path(rel).suffix}", (g.root / rel).read_bytes())
+                       for name, rel in group_files(g).items()]
+            members.append(("metadata.json", (g.root / g.id / "metadata.json").read_bytes()))
+            for ext, data in members:
+                info = tarfile.TarInfo(f"{g.id}.{ext}")
+                info.size, info.mtime, info.mode = len(data), 0, 0o644
+                info.uid = info.gid = 0
+                info.uname = info.gname = ""
+                tar.addfile(info, io.BytesIO(data))
+
+
+def export(root: str | Path, out: str | Path, fmt: str, *, splits: list[str] | None = None,
+           groups_per_shard: int = 64) -> dict[str, Any]:
+    """Export a dataset folder as ``fmt`` (``huggingface`` or ``webdataset``) into ``out``.
+
+    Returns ``{"written": [...], "kept": [...], "removed": [...]}`` (shard paths relative to
+    ``out``).
+    """
+    if fmt not in FORMATS:
+        raise DatasetError(f"format: expected one of {list(FORMATS)}, got {fmt!r}")
+    if groups_per_shard < 1:
+        raise DatasetError(f"groups_per_shard: expected >= 1, got {groups_per_shard}")
+    if fmt == "webdataset":
+        try:  # not needed to write a tar, but a reader will want it: say so now
+            import webdataset  # noqa: F401
+        except ImportError:
+            raise DatasetError(f"the webdataset export needs webdataset; "
+                               f"{_INSTALL['webdataset']}") from None
+    folder = DatasetFolder(root)
+    out = Path(out).resolve()
+    if out == folder.root.resolve() or folder.root.resolve() in out.parents:
+        raise DatasetError(f"{out}: inside the dataset folder {folder.root}; export beside it "
+                           "(the folder holds what the build wrote, nothing else)")
+    state_path = out / STATE_NAME
+    if out.exists() and any(out.iterdir()) and not state_path.is_file():
+        raise DatasetError(f"{out}: not empty and not an export folder (no {STATE_NAME}); "
+                           "choose an empty or new folder")
+    previous = json.loads(state_path.read_text()) if state_path.is_file() else {}
+    if previous and previous.get("format") != fmt:
+        raise DatasetError(f"{out}: holds a {previous.get('format')} export; choose another "
+                           f"folder for {fmt}")
+    sums = read_checksums(folder.root)
+    chosen = splits or folder.splits
+    wanted: list[tuple[str, list[Group]]] = []
+    for split in chosen:
+        for key, chunk in _shards(folder, split, groups_per_shard, sums):
+            rel = (f"data/{split}-{key}.parquet" if fmt == "huggingface"
+                   else f"{split}-{key}.tar")
+            wanted.append((rel, chunk))
+    written, kept = [], []
+    for rel, chunk in wanted:
+        path = out / rel
+        if path.is_file():
+            kept.append(rel)
+            continue
+        (_write_parquet if fmt == "huggingface" else _write_tar)(path, chunk)
+        written.append(rel)
+    names = {rel for rel, _ in wanted}
+    removed = sorted(r for r in previous.get("shards", []) if r not in names)
+    for rel in removed:
+        (out / rel).unlink(missing_ok=True)
+    write_text(state_path, json.dumps(
+        {"format": fmt, "version": FORMAT_VERSION, "dataset": str(folder.root.resolve()),
+         "splits": chosen, "shards": sorted(names)}, indent=2, sort_keys=True) + "\n")
+    return {"written": written, "kept": kept, "removed": removed}
