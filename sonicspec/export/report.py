@@ -442,14 +442,12 @@ def _group_page(env, info: rd.DatasetInfo, view, g: dict[str, Any], pages_dir: P
         return rd.relative(target, pages_dir) if target.is_file() else None
 
     meta_path = g["metadata_path"]
-    meta = json.loads(meta_path.read_text(encoding="utf-8"))
-    audio = [{"name": s["name"], "src": link((meta.get(s["name"]) or {}).get("file"))}
-             for s in g["sources"]]
-    for m in meta.get("mixtures") or []:
-        audio.append({"name": f"mixture {m.get('name')}", "src": link(m.get("file"))})
+    audio = [{"name": s["name"], "src": link(s["file"])} for s in g["sources"]]
+    audio += [{"name": f"mixture {name}", "src": link(file)} for name, file in g["mixtures"]]
     html = env.get_template("group.html.j2").render(
         g=g, plan=plan, rir_plot=rir_plot, figures=figures, audio=audio,
         back=rd.relative(report_path, pages_dir), metadata=rd.relative(meta_path, pages_dir),
-        sources=[_clean({k: v for k, v in s.items() if k not in ("intervals", "trajectory_m")})
+        sources=[_clean({k: v for k, v in s.items()
+                         if k not in ("intervals", "trajectory_m", "position_m", "file")})
                  for s in g["sources"]])
     return html, bands

@@ -137,7 +137,8 @@ def floor_plan(walls: Sequence[np.ndarray], paths: Sequence[np.ndarray],
     wall_segments = np.concatenate(walls) if len(walls) else np.zeros((0, 2, 2))
     if len(wall_segments):
         ax.add_collection(LineCollection(wall_segments, colors="black", linewidths=1.4))
-    many = len(paths) > 60
+    many = len(paths) > 60  # drawn thin and light, without labels
+    raster = len(paths) > 3000  # a few polylines each: vector up to here (~0.5 MB)
     if paths:
         if labels is not None and not many:
             for k, p in enumerate(paths):
@@ -147,18 +148,18 @@ def floor_plan(walls: Sequence[np.ndarray], paths: Sequence[np.ndarray],
         else:
             lines = LineCollection([p[:, :2] for p in paths], colors="C0",
                                    linewidths=0.8 if many else 1.4, alpha=0.35 if many else 0.8,
-                                   rasterized=many)
+                                   rasterized=raster)
             ax.add_collection(lines)
             starts = np.asarray([p[0, :2] for p in paths])
             ends = np.asarray([p[-1, :2] for p in paths])
-            ax.plot(starts[:, 0], starts[:, 1], "o", color="C0", ms=2.5, rasterized=many)
-            ax.plot(ends[:, 0], ends[:, 1], "s", color="C1", ms=2.5, rasterized=many)
+            ax.plot(starts[:, 0], starts[:, 1], "o", color="C0", ms=2.5, rasterized=raster)
+            ax.plot(ends[:, 0], ends[:, 1], "s", color="C1", ms=2.5, rasterized=raster)
     if len(statics):
         ax.plot(statics[:, 0], statics[:, 1], "x", color="dimgray", ms=6, ls="none",
-                label="noise / music", rasterized=many)
+                label="noise / music", rasterized=raster)
     if len(mics):
         ax.plot(mics[:, 0], mics[:, 1], "^", color="crimson", ms=8 if len(mics) < 20 else 4,
-                ls="none", label="microphone", rasterized=many)
+                ls="none", label="microphone", rasterized=raster)
     points = [a for a in (wall_segments.reshape(-1, 2),
                           *(p[:, :2] for p in paths), mics[:, :2] if len(mics) else None,
                           statics[:, :2] if len(statics) else None) if a is not None and len(a)]
