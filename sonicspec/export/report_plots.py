@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import io
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -111,7 +112,8 @@ def per_band(per_split: Mapping[str, np.ndarray], bands_hz: Sequence[float], lab
         if not v.size:
             continue
         color = SPLIT_COLORS[k % len(SPLIT_COLORS)]
-        with np.errstate(all="ignore"):
+        with warnings.catch_warnings():  # a band with no figure (all NaN) draws nothing
+            warnings.simplefilter("ignore", RuntimeWarning)
             med = np.nanmedian(v, axis=0)
             lo, hi = np.nanpercentile(v, 5, axis=0), np.nanpercentile(v, 95, axis=0)
         ax.plot(x, med, "o-", color=color, lw=1.5, ms=4, label=f"{split} (n={len(v)})")
