@@ -110,6 +110,7 @@ def write_synthetic_dataset(root: Path, groups: dict[str, int], *, scenes: int =
     """A dataset folder with ``groups[split]`` groups per split over ``scenes`` scenes per
     split (metadata and ``dataset.json`` only)."""
     root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
     entries = []
     for s, (split, count) in enumerate(groups.items()):
         for i in range(count):
