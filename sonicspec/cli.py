@@ -217,11 +217,25 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _report_unavailable(where: str) -> bool:
+    """True (after the message) if matplotlib or jinja2, which the report needs, is missing."""
+    from sonicspec.stages.preflight import module_available
+
+    missing = [m for m in ("matplotlib", "jinja2") if not module_available(m)]
+    if missing:
+        print(f"sonicspec: error: {where} needs {' and '.join(missing)}: "
+              "pip install 'sonicspec[report]'", file=sys.stderr)
+    return bool(missing)
+
+
 def cmd_build(args: argparse.Namespace) -> int:
     from sonicspec.stages.workflow import build
 
     loaded = _load_or_exit(args.spec, args)
     if loaded is None or not _preflight_or_exit(loaded, args.spec):
+        return EXIT_INVALID
+    if loaded.spec.outputs.report.enabled and not args.dry_run and not args.until \
+            and _report_unavailable(f"{args.spec}: outputs.report.enabled"):
         return EXIT_INVALID
     plan = _compile(loaded, args)
     if args.until:
@@ -259,6 +273,8 @@ def _report_line(report) -> str:
 def cmd_report(args: argparse.Namespace) -> int:
     from sonicspec.export.report import write_report
 
+    if _report_unavailable("sonicspec report"):
+        return EXIT_INVALID
     folder = Path(args.dataset)
     if not folder.is_dir():
         print(f"sonicspec: error: {folder}: no such folder", file=sys.stderr)

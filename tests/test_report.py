@@ -120,8 +120,8 @@ def _oracle(metas: list[dict], split: str) -> dict[str, np.ndarray]:
 
 
 def test_figures_in_the_page_equal_the_metadata(synthetic: Path, tmp_path: Path) -> None:
-    result = write_report(synthetic, tmp_path / "r.html", group_pages=5)
-    assert result.groups == sum(GROUPS.values()) and result.group_pages == 5
+    result = write_report(synthetic, tmp_path / "r.html", group_pages=2)
+    assert result.groups == sum(GROUPS.values()) and result.group_pages == 2
     page = page_figures(result.path)
     metas = _metadata(synthetic)
     assert page.plan_groups == GROUPS
@@ -142,10 +142,10 @@ def test_figures_in_the_page_equal_the_metadata(synthetic: Path, tmp_path: Path)
     assert "val/000001 (-4.0 dB)" in text
     close = re.search(r"val/000001 source2 \((\d\.\d\d) m\)", text)
     assert close is not None and float(close.group(1)) <= 0.3  # its path passes 0.3 m or closer
-    # the table's data: every group once, pages for the 5 sampled ones
+    # the table's data: every group once, pages for the 2 sampled ones
     rows = json.loads(text.split('id="group-data">')[1].split("</script>")[0])
     assert sorted(r["group"] for r in rows) == sorted(m["group"] for m in metas)
-    assert sum(r["page"] is not None for r in rows) == 5
+    assert sum(r["page"] is not None for r in rows) == 2
     for r in rows:
         if r["page"]:
             assert (result.path.parent / r["page"]).is_file()
@@ -262,6 +262,42 @@ def test_bad_input_is_named_with_exit_code_2(synthetic: Path, tmp_path: Path, ca
 
 def test_group_pages_of_an_earlier_sample_are_removed(synthetic: Path, tmp_path: Path) -> None:
     out = tmp_path / "r.html"
-    write_report(synthetic, out, group_pages=6)
-    write_report(synthetic, out, group_pages=2)
-    assert len(list((tmp_path / "r_files" / "groups").glob("*.html"))) == 2
+    write_report(synthetic, out, group_pages=3, split="test")
+    write_report(synthetic, out, group_pages=1, split="test")
+    assert len(list((tmp_path / "r_files" / "groups").glob("*.html"))) == 1
+
+
+def test_scene_warnings_from_the_mesh_report_and_log() -> None:
+    """The mesh stage's leak message and the material library's fallback message, as the
+    mesh job's log holds them (time stamp and level first)."""
+    warnings = rd.Warnings()
+    log = ["2026-11-26 02:17:41,063 WARNING scene 'mp3d/abc': expected a material for every "
+           "face label, got none for faces without a label (1.3 % of the area -> Default); ..."]
+    lines = rd.scene_warnings("mp3d/abc", {"leak": {"fraction": 0.0}}, log, 0.001, warnings)
+    assert lines == [log[0][len("2026-11-26 02:17:41,063 WARNING "):]]
+    assert warnings.default_materials == [{"scene": "mp3d/abc", "message": lines[0]}]
+    assert warnings.leaked_scenes == []
+    leak = ("scene 'mp3d/x': 2.00% of 1000 test rays leave the mesh (allowed: 0.10%); raise "
+            "repair.max_hole_size_m or fix the scan")
+    rd.scene_warnings("mp3d/x", {"leak": {"fraction": 0.02}, "warnings": [leak]}, [leak],
+                      0.001, warnings)
+    assert warnings.leaked_scenes == [{"scene": "mp3d/x", "fraction": 0.02, "allowed": 0.001}]
+    rd.scene_warnings("mp3d/y", {"leak": {"fraction": 0.0005}}, [], 0.001, warnings)
+    assert len(warnings.leaked_scenes) == 1 and warnings.count == 2  # within what is allowed
+
+
+def test_the_report_needs_its_libraries(monkeypatch, synthetic: Path, tmp_path: Path,
+                                        capsys) -> None:
+    from sonicspec.stages import preflight
+
+    monkeypatch.setattr(preflight, "module_available", lambda name: name != "jinja2")
+    assert main(["report", str(synthetic)]) == 2
+    assert "sonicspec report needs jinja2: pip install 'sonicspec[report]'" in (
+        capsys.readouterr().err)
+    spec = tmp_path / "demo.yaml"
+    text = (Path(__file__).resolve().parents[1] / "specs" / "demo.yaml").read_text()
+    spec.write_text(text.replace("  groups_per_shard: 2\n",
+                                 "  groups_per_shard: 2\n  report: {enabled: true}\n"))
+    assert main(["build", str(spec)]) == 2
+    assert "outputs.report.enabled needs jinja2" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()  # refused before anything was written

@@ -196,16 +196,8 @@ def _scenes(groups, view, warnings: rd.Warnings) -> tuple[list[dict[str, Any]], 
             entry["kind"] = report.get("kind")
             entry["repair"] = report.get("repair")
             entry["leak"] = report.get("leak")
-            entry["warnings"] = [*report.get("warnings", []), *scene["log_warnings"]]
-            leak = (report.get("leak") or {}).get("fraction")
-            limit = scene["max_leak_fraction"]
-            if (leak is not None and leak > (limit or 0.0)) or any(
-                    "leave the mesh" in w for w in entry["warnings"]):
-                warnings.leaked_scenes.append({"scene": scene_id, "fraction": leak,
-                                               "allowed": limit})
-            fell_back = [w for w in entry["warnings"]
-                         if "expected a material for every face label" in w]
-            warnings.default_materials += [{"scene": scene_id, "message": w} for w in fell_back]
+            entry["warnings"] = rd.scene_warnings(scene_id, report, scene["log_warnings"],
+                                                  scene["max_leak_fraction"], warnings)
         floors = sorted({g["floor"] if g["floor"] is not None else 0 for g in of})
         for floor in floors:
             on = [g for g in of if (g["floor"] or 0) == floor]

@@ -460,6 +460,26 @@ def group_warnings(groups: Sequence[dict[str, Any]], warnings: Warnings) -> None
                                                "distance_m": d})
 
 
+_LOG_PREFIX = re.compile(r"^.*?\bWARNING\s+")
+
+
+def scene_warnings(scene_id: str, report: dict[str, Any], log_lines: Sequence[str],
+                   max_leak_fraction: float | None, warnings: Warnings) -> list[str]:
+    """A scene's warnings (its mesh report's and its mesh job's log lines, without the log's
+    time stamp); a leak beyond what the spec allows and default-material fallbacks also go
+    into ``warnings``."""
+    lines = list(dict.fromkeys([*report.get("warnings", []),
+                                *(_LOG_PREFIX.sub("", x) for x in log_lines)]))
+    leak = (report.get("leak") or {}).get("fraction")
+    if (leak is not None and leak > (max_leak_fraction or 0.0)) or any(
+            "leave the mesh" in w for w in lines):
+        warnings.leaked_scenes.append({"scene": scene_id, "fraction": leak,
+                                       "allowed": max_leak_fraction})
+    warnings.default_materials += [{"scene": scene_id, "message": w} for w in lines
+                                   if "expected a material for every face label" in w]
+    return lines
+
+
 # --- the store: scenes, RIRs, build facts ----------------------------------------------------
 
 
