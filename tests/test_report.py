@@ -301,3 +301,17 @@ def test_the_report_needs_its_libraries(monkeypatch, synthetic: Path, tmp_path: 
     assert main(["build", str(spec)]) == 2
     assert "outputs.report.enabled needs jinja2" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_report_settings_rerun_no_export(tmp_path: Path) -> None:
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import load_spec
+
+    text = (Path(__file__).resolve().parents[1] / "specs" / "demo.yaml").read_text()
+    plain, asked = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    plain.write_text(text)
+    asked.write_text(text.replace("  groups_per_shard: 2\n", "  groups_per_shard: 2\n"
+                                  "  report: {enabled: true, group_pages: 7}\n"))
+    before = {j.key for j in compile_spec(load_spec(plain)).jobs}
+    after = compile_spec(load_spec(asked))
+    assert {j.step for j in after.jobs if j.key not in before} == {"dataset"}

@@ -19,7 +19,8 @@ class ReportSpec(SpecModel):
         "build facts, distributions per split aggregated from the groups' metadata, floor "
         "plans per scene, a sortable group table and warnings. Needs matplotlib and jinja2: "
         "pip install 'sonicspec[report]'. The report is not part of the dataset's content: "
-        "it is not in checksums.sha256 and changing these fields reruns no job.",
+        "it is not in checksums.sha256, and changing these fields reruns only the dataset "
+        "step (its dataset.json records the spec), no export.",
     )
     group_pages: int = Field(
         100,
