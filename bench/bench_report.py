@@ -10,7 +10,7 @@ the page's size and the group pages' size. There is no store, so no RIRs: the gr
 have a floor plan and audio links, the scenes have no walls.
 
 Reproduce:
-    python bench/bench_report.py                      # ~5 min to write 6.8 GB, then ~1 min
+    python bench/bench_report.py                      # ~10 min to write 7 GB, then ~1 min
     python bench/bench_report.py --duration 10        # demo-sized groups (~0.6 MB each)
     python bench/bench_report.py --dir /tmp/ds --keep # keep the dataset for another run
 """
