@@ -229,14 +229,14 @@ def _report_unavailable(where: str) -> bool:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from sonicspec.stages.workflow import build
-
     loaded = _load_or_exit(args.spec, args)
     if loaded is None or not _preflight_or_exit(loaded, args.spec):
         return EXIT_INVALID
     if loaded.spec.outputs.report.enabled and not args.dry_run and not args.until \
             and _report_unavailable(f"{args.spec}: outputs.report.enabled"):
         return EXIT_INVALID
+    from sonicspec.stages.workflow import build
+
     plan = _compile(loaded, args)
     if args.until:
         plan = plan.until(args.until)

@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 from build_cases import write_spec
 
+# Imported at collection: build() binds sys.stderr as its default stream when its module is
+# first imported, and a first import under another test's capsys would bind a closed stream.
+import sonicspec.stages.workflow  # noqa: F401
 from sonicspec.cli import main
 from sonicspec.export.checksums import read_checksums, unlisted_files
 from sonicspec.export.report_data import StoreView, read_metadata

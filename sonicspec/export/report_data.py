@@ -483,6 +483,9 @@ def scene_warnings(scene_id: str, report: dict[str, Any], log_lines: Sequence[st
 # --- the store: scenes, RIRs, build facts ----------------------------------------------------
 
 
+MAX_PLANS_READ = 4
+
+
 class StoreView:
     """What the report reads from the artifact store a dataset names (None-safe)."""
 
@@ -493,8 +496,11 @@ class StoreView:
         self.root = store_dir
         self.store = ArtifactStore(store_dir)
         self.plan = None
-        for path in sorted((store_dir / "plans").glob("*.json"),
-                           key=lambda p: p.stat().st_mtime, reverse=True):
+        # The last build's plan first, then the newest others (a plan of 10^5 groups is tens
+        # of MB: a few are read at most).
+        plans = sorted((store_dir / "plans").glob("*.json"),
+                       key=lambda p: (not p.name.startswith("last-build-"), -p.stat().st_mtime))
+        for path in plans[:MAX_PLANS_READ]:
             try:
                 plan = Plan.read(path)
             except Exception:  # an unreadable or foreign plan file: try the next one
