@@ -346,7 +346,7 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
 
     build = view.build_facts(info.marker.get("dataset_key")) if view is not None else {}
     if (root / "dataset.json").is_file():
-        build["dataset_written_utc"] = rd._utc((root / "dataset.json").stat().st_mtime)
+        build["dataset_written_utc"] = rd.utc_text((root / "dataset.json").stat().st_mtime)
     spec_text = _spec_yaml(spec) if spec else None
     context = {
         "title": info.summary.get("name") or root.name,

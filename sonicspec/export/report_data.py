@@ -570,7 +570,7 @@ class StoreView:
             if m:
                 facts["cores"] = int(m.group(1))
             facts["log"] = str(path)
-            facts["finished_utc"] = _utc(path.stat().st_mtime)
+            facts["finished_utc"] = utc_text(path.stat().st_mtime)
         steps: dict[str, dict[str, float]] = {}
         for job in self.jobs.values():
             bench = (self.root / "benchmarks" / job.step / job.key[:2] / f"{job.key}.tsv")
@@ -598,7 +598,8 @@ def _float(x: str | None) -> float:
         return 0.0
 
 
-def _utc(t: float) -> str:
+def utc_text(t: float) -> str:
+    """A file time as people read it."""
     import datetime as dt
 
     return dt.datetime.fromtimestamp(t, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")

@@ -13,7 +13,6 @@ import base64
 import io
 import warnings
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -216,9 +215,3 @@ def rirs_and_edcs(rirs: Mapping[str, np.ndarray], sample_rate_hz: float) -> str:
     for ax in (ax_w, ax_e):
         ax.tick_params(labelsize=7)
     return svg_uri(fig)
-
-
-def meta_info() -> dict[str, Any]:
-    import matplotlib
-
-    return {"matplotlib": matplotlib.__version__}
