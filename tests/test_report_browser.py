@@ -47,7 +47,15 @@ def test_the_build_writes_the_report_outside_the_checksums(demo: Path) -> None:
     assert len(list((demo / "report_files" / "groups").glob("*.html"))) == 3
     assert unlisted_files(demo, read_checksums(demo)) == []  # no stray-file warning next time
     marker = json.loads((demo / ".sonicspec-dataset.json").read_text())
-    assert f'id="content-key">{marker["dataset_key"]}<' in page.read_text()
+    text = page.read_text()
+    assert f'id="content-key">{marker["dataset_key"]}<' in text
+    # From the store: build facts, scene materials and repair facts, per-band figures.
+    assert "<th class=\"text\">cores given</th><td class=\"text\">2</td>" in text
+    living = text.split('data-scene="living_room"')[1].split('class="card scene"')[0]
+    assert "<td>sofa</td>" in living and "<td>plaster_on_brick</td>" in living
+    assert "none (a procedural room is watertight by construction)" in living
+    for band in ("band_t30", "band_edt", "band_c50"):
+        assert f'data-quantity="{band}"' in text
 
 
 def test_the_group_pages_show_the_rirs_the_metadata_measured(demo: Path) -> None:
