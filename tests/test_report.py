@@ -315,3 +315,18 @@ def test_report_settings_rerun_no_export(tmp_path: Path) -> None:
     before = {j.key for j in compile_spec(load_spec(plain)).jobs}
     after = compile_spec(load_spec(asked))
     assert {j.step for j in after.jobs if j.key not in before} == {"dataset"}
+
+
+def test_one_row_of_a_stored_array(tmp_path: Path) -> None:
+    from sonicspec.errors import StoreError
+    from sonicspec.store import ArtifactStore
+
+    store = ArtifactStore(tmp_path / "store")
+    key = "ab" * 32
+    stack = np.arange(3 * 2 * 5, dtype=np.float32).reshape(3, 2, 5)
+    store.write("rir", key, {"g0_s0": stack}, data={"groups": []})
+    assert np.array_equal(store.read_array("rir", key, "g0_s0", 1), stack[1])
+    with pytest.raises(StoreError, match="rir cdcdcdcdcdcd: no artifact"):
+        store.read_array("rir", "cd" * 32, "g0_s0", 0)
+    with pytest.raises(StoreError, match="cannot read array 'nope' row 0"):
+        store.read_array("rir", key, "nope", 0)
