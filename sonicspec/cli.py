@@ -226,12 +226,26 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def cmd_build(args: argparse.Namespace) -> int:
-    from sonicspec.stages.workflow import build
+def _report_unavailable(where: str) -> bool:
+    """True (after the message) if matplotlib or jinja2, which the report needs, is missing."""
+    from sonicspec.stages.preflight import module_available
 
+    missing = [m for m in ("matplotlib", "jinja2") if not module_available(m)]
+    if missing:
+        print(f"sonicspec: error: {where} needs {' and '.join(missing)}: "
+              "pip install 'sonicspec[report]'", file=sys.stderr)
+    return bool(missing)
+
+
+def cmd_build(args: argparse.Namespace) -> int:
     loaded = _load_or_exit(args.spec, args)
     if loaded is None or not _preflight_or_exit(loaded, args.spec):
         return EXIT_INVALID
+    if loaded.spec.outputs.report.enabled and not args.dry_run and not args.until \
+            and _report_unavailable(f"{args.spec}: outputs.report.enabled"):
+        return EXIT_INVALID
+    from sonicspec.stages.workflow import build
+
     plan = _compile(loaded, args)
     if args.until:
         plan = plan.until(args.until)
@@ -249,6 +263,44 @@ def cmd_build(args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     plan.write(_last_plan_path(plan))
     print(f"dataset written to {plan.output_dir}", file=sys.stderr)
+    if loaded.spec.outputs.report.enabled:
+        from sonicspec.export.report import write_report
+
+        report = write_report(plan.output_dir,
+                              group_pages=loaded.spec.outputs.report.group_pages)
+        print(_report_line(report), file=sys.stderr)
+    return EXIT_OK
+
+
+def _report_line(report) -> str:
+    return (f"report written to {report.path} ({report.groups} group"
+            f"{'s' * (report.groups != 1)}, {report.group_pages} with a page in "
+            f"{report.files_dir.name}/; {report.page_bytes / 1e6:.2f} MB, "
+            f"{report.seconds:.1f} s)")
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from sonicspec.export.report import write_report
+
+    if _report_unavailable("sonicspec report"):
+        return EXIT_INVALID
+    folder = Path(args.dataset)
+    if not folder.is_dir():
+        print(f"sonicspec: error: {folder}: no such folder", file=sys.stderr)
+        return EXIT_INVALID
+    if args.group_pages is not None and args.group_pages < 0:
+        print(f"sonicspec: error: --group-pages: expected >= 0, got {args.group_pages}",
+              file=sys.stderr)
+        return EXIT_INVALID
+    from sonicspec.export.report_data import ReportError
+
+    try:
+        report = write_report(folder, args.output, split=args.split,
+                              group_pages=args.group_pages)
+    except ReportError as exc:
+        print(f"sonicspec: error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    print(_report_line(report))
     return EXIT_OK
 
 
@@ -729,6 +781,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the receiver as the spec writes it, e.g. '{kind: ambisonics, order: 1}'"
                    " or '{kind: circular_array, n: 6, radius_m: 0.05}' (default: mono)")
     p.set_defaults(func=cmd_rir)
+
+    p = sub.add_parser("report", help="write an HTML report of a dataset folder: spec, plan, "
+                       "build facts, distributions per split, scenes, groups, warnings")
+    p.add_argument("dataset", metavar="DATASET", help="a dataset folder (outputs.dir)")
+    p.add_argument("-o", "--output", metavar="REPORT.html",
+                   help="where to write it (default: DATASET/report.html); group pages go in "
+                   "the folder beside it named after it (report_files/)")
+    p.add_argument("--split", metavar="S", help="report this split only")
+    p.add_argument("--group-pages", type=int, metavar="N",
+                   help="at most N groups get a page (default: the spec's "
+                   "outputs.report.group_pages, 100)")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")
     p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")

@@ -27,6 +27,9 @@ from sonicspec.hashing import file_sha256
 CHECKSUMS_NAME = "checksums.sha256"
 DATASET_MARKER = ".sonicspec-dataset.json"
 STORE_MARKER = "sonicspec-store.json"
+# The report a build writes at the dataset's top (outputs.report), and its group pages.
+REPORT_NAME = "report.html"
+REPORT_FILES = "report_files"
 STORE_STEP_FOLDERS = ("plans", "corpus", "mesh")  # what a store made before markers has
 
 
@@ -97,10 +100,13 @@ def verify_dataset(out: Path) -> tuple[int, list[FileProblem]]:
 
 
 def unlisted_files(out: Path, listed: dict[str, str]) -> list[str]:
-    """Files under ``out`` that the checksum list does not name (nor the list and marker)."""
-    known = set(listed) | {CHECKSUMS_NAME, DATASET_MARKER}
+    """Files under ``out`` that the checksum list does not name (nor the list, the marker and
+    the report)."""
+    known = set(listed) | {CHECKSUMS_NAME, DATASET_MARKER, REPORT_NAME}
     found = []
     for dirpath, dirs, files in os.walk(out):
+        if Path(dirpath) == out and REPORT_FILES in dirs:
+            dirs.remove(REPORT_FILES)  # the report's group pages: not part of the dataset
         dirs.sort()
         for name in sorted(files):
             rel = Path(dirpath, name).relative_to(out).as_posix()

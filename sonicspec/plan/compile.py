@@ -309,7 +309,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
-    for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard"):
+    for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard", "report"):
         outputs.pop(k)  # where and how finely: no export writes other bytes for them
     outputs = shared(outputs)
 

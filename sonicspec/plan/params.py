@@ -113,10 +113,12 @@ SceneParams = Annotated[
 
 
 class OutputsParams(OutputsSpec):
-    """What an export writes, without where (``dir``, ``store_dir``) and how finely the work
-    is cut (``groups_per_shard``): no exported byte depends on them."""
+    """What an export writes, without where (``dir``, ``store_dir``), how finely the work
+    is cut (``groups_per_shard``) and the report made after the build (``report``): no
+    exported byte depends on them."""
 
     dir: None = _DROPPED  # type: ignore[assignment]
+    report: None = _DROPPED  # type: ignore[assignment]
     store_dir: None = _DROPPED  # type: ignore[assignment]
     allow_outside_spec_folder: None = _DROPPED  # type: ignore[assignment]
     groups_per_shard: None = _DROPPED  # type: ignore[assignment]

@@ -9,6 +9,30 @@ from pydantic import Field
 from sonicspec.spec.base import SpecModel
 
 
+class ReportSpec(SpecModel):
+    """The HTML report a build writes at the end (``sonicspec report`` makes it any time)."""
+
+    enabled: bool = Field(
+        False,
+        description="After a successful build, write report.html (and its folder of group "
+        "pages, report_files/) at the top of the dataset folder: the spec, the plan summary, "
+        "build facts, distributions per split aggregated from the groups' metadata, floor "
+        "plans per scene, a sortable group table and warnings. Needs matplotlib and jinja2: "
+        "pip install 'sonicspec[report]'. The report is not part of the dataset's content: "
+        "it is not in checksums.sha256, and changing these fields reruns only the dataset "
+        "step (its dataset.json records the spec), no export.",
+    )
+    group_pages: int = Field(
+        100,
+        ge=0,
+        le=100_000,
+        description="At most this many groups get a page of their own (floor plan, RIR and "
+        "energy decay curves, audio players), drawn with the spec's seed and spread over "
+        "splits and scenes; per-band T30, EDT and C50 are computed from these groups' RIRs. "
+        "Bounds the report's time and size on big datasets.",
+    )
+
+
 class OutputsSpec(SpecModel):
     """Dataset folder layout and file formats."""
 
@@ -37,6 +61,9 @@ class OutputsSpec(SpecModel):
     metadata: bool = Field(True, description="Write a metadata JSON per group (SonicSet form).")
     manifests: list[Literal["lhotse", "csv"]] = Field(
         default_factory=list, description="Manifest formats written per split."
+    )
+    report: ReportSpec = Field(
+        default_factory=ReportSpec, description="The HTML report of the built dataset."
     )
     groups_per_shard: int = Field(
         4, ge=1, le=10_000, description="Groups handled by one pipeline job (keeps the DAG small)."

@@ -216,6 +216,20 @@ class ArtifactStore:
             raise StoreError(f"{stage} {key[:12]}: {path} has no provenance attributes")
         return Artifact(stage, key, arrays, attrs.get("data"), attrs["sonicspec"])
 
+    def read_array(self, stage: str, key: str, name: str, index: int) -> np.ndarray:
+        """Row ``index`` of one array of an artifact, reading only the chunks it lies in
+        (the report reads one RIR of a shard's stack this way)."""
+        import zarr
+
+        path = self.path(stage, key)
+        if not self.exists(stage, key):
+            raise StoreError(f"{stage} {key[:12]}: no artifact at {path}")
+        try:
+            return np.asarray(zarr.open_group(store=str(path), mode="r")[name][index])
+        except Exception as exc:  # zarr raises many kinds on damaged files
+            raise StoreError(f"{stage} {key[:12]}: cannot read array {name!r} row {index} "
+                             f"at {path}: {exc}") from exc
+
     def read_data(self, stage: str, key: str) -> Any:
         """Only the stage's JSON data (cheap: no arrays are read)."""
         path = self.path(stage, key) / "zarr.json"

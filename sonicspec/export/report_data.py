@@ -1,0 +1,643 @@
+"""What the dataset report shows, as numbers: read from the dataset folder (and, when it is
+reachable, the artifact store the folder names), never by decoding audio.
+
+Every distribution is aggregated from the groups' ``metadata.json`` (the SonicSet form that
+``stages.export`` writes; fields a metadata file lacks are left out and counted, so a SonicSet
+release's plainer metadata reports what it has). Scene geometry, material areas, repair facts
+and the RIRs of the sampled groups come from the store; without a store those parts say so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonicspec.errors import SonicspecError
+from sonicspec.export.checksums import DATASET_MARKER
+from sonicspec.hashing import rng_for
+
+# The SonicSim paper's recipe where it states one (as the `sonicset` preset writes it:
+# specs/sonicset.yaml, "the paper's rules: 1-8 m"; spec.mixture.LOUDNESS_PRESETS
+# "sonicsim_paper": -17 / -21 / -24 LUFS).
+PAPER_DISTANCE_M = (1.0, 8.0)
+PAPER_TRAVEL_M = (1.0, 8.0)
+
+# Thresholds of the warnings the issue asks for.
+GUARD_CUT_DB = -3.0
+CLOSE_SOURCE_M = 0.5
+
+ROLES = ("speech", "noise", "music")
+
+
+class ReportError(SonicspecError):
+    """A folder the report cannot read (not a dataset, unreadable metadata)."""
+
+
+# --- reading -------------------------------------------------------------------------------
+
+
+@dataclass
+class DatasetInfo:
+    """A dataset folder: its summary (``dataset.json``, may be empty), marker and groups."""
+
+    root: Path
+    summary: dict[str, Any]
+    marker: dict[str, Any]
+    groups: list[dict[str, Any]]  # {"group", "split", "scene_id", "metadata_path"}
+
+    @property
+    def spec(self) -> dict[str, Any]:
+        return self.summary.get("spec") or {}
+
+    @property
+    def store_dir(self) -> Path | None:
+        rel = self.marker.get("store")
+        if not rel:
+            return None
+        path = (self.root / rel).resolve()
+        return path if path.is_dir() else None
+
+
+def read_dataset(root: Path) -> DatasetInfo:
+    """The dataset folder ``root``: ``dataset.json`` when there (a sonicspec build), else every
+    ``<split>/<group>/metadata.json`` found (a SonicSet-style folder)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise ReportError(f"{root}: no such folder")
+    marker: dict[str, Any] = {}
+    if (root / DATASET_MARKER).is_file():
+        marker = _read_json(root / DATASET_MARKER)
+    summary_path = root / "dataset.json"
+    summary: dict[str, Any] = {}
+    groups: list[dict[str, Any]] = []
+    if summary_path.is_file():
+        summary = _read_json(summary_path)
+        for g in summary.get("groups", []):
+            rel = (g.get("metadata") or {}).get("path")
+            groups.append({"group": g["group"], "split": g["split"],
+                           "scene_id": g.get("scene_id"),
+                           "metadata_path": root / rel if rel else None})
+    else:
+        for path in sorted(root.glob("*/*/metadata.json")):
+            split, index = path.parent.parent.name, path.parent.name
+            groups.append({"group": f"{split}/{index}", "split": split, "scene_id": None,
+                           "metadata_path": path})
+    if not groups:
+        raise ReportError(f"{root}: expected a dataset folder (dataset.json, or "
+                          "<split>/<group>/metadata.json files), found neither")
+    return DatasetInfo(root, summary, marker, groups)
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ReportError(f"{path}: unreadable JSON ({exc})") from None
+
+
+_TRACK = b'track": {'
+
+
+def read_metadata(path: Path) -> dict[str, Any]:
+    """A group's metadata without its position tracks (``track``, ``microphone_track``: a
+    number every 10 ms, 90 % of a 60 s group's 3 MB, which the report does not use): they
+    are cut from the bytes before parsing, 15x faster than parsing them. A track holds no
+    nested object, so it ends at the first ``}``; if another ``{`` comes first, the file is
+    parsed whole."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ReportError(f"{path}: unreadable ({exc.strerror or exc})") from None
+    parts, pos = [], 0
+    while True:
+        j = data.find(_TRACK, pos)
+        if j < 0:
+            parts.append(data[pos:])
+            break
+        body = j + len(_TRACK)
+        k = data.find(b"}", body)
+        if k < 0 or data.find(b"{", body, k) >= 0:
+            parts = [data]
+            break
+        parts += [data[pos:body], b"}"]
+        pos = k + 1
+    try:
+        return json.loads(b"".join(parts))
+    except ValueError:
+        try:
+            return json.loads(data)
+        except ValueError as exc:
+            raise ReportError(f"{path}: unreadable JSON ({exc})") from None
+
+
+# --- per-group facts -------------------------------------------------------------------------
+
+
+def _union_length(intervals: Iterable[Sequence[float]]) -> float:
+    """Total length covered by ``[start, end)`` intervals."""
+    total, end = 0.0, -math.inf
+    for a, b in sorted((float(a), float(b)) for a, b in intervals):
+        if b <= a:
+            continue
+        if a > end:
+            total += b - a
+            end = b
+        elif b > end:
+            total += b - end
+            end = b
+    return total
+
+
+def overlap_ratio(speakers: Sequence[Sequence[Sequence[float]]]) -> float | None:
+    """Time two or more speakers talk at once over the time at least one does (None: no
+    speech). ``speakers``: per speaker, its ``[start, end)`` intervals."""
+    events = []
+    for intervals in speakers:
+        # one speaker's own intervals do not overlap each other: merge them first
+        merged: list[list[float]] = []
+        for a, b in sorted((float(a), float(b)) for a, b in intervals):
+            if b <= a:
+                continue
+            if merged and a <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        for a, b in merged:
+            events += [(a, 1), (b, -1)]
+    if not events:
+        return None
+    events.sort()
+    active, last, any_time, multi_time = 0, events[0][0], 0.0, 0.0
+    for t, step in events:
+        if active >= 1:
+            any_time += t - last
+        if active >= 2:
+            multi_time += t - last
+        active += step
+        last = t
+    return multi_time / any_time if any_time > 0 else None
+
+
+def segment_distances(points: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Distance from ``at`` (3,) to every segment of the polyline ``points`` (P, 3), exact;
+    a single point is its own segment."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    a, b = (p[:-1], p[1:]) if len(p) > 1 else (p, p)
+    ab = b - a
+    length2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", at - a, ab) / np.where(length2 > 0, length2, 1.0), 0, 1)
+    return np.linalg.norm(a + t[:, None] * ab - at, axis=1)
+
+
+def _distances(entry: dict[str, Any], mic: np.ndarray | None) -> tuple[float, ...] | None:
+    """Source–microphone distance at the start and end of the path and its minimum along it
+    (exact, from the path's polyline; a static source's position), m."""
+    points = entry.get("trajectory_m") or ([entry["position_m"]] if entry.get("position_m")
+                                           else None)
+    if points is None or mic is None:
+        return None
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    ends = np.linalg.norm(p[[0, -1]] - mic, axis=1)
+    return float(ends[0]), float(ends[1]), float(segment_distances(p, mic).min())
+
+
+def _speed(entry: dict[str, Any], rate: float | None, speed_m_s: float | None) -> float | None:
+    """Walking speed: the spec's, or (null there) the path over the time from the first
+    utterance's start to the last one's end, as the renderer walks it, m/s."""
+    if speed_m_s:
+        return float(speed_m_s)
+    length, spans = _num(entry.get("path_length_m")), entry.get("start_end_points")
+    if length is None or not spans or not rate:
+        return None
+    duration = (float(spans[-1][1]) - float(spans[0][0])) / float(rate)
+    return length / duration if duration > 0 else None
+
+
+def _num(x: Any) -> float | None:
+    return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
+
+
+def source_names(meta: dict[str, Any]) -> list[str]:
+    """``source1``, ``source2``, ... in order, then ``noise`` and ``music`` when present."""
+    speech = sorted((k for k in meta if re.fullmatch(r"source\d+", k)), key=lambda k: int(k[6:]))
+    return speech + [k for k in ("noise", "music") if isinstance(meta.get(k), dict)]
+
+
+def group_facts(meta: dict[str, Any], speed_m_s: float | None = None) -> dict[str, Any]:
+    """One group's figures for the report: per source and per group (see the module doc).
+    ``speed_m_s``: the spec's walking speed (None: the walk spans the speech)."""
+    mic = np.asarray(meta["mic_m"], dtype=np.float64) if meta.get("mic_m") else None
+    n = meta.get("num_samples")
+    rate = meta.get("sample_rate_hz")
+    sources = []
+    for name in source_names(meta):
+        e = meta[name]
+        role = "speech" if name.startswith("source") else name
+        loud = e.get("loudness") or {}
+        dist = _distances(e, mic)
+        s: dict[str, Any] = {
+            "name": name, "role": role,
+            "t30_s": _num(e.get("t30_s")), "drr_db": _num(e.get("drr_db")),
+            "direct_path": e.get("direct_path"),
+            "measured_lufs": _num(loud.get("measured_lufs")),
+            "output_lufs": _num(loud.get("output_lufs")),
+            "target_lufs": _num(loud.get("target_lufs")),
+            "distance_start_m": dist[0] if dist is not None else None,
+            "distance_end_m": dist[1] if dist is not None else None,
+            "distance_min_m": dist[2] if dist is not None else None,
+            "intervals": [list(p) for p in e.get("start_end_points") or []],
+            "position_m": e.get("position_m"), "file": e.get("file"),
+        }
+        if role == "speech":
+            s.update(path_length_m=_num(e.get("path_length_m")),
+                     speed_m_s=_speed(e, rate, speed_m_s),
+                     speaker=e.get("speaker"), trajectory_m=e.get("trajectory_m"))
+        sources.append(s)
+    speech = [s for s in sources if s["role"] == "speech"]
+    facts: dict[str, Any] = {
+        "group": meta.get("group"), "split": meta.get("split"), "scene_id": meta.get("scene_id"),
+        "floor": meta.get("floor"), "mic_m": meta.get("mic_m"),
+        "group_gain_db": _num(meta.get("group_gain_db")),
+        "overlap_ratio": overlap_ratio([s["intervals"] for s in speech]),
+        "sources": sources,
+        "mixtures": [(m.get("name"), m.get("file")) for m in meta.get("mixtures") or []],
+        "num_samples": n, "sample_rate_hz": meta.get("sample_rate_hz"),
+        "rir_key": (meta.get("keys") or {}).get("rir"),
+    }
+    for role in ROLES:
+        of_role = [iv for s in sources if s["role"] == role for iv in s["intervals"]]
+        facts[f"{role}_activity"] = (_union_length(of_role) / n if n and of_role
+                                     else (0.0 if n else None))
+    return facts
+
+
+def read_group_facts(info: DatasetInfo, split: str | None = None) -> list[dict[str, Any]]:
+    """Facts of every group (of ``split``) whose metadata file exists, in group order."""
+    speed_m_s = (info.spec.get("trajectory") or {}).get("speed_m_s")
+    out = []
+    for g in info.groups:
+        if split is not None and g["split"] != split:
+            continue
+        path = g["metadata_path"]
+        if path is None or not path.is_file():
+            continue
+        meta = read_metadata(path)
+        facts = group_facts(meta, speed_m_s)
+        facts["group"] = facts["group"] or g["group"]
+        facts["split"] = facts["split"] or g["split"]
+        facts["scene_id"] = facts["scene_id"] or g["scene_id"] or "unknown"
+        facts["metadata_path"] = path
+        out.append(facts)
+    return out
+
+
+# --- distributions -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A figure the report shows per split: how to collect it and what marks it has."""
+
+    key: str
+    label: str
+    unit: str
+    per: str  # "group" or a role ("speech", "any" for every source)
+    field: str
+    marks: tuple[tuple[str, float], ...] = ()  # (label, value) vertical lines
+    ranges: tuple[tuple[str, float, float], ...] = ()  # (label, lo, hi) shaded
+
+
+def _spec_range(spec: dict[str, Any], *path: str) -> tuple[float, float] | None:
+    node: Any = spec
+    for p in path:
+        if not isinstance(node, dict) or p not in node:
+            return None
+        node = node[p]
+    return (float(node[0]), float(node[1])) if isinstance(node, list) and len(node) == 2 else None
+
+
+def quantities(spec: dict[str, Any]) -> list[Quantity]:
+    """The distributions, with the spec's recipe and the paper's values marked."""
+    from sonicspec.spec.mixture import LOUDNESS_PRESETS
+
+    paper = LOUDNESS_PRESETS["sonicsim_paper"]
+    loud = (spec.get("mixture") or {}).get("loudness") or {}
+
+    def ranges(*path: str, paper_range: tuple[float, float] | None = None):
+        out = []
+        r = _spec_range(spec, "placement", *path)
+        if r is not None:
+            out.append(("spec", *r))
+        if paper_range is not None:
+            out.append(("paper", *paper_range))
+        return tuple(out)
+
+    def level(role: str):
+        marks = []
+        if f"{role}_lufs" in loud:
+            marks.append(("spec target", float(loud[f"{role}_lufs"])))
+        marks.append(("paper", paper[f"{role}_lufs"]))
+        return tuple(marks)
+
+    speed = (spec.get("trajectory") or {}).get("speed_m_s")
+    guard_marks = [("warning below", GUARD_CUT_DB)]
+    qs = [
+        Quantity("t30", "T30 (broadband, first RIR point)", "s", "any", "t30_s"),
+        Quantity("drr", "DRR (first RIR point)", "dB", "any", "drr_db"),
+        Quantity("distance_start", "source–mic distance at the start", "m", "speech",
+                 "distance_start_m",
+                 ranges=ranges("source_start_distance_m", paper_range=PAPER_DISTANCE_M)),
+        Quantity("distance_end", "source–mic distance at the end", "m", "speech",
+                 "distance_end_m",
+                 ranges=ranges("source_end_distance_m", paper_range=PAPER_DISTANCE_M)),
+        Quantity("distance_min", "minimum source–mic distance along the path", "m", "any",
+                 "distance_min_m", marks=(("warning below", CLOSE_SOURCE_M),)),
+        Quantity("path_length", "path length", "m", "speech", "path_length_m",
+                 ranges=ranges("source_travel_distance_m", paper_range=PAPER_TRAVEL_M)),
+        Quantity("speed", "walking speed while moving", "m/s", "speech", "speed_m_s",
+                 marks=(("spec", float(speed)),) if speed else ()),
+    ]
+    for role in ROLES:
+        qs.append(Quantity(f"{role}_before", f"{role} loudness before normalisation", "LUFS",
+                           role, "measured_lufs"))
+        qs.append(Quantity(f"{role}_after", f"{role} loudness after normalisation and guard",
+                           "LUFS", role, "output_lufs", marks=level(role)))
+    qs += [
+        Quantity("group_gain", "peak-guard gain", "dB", "group", "group_gain_db",
+                 marks=tuple(guard_marks)),
+        Quantity("overlap", "speaker overlap ratio", "", "group", "overlap_ratio"),
+    ]
+    qs += [Quantity(f"{role}_activity", f"{role} activity (share of the clip)", "", "group",
+                    f"{role}_activity") for role in ROLES]
+    return qs
+
+
+def values_of(q: Quantity, groups: Sequence[dict[str, Any]]) -> np.ndarray:
+    """Every finite value of ``q`` in ``groups``."""
+    if q.per == "group":
+        vals = [g[q.field] for g in groups]
+    else:
+        vals = [s.get(q.field) for g in groups for s in g["sources"]
+                if q.per == "any" or s["role"] == q.per]
+    return np.asarray([v for v in vals if v is not None and math.isfinite(v)],
+                      dtype=np.float64)
+
+
+def stats(values: np.ndarray) -> dict[str, float | int | None]:
+    """Count, median, 5th and 95th percentile, mean, min and max (None when empty)."""
+    if values.size == 0:
+        return {"n": 0, "median": None, "p5": None, "p95": None, "mean": None, "min": None,
+                "max": None}
+    return {"n": int(values.size), "median": float(np.median(values)),
+            "p5": float(np.percentile(values, 5)), "p95": float(np.percentile(values, 95)),
+            "mean": float(values.mean()), "min": float(values.min()),
+            "max": float(values.max())}
+
+
+def direct_path_shares(groups: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per kind of direct path (visible, through walls, blocked, diffracted, ...): the count
+    and share of the sources that have one."""
+    kinds = [s["direct_path"] for g in groups for s in g["sources"] if s["direct_path"]]
+    total = len(kinds)
+    return {k: {"count": kinds.count(k), "share": kinds.count(k) / total}
+            for k in sorted(set(kinds))}
+
+
+# --- sampling ------------------------------------------------------------------------------
+
+
+def sample_groups(groups: Sequence[dict[str, Any]], cap: int, seed: int) -> list[str]:
+    """Up to ``cap`` group ids, drawn with ``seed``: every (split, scene) in turn, so each
+    gets pages before any gets many; returned in group order."""
+    strata: dict[tuple[str, str], list[str]] = {}
+    for g in groups:
+        strata.setdefault((g["split"], g["scene_id"]), []).append(g["group"])
+    rng = rng_for(seed, "report", "group_pages")
+    queues = [list(np.asarray(ids)[rng.permutation(len(ids))]) for _, ids in sorted(
+        strata.items())]
+    chosen: list[str] = []
+    while len(chosen) < cap and any(queues):
+        for q in queues:
+            if q and len(chosen) < cap:
+                chosen.append(str(q.pop(0)))
+    return sorted(chosen)
+
+
+# --- warnings ------------------------------------------------------------------------------
+
+
+@dataclass
+class Warnings:
+    leaked_scenes: list[dict[str, Any]] = field(default_factory=list)
+    guard_cut: list[dict[str, Any]] = field(default_factory=list)
+    close_sources: list[dict[str, Any]] = field(default_factory=list)
+    default_materials: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def count(self) -> int:
+        return (len(self.leaked_scenes) + len(self.guard_cut) + len(self.close_sources)
+                + len(self.default_materials))
+
+
+def group_warnings(groups: Sequence[dict[str, Any]], warnings: Warnings) -> None:
+    """Groups the guard cut more than 3 dB and sources closer than 0.5 m, into ``warnings``."""
+    for g in groups:
+        gain = g["group_gain_db"]
+        if gain is not None and gain < GUARD_CUT_DB:
+            warnings.guard_cut.append({"group": g["group"], "gain_db": gain})
+        for s in g["sources"]:
+            d = s["distance_min_m"]
+            if d is not None and d < CLOSE_SOURCE_M:
+                warnings.close_sources.append({"group": g["group"], "source": s["name"],
+                                               "distance_m": d})
+
+
+_LOG_PREFIX = re.compile(r"^.*?\bWARNING\s+")
+
+
+def scene_warnings(scene_id: str, report: dict[str, Any], log_lines: Sequence[str],
+                   max_leak_fraction: float | None, warnings: Warnings) -> list[str]:
+    """A scene's warnings (its mesh report's and its mesh job's log lines, without the log's
+    time stamp); a leak beyond what the spec allows and default-material fallbacks also go
+    into ``warnings``."""
+    lines = list(dict.fromkeys([*report.get("warnings", []),
+                                *(_LOG_PREFIX.sub("", x) for x in log_lines)]))
+    leak = (report.get("leak") or {}).get("fraction")
+    if (leak is not None and leak > (max_leak_fraction or 0.0)) or any(
+            "leave the mesh" in w for w in lines):
+        warnings.leaked_scenes.append({"scene": scene_id, "fraction": leak,
+                                       "allowed": max_leak_fraction})
+    warnings.default_materials += [{"scene": scene_id, "message": w} for w in lines
+                                   if "expected a material for every face label" in w]
+    return lines
+
+
+# --- the store: scenes, RIRs, build facts ----------------------------------------------------
+
+
+MAX_PLANS_READ = 4
+
+
+class StoreView:
+    """What the report reads from the artifact store a dataset names (None-safe)."""
+
+    def __init__(self, store_dir: Path, dataset_key: str | None) -> None:
+        from sonicspec.plan.model import Plan
+        from sonicspec.store import ArtifactStore
+
+        self.root = store_dir
+        self.store = ArtifactStore(store_dir)
+        self.plan = None
+        # The last build's plan first, then the newest others (a plan of 10^5 groups is tens
+        # of MB: a few are read at most).
+        plans = sorted((store_dir / "plans").glob("*.json"),
+                       key=lambda p: (not p.name.startswith("last-build-"), -p.stat().st_mtime))
+        for path in plans[:MAX_PLANS_READ]:
+            try:
+                plan = Plan.read(path)
+            except Exception:  # an unreadable or foreign plan file: try the next one
+                continue
+            if dataset_key is None or any(j.key == dataset_key for j in plan.jobs):
+                self.plan = plan
+                break
+        self.jobs = self.plan.by_key() if self.plan is not None else {}
+
+    def jobs_of(self, step: str) -> list[Any]:
+        return [j for j in self.jobs.values() if j.step == step]
+
+    def scene(self, scene_id: str) -> dict[str, Any] | None:
+        """The scene's mesh (vertices, faces, materials), its mesh report, its floors and the
+        warning lines of its mesh job's log; None if the store lacks them."""
+        mesh_job = next((j for j in self.jobs_of("mesh") if j.params.get("scene_id") == scene_id),
+                        None)
+        if mesh_job is None or not self.store.exists("mesh", mesh_job.key):
+            return None
+        art = self.store.read("mesh", mesh_job.key)
+        nav_job = next((j for j in self.jobs_of("navigation") if mesh_job.key in j.inputs), None)
+        floors = []
+        if nav_job is not None and self.store.exists("navigation", nav_job.key):
+            floors = [f["floor"]["z_m"] for f in
+                      self.store.read_data("navigation", nav_job.key)["floors"]]
+        log = self.root / "logs" / "mesh" / mesh_job.key[:2] / f"{mesh_job.key}.log"
+        lines = []
+        if log.is_file():
+            lines = [x.strip() for x in log.read_text(errors="replace").splitlines()
+                     if re.search(r"\bWARNING\b", x)]
+        repair = ((mesh_job.params.get("scene") or {}).get("repair") or {})
+        return {"arrays": art.arrays, "report": art.data, "floors_z_m": floors,
+                "log_warnings": lines, "max_leak_fraction": repair.get("max_leak_fraction")}
+
+    def first_rirs(self, rir_key: str, group: str) -> tuple[dict[str, np.ndarray], dict] | None:
+        """Each source's RIR at its first point (channel 0) in group ``group``, and the rir
+        artifact's bands and rate; None if the store lacks them."""
+        if not self.store.exists("rir", rir_key):
+            return None
+        data = self.store.read_data("rir", rir_key)
+        entry = next((g for g in data["groups"] if g["group"] == group), None)
+        if entry is None:
+            return None
+        rirs = {s["name"]: self.store.read_array("rir", rir_key, s["array"], 0)[0]
+                for s in entry["sources"]}
+        return rirs, {"bands_hz": data["bands_hz"], "sample_rate_hz": data["sample_rate_hz"]}
+
+    def build_facts(self, dataset_key: str | None) -> dict[str, Any]:
+        """When, how long and on what the build ran: the Snakemake log that ran the dataset
+        job (its header) and the jobs' benchmark files (seconds and peak memory per step)."""
+        facts: dict[str, Any] = {}
+        logs = sorted((self.root / "logs").glob("snakemake-*.log"),
+                      key=lambda p: p.stat().st_mtime, reverse=True)
+        chosen = None
+        for path in logs:
+            text = path.read_text(errors="replace")
+            if dataset_key is None or f"key={dataset_key}" in text:
+                chosen = (path, text)
+                break
+        if chosen is not None:
+            path, text = chosen
+            for name in ("Date", "Host", "Platform", "Snakemake version", "Python version"):
+                m = re.search(rf"^\s*{name}: (.+)$", text, re.M)
+                if m:
+                    facts[name.lower().replace(" ", "_")] = m.group(1).strip()
+            m = re.search(r"^Provided cores: (\d+)", text, re.M)
+            if m:
+                facts["cores"] = int(m.group(1))
+            facts["log"] = str(path)
+            facts["finished_utc"] = utc_text(path.stat().st_mtime)
+        steps: dict[str, dict[str, float]] = {}
+        for job in self.jobs.values():
+            bench = (self.root / "benchmarks" / job.step / job.key[:2] / f"{job.key}.tsv")
+            try:
+                rows = bench.read_text().splitlines()
+            except OSError:
+                continue
+            if len(rows) < 2:
+                continue
+            head, values = rows[0].split("\t"), rows[1].split("\t")
+            row = dict(zip(head, values, strict=False))
+            step = steps.setdefault(job.step, {"jobs": 0, "seconds": 0.0, "max_rss_mb": 0.0})
+            step["jobs"] += 1
+            step["seconds"] += _float(row.get("s"))
+            step["max_rss_mb"] = max(step["max_rss_mb"], _float(row.get("max_rss")))
+        facts["steps"] = steps
+        facts["job_seconds"] = sum(s["seconds"] for s in steps.values())
+        return facts
+
+
+def _float(x: str | None) -> float:
+    try:
+        return float(x) if x not in (None, "", "-", "NA") else 0.0
+    except ValueError:
+        return 0.0
+
+
+def utc_text(t: float) -> str:
+    """A file time as people read it."""
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(t, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def open_store(info: DatasetInfo) -> StoreView | None:
+    """The store the dataset names, when it is there and holds a plan of this dataset."""
+    store_dir = info.store_dir
+    if store_dir is None or not (store_dir / "plans").is_dir():
+        return None
+    view = StoreView(store_dir, info.marker.get("dataset_key"))
+    return view if view.plan is not None else None
+
+
+def material_areas(arrays: dict[str, np.ndarray], materials: Sequence[str]) -> dict[str, float]:
+    """Area per material, m², largest first."""
+    v = np.asarray(arrays["vertices"], dtype=np.float64)
+    f = np.asarray(arrays["faces"])
+    tri = v[f]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    per = np.bincount(np.asarray(arrays["face_material"]), weights=areas,
+                      minlength=len(materials))
+    return dict(sorted(((materials[i], float(a)) for i, a in enumerate(per) if a > 0),
+                       key=lambda kv: -kv[1]))
+
+
+def rir_files(root: Path, group: str, names: Iterable[str]) -> dict[str, Path]:
+    """RIRs the dataset itself holds (``outputs.rirs``): each source's first point."""
+    out = {}
+    for name in names:
+        path = root / group / "rirs" / name / "000.wav"
+        if path.is_file():
+            out[name] = path
+    return out
+
+
+def relative(path: Path, start: Path) -> str:
+    """``path`` relative to the folder ``start``, as a URL path (for links in the page)."""
+    from urllib.parse import quote
+
+    return quote(Path(os.path.relpath(path, start)).as_posix())
