@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from build_cases import EDITS, build_digest, plan_for, readme_spec, write_spec
+from build_cases import EDITS, ROOT, build_digest, plan_for, readme_spec, write_spec
 
 from sonicspec.export.checksums import CHECKSUMS_NAME, DATASET_MARKER
 from sonicspec.plan.compile import plan_changes
@@ -448,3 +448,28 @@ def test_a_running_job_shows_how_far_it_is_on_the_progress_line(tmp_path: Path) 
     assert line == f" | {rir.label}: group 1/2: 15 points, 8,192/600 rays"
     progress_path(plan.store_dir, rir.key).unlink()
     assert _job_progress(plan, [rir]) == ""
+
+
+def test_planning_a_mesh_scene_does_not_block_claiming_its_fresh_store(tmp_path: Path) -> None:
+    # Planning reads mesh files and caches their digests in <store>/cache before a build
+    # claims the store: the claim must accept that cache (a fresh store of a spec with mesh
+    # scenes was refused as "not empty"), and nothing else.
+    from sonicspec.export.checksums import UnsafeOutputError, claim_folder
+
+    shutil.copy(ROOT / "specs" / "meshes" / "room.obj", tmp_path / "room.obj")
+    spec = write_spec(tmp_path)
+    spec.write_text(spec.read_text().replace(
+        "  - kind: shoebox\n    id: living_room",
+        "  - {kind: mesh, id: scan, path: room.obj, repair: {leak_test_rays: 0}}\n"
+        "  - kind: shoebox\n    id: living_room", 1))
+    plan = plan_for(spec)
+    store = Path(plan.store_dir)
+    assert sorted(p.name for p in store.iterdir()) == ["cache"]  # the digests, before a build
+    claim_folder(store, "store", "outputs.store_dir")
+    assert (store / "sonicspec-store.json").is_file()
+    other = tmp_path / "other"
+    (other / "cache").mkdir(parents=True)
+    (other / "cache" / "file-digests.json").write_text("{}")
+    (other / "cache" / "notes.txt").write_text("mine")
+    with pytest.raises(UnsafeOutputError, match="is not empty and is not a sonicspec store"):
+        claim_folder(other, "store", "outputs.store_dir")

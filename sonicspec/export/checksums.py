@@ -151,7 +151,8 @@ def claim_folder(path: Path, kind: str, where: str, info: dict[str, Any] | None 
     if path.exists() and not path.is_dir():
         raise UnsafeOutputError(f"{where}: {path} is a file, not a folder")
     found = folder_kind(path) if path.is_dir() else None
-    if found is None and path.is_dir() and any(path.iterdir()):
+    if found is None and path.is_dir() and any(path.iterdir()) and not (
+            kind == "store" and _only_digest_cache(path)):
         raise UnsafeOutputError(
             f"{where}: {path} is not empty and is not a sonicspec {kind} (no {marker.name}); "
             "sonicspec writes only into empty folders or its own: choose another folder")
@@ -167,6 +168,15 @@ def claim_folder(path: Path, kind: str, where: str, info: dict[str, Any] | None 
         current = None
     if current != content:
         write_json(marker, content)
+
+
+def _only_digest_cache(path: Path) -> bool:
+    """Whether a folder holds nothing but the file-digest cache that planning a spec writes
+    (``cache/file-digests.json``, made before the build claims its store)."""
+    entries = list(path.iterdir())
+    cache = path / "cache"
+    return (all(e == cache for e in entries) and cache.is_dir()
+            and all(f.name == "file-digests.json" for f in cache.iterdir()))
 
 
 def read_marker(path: Path) -> dict[str, Any]:

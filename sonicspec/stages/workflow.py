@@ -309,7 +309,7 @@ def build(
     cores: int = 1,
     profile: Path | None = None,
     dry_run: bool = False,
-    stream: TextIO = sys.stderr,
+    stream: TextIO | None = None,
     poll_s: float = 1.0,
     on_start: Callable[[subprocess.Popen], None] | None = None,
     snakemake_args: list[str] | None = None,
@@ -323,6 +323,7 @@ def build(
     """
     from sonicspec.stages.corpus import skipped_files  # reads audio libraries: only here
 
+    stream = stream or sys.stderr  # at call time: a caller may have replaced sys.stderr
     store = ArtifactStore(plan.store_dir)
     out = Path(plan.output_dir)
     dataset_key = next((j.key for j in plan.jobs if j.step == "dataset"), None)
