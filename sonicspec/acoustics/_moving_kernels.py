@@ -56,3 +56,42 @@ def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np
             w = table[i] + (pos - i) * (table[i + 1] - table[i])
             acc += x[m] * w
         out[j] += acc * a * d
+
+
+@njit(cache=True, nogil=True)
+def fixed_receiver_arrivals(track: np.ndarray, receiver: np.ndarray, fs: float, c: float,
+                            extra_s: np.ndarray, tau: np.ndarray, r: np.ndarray) -> None:
+    """Arrival (output samples) ``tau[k] = k + (r_k / c + extra_s[k]) · fs`` and distance
+    ``r[k]`` of each emission from ``track[k]`` to a receiver that does not move (the
+    retarded-time equation is then explicit); ``extra_s`` of length 1 is one offset for all."""
+    one = extra_s.size == 1
+    for k in range(track.shape[0]):
+        dx = track[k, 0] - receiver[0]
+        dy = track[k, 1] - receiver[1]
+        dz = track[k, 2] - receiver[2]
+        r[k] = math.sqrt(dx * dx + dy * dy + dz * dz)
+        tau[k] = k + (r[k] / c + (extra_s[0] if one else extra_s[k])) * fs
+
+
+@njit(cache=True, nogil=True)
+def gradient_inverse(tau: np.ndarray, out: np.ndarray) -> None:
+    """``1 / numpy.gradient(tau)`` (central differences inside, one-sided at the ends)."""
+    n = tau.size
+    out[0] = 1.0 / (tau[1] - tau[0])
+    out[n - 1] = 1.0 / (tau[n - 1] - tau[n - 2])
+    for k in range(1, n - 1):
+        out[k] = 2.0 / (tau[k + 1] - tau[k - 1])
+
+
+@njit(cache=True, nogil=True)
+def weighted_bands(bands: np.ndarray, weights: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   frac: np.ndarray, out: np.ndarray) -> None:
+    """``out[t] = Σ_b (weights[lo[t], b]·(1 − frac[t]) + weights[hi[t], b]·frac[t]) ·
+    bands[b, t]``: a path's band factors, linear between RIR points, applied at emission."""
+    n_bands = bands.shape[0]
+    for t in range(out.size):
+        f = frac[t]
+        acc = 0.0
+        for b in range(n_bands):
+            acc += (weights[lo[t], b] * (1.0 - f) + weights[hi[t], b] * f) * bands[b, t]
+        out[t] = acc

@@ -28,7 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sonicspec.acoustics._moving_kernels import TABLE_STEPS, accumulate_path
+from sonicspec.acoustics._moving_kernels import (
+    TABLE_STEPS,
+    accumulate_path,
+    fixed_receiver_arrivals,
+    gradient_inverse,
+    weighted_bands,
+)
 from sonicspec.acoustics.arrivals import Arrivals
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
@@ -69,20 +75,31 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     if s.ndim != 1 or s.size < 2:
         raise AcousticsError(f"dry: expected a 1-D signal of >= 2 samples, got shape {s.shape}")
     fs = float(sample_rate_hz)
-    t_a, r = moving_arrival_times(source_m, receiver_m, s.size, fs, speed_of_sound_m_s)
+    receiver = np.asarray(receiver_m, dtype=np.float64)
+    if receiver.shape == (3,):  # a receiver that stays put: arrivals in one compiled pass
+        track = np.ascontiguousarray(np.broadcast_to(
+            np.asarray(source_m, dtype=np.float64), (s.size, 3)))
+        extra = np.zeros(1) if extra_delay_s is None else np.ascontiguousarray(
+            np.broadcast_to(np.asarray(extra_delay_s, dtype=np.float64), s.shape))
+        tau, r = np.empty(s.size), np.empty(s.size)
+        fixed_receiver_arrivals(track, receiver, fs, float(speed_of_sound_m_s), extra, tau, r)
+    else:
+        t_a, r = moving_arrival_times(source_m, receiver_m, s.size, fs, speed_of_sound_m_s)
+        if extra_delay_s is not None:
+            t_a = t_a + np.asarray(extra_delay_s, dtype=np.float64)
+        tau = t_a * fs  # arrival of each emission, output samples (increasing)
     if np.any(r <= 0):
         raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
-    if extra_delay_s is not None:
-        t_a = t_a + np.asarray(extra_delay_s, dtype=np.float64)
-    tau = t_a * fs  # arrival of each emission, output samples (increasing)
     if n_out is None:
         n_out = int(np.ceil(tau[-1])) + half_width + 1
     amp = np.broadcast_to(np.asarray(gain, dtype=np.float64), s.shape) / (4 * np.pi * r)
     out = np.zeros(n_out)
     # Before the first arrival and after the last the path is silent (the sinc's own reach
     # covers the edges).
-    accumulate_path(s, tau, 1.0 / np.gradient(tau), np.ascontiguousarray(amp),
-                    _sinc_table(half_width, beta), half_width, out)
+    density = np.empty(s.size)
+    gradient_inverse(tau, density)
+    accumulate_path(s, tau, density, np.ascontiguousarray(amp), _sinc_table(half_width, beta),
+                    half_width, out)
     return out
 
 
@@ -279,7 +296,8 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             at_point = int(np.rint(index[0]))
             x = w[at_point] @ band_dry
         else:  # band factors at each emission, linear between points
-            x = ((w[lo].T * (1 - frac) + w[hi].T * frac) * band_dry).sum(axis=0)
+            x = np.empty(s.size)
+            weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
         source = track[0] if static else track
 
         def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k):
