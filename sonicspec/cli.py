@@ -244,6 +244,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     if loaded.spec.outputs.report.enabled and not args.dry_run and not args.until \
             and _report_unavailable(f"{args.spec}: outputs.report.enabled"):
         return EXIT_INVALID
+    if not args.dry_run and not args.until and _exports_unavailable(loaded, args.spec):
+        return EXIT_INVALID
     from sonicspec.stages.workflow import build
 
     plan = _compile(loaded, args)
@@ -269,6 +271,52 @@ def cmd_build(args: argparse.Namespace) -> int:
         report = write_report(plan.output_dir,
                               group_pages=loaded.spec.outputs.report.group_pages)
         print(_report_line(report), file=sys.stderr)
+    return _write_exports(loaded, plan.output_dir)
+
+
+HUB_FORMATS = ("huggingface", "webdataset")
+_HUB_MODULES = {"huggingface": ("datasets", "pyarrow"), "webdataset": ("webdataset",)}
+
+
+def export_folder(output_dir: str | Path, fmt: str) -> Path:
+    """Where ``outputs.manifests: [<fmt>]`` writes its export: beside the dataset folder."""
+    out = Path(output_dir)
+    return out.parent / f"{out.name}-{fmt}"
+
+
+def _exports_unavailable(loaded, spec: str) -> bool:
+    """True (after the message) if an export the spec asks for cannot be written."""
+    import importlib.util
+
+    for fmt in HUB_FORMATS:
+        if fmt in loaded.spec.outputs.manifests:
+            missing = [m for m in _HUB_MODULES[fmt] if importlib.util.find_spec(m) is None]
+            if missing:
+                print(f"sonicspec: error: {spec}: outputs.manifests: {fmt!r} needs "
+                      f"{' and '.join(missing)}; pip install 'sonicspec[export]'",
+                      file=sys.stderr)
+                return True
+    return False
+
+
+def _write_exports(loaded, output_dir: str | Path) -> int:
+    """The exports ``outputs.manifests`` asks for, after a finished build (only shards whose
+    groups changed are written)."""
+    from sonicspec.dataload.folder import DatasetError
+    from sonicspec.dataload.hub import export
+
+    for fmt in HUB_FORMATS:
+        if fmt not in loaded.spec.outputs.manifests:
+            continue
+        where = export_folder(output_dir, fmt)
+        try:
+            result = export(output_dir, where, fmt)
+        except DatasetError as exc:
+            print(f"sonicspec: error: outputs.manifests: {fmt}: {exc}", file=sys.stderr)
+            return EXIT_FAILURE
+        print(f"{fmt} export written to {where}: {len(result['written'])} shard(s) written, "
+              f"{len(result['kept'])} unchanged, {len(result['removed'])} removed",
+              file=sys.stderr)
     return EXIT_OK
 
 

@@ -420,6 +420,22 @@ def _line(root: Path, rel: str) -> str:
                 if line.endswith("  " + rel))
 
 
+def test_the_build_writes_the_exports_the_spec_asks_for(root: Path, tmp_path: Path) -> None:
+    # outputs.manifests: [huggingface, webdataset]: beside the dataset folder, the same
+    # shards `sonicspec export` writes, and a second build rewrites none of them.
+    from sonicspec.cli import export_folder
+
+    for fmt in ("huggingface", "webdataset"):
+        built = export_folder(root, fmt)
+        assert built == root.parent / f"{root.name}-{fmt}" and built.is_dir()
+        again = export(root, built, fmt)
+        assert again["written"] == [] and again["removed"] == [] and again["kept"]
+        fresh = export(root, tmp_path / fmt, fmt)
+        assert sorted(fresh["written"]) == sorted(again["kept"])
+        for rel in fresh["written"]:
+            assert (built / rel).read_bytes() == (tmp_path / fmt / rel).read_bytes()
+
+
 def test_export_errors(root: Path, tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="inside the dataset folder"):
         export(root, root / "hf", "huggingface")

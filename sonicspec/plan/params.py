@@ -45,7 +45,7 @@ from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
 from sonicspec.spec.mixture import Interpolation, LoudnessSpec, MixtureSpec, TaskSpec
-from sonicspec.spec.outputs import OutputsSpec
+from sonicspec.spec.outputs import Manifest, OutputsSpec
 from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import (
     CylinderSceneSpec,
@@ -264,7 +264,7 @@ class ExportParams(ShardParams):
 class DatasetParams(StepParams):
     spec: DatasetSpec
     output_dir: str
-    manifests: tuple[Literal["lhotse", "csv"], ...]
+    manifests: tuple[Manifest, ...]
     splits: dict[str, int]
     """Groups per split."""
 

@@ -33,6 +33,9 @@ class ReportSpec(SpecModel):
     )
 
 
+Manifest = Literal["lhotse", "csv", "huggingface", "webdataset"]
+
+
 class OutputsSpec(SpecModel):
     """Dataset folder layout and file formats."""
 
@@ -59,8 +62,13 @@ class OutputsSpec(SpecModel):
     mixtures: bool = Field(True, description="Write the task mixtures.")
     rirs: bool = Field(False, description="Write the RIRs used, as float32 WAV.")
     metadata: bool = Field(True, description="Write a metadata JSON per group (SonicSet form).")
-    manifests: list[Literal["lhotse", "csv"]] = Field(
-        default_factory=list, description="Manifest formats written per split."
+    manifests: list[Manifest] = Field(
+        default_factory=list,
+        description="Manifests written per split in the dataset folder ('lhotse', 'csv'), and "
+        "exports written beside it after the build, rewritten only where groups changed: "
+        "'huggingface' (Parquet shards with Audio columns, <dir>-huggingface/, "
+        "datasets.load_dataset reads it) and 'webdataset' (tar shards, <dir>-webdataset/); "
+        "the exports need pip install 'sonicspec[export]'.",
     )
     report: ReportSpec = Field(
         default_factory=ReportSpec, description="The HTML report of the built dataset."
