@@ -155,9 +155,9 @@ def _distributions(spec, groups, splits) -> list[dict[str, Any]]:
 
 
 def _mesh_of(scene: dict[str, Any]):
-    from sonicspec.stages.mesh import load_scene_mesh
+    from sonicspec.stages.artifacts import read_mesh
 
-    return load_scene_mesh(scene["arrays"], scene["report"])
+    return read_mesh(scene["arrays"], scene["report"])
 
 
 def _walls(mesh, z_floor: float) -> list[np.ndarray]:

@@ -531,22 +531,28 @@ class StoreView:
         if log.is_file():
             lines = [x.strip() for x in log.read_text(errors="replace").splitlines()
                      if re.search(r"\bWARNING\b", x)]
-        repair = ((mesh_job.params.get("scene") or {}).get("repair") or {})
+        from sonicspec.plan.params import read_params
+
+        repair = getattr(read_params("mesh", mesh_job.params, mesh_job.label).scene, "repair",
+                         None)
         return {"arrays": art.arrays, "report": art.data, "floors_z_m": floors,
-                "log_warnings": lines, "max_leak_fraction": repair.get("max_leak_fraction")}
+                "log_warnings": lines,
+                "max_leak_fraction": None if repair is None else repair.max_leak_fraction}
 
     def first_rirs(self, rir_key: str, group: str) -> tuple[dict[str, np.ndarray], dict] | None:
         """Each source's RIR at its first point (channel 0) in group ``group``, and the rir
         artifact's bands and rate; None if the store lacks them."""
         if not self.store.exists("rir", rir_key):
             return None
-        data = self.store.read_data("rir", rir_key)
-        entry = next((g for g in data["groups"] if g["group"] == group), None)
+        from sonicspec.stages.artifacts import decode
+
+        data = decode("rir", self.store.read_data("rir", rir_key))
+        entry = next((g for g in data.groups if g.group == group), None)
         if entry is None:
             return None
-        rirs = {s["name"]: self.store.read_array("rir", rir_key, s["array"], 0)[0]
-                for s in entry["sources"]}
-        return rirs, {"bands_hz": data["bands_hz"], "sample_rate_hz": data["sample_rate_hz"]}
+        rirs = {s.name: self.store.read_array("rir", rir_key, s.array, 0)[0]
+                for s in entry.sources}
+        return rirs, {"bands_hz": list(data.bands_hz), "sample_rate_hz": data.sample_rate_hz}
 
     def build_facts(self, dataset_key: str | None) -> dict[str, Any]:
         """When, how long and on what the build ran: the Snakemake log that ran the dataset

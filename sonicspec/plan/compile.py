@@ -307,6 +307,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     targets = shared(list(spec.mixture.targets))
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
+    rendering = spec.mixture.rendering(spec.microphone)  # `auto` resolved
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
     for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard", "report"):
@@ -357,7 +358,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "files": rir_files_shared,
-                        "early_paths": spec.mixture.interpolation == "paths",
+                        "early_paths": rendering == "paths",
                     },
                     (mesh_keys[scene_id], placement.key),
                     f"rir {tag}",
@@ -367,7 +368,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                     "render",
                     {
                         **common,
-                        "interpolation": spec.mixture.interpolation,
+                        "interpolation": rendering,
                         "targets": targets,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),

@@ -44,7 +44,7 @@ from sonicspec.spec.corpora import (
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
-from sonicspec.spec.mixture import Interpolation, LoudnessSpec, MixtureSpec, TaskSpec
+from sonicspec.spec.mixture import LoudnessSpec, MixtureSpec, Rendering, TaskSpec
 from sonicspec.spec.outputs import Manifest, OutputsSpec
 from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import (
@@ -236,7 +236,8 @@ class RirParams(ShardParams):
 
 
 class RenderParams(ShardParams):
-    interpolation: Interpolation
+    interpolation: Rendering
+    """``mixture.interpolation`` with ``auto`` resolved (:meth:`MixtureSpec.rendering`)."""
     targets: tuple[Literal["dry", "direct", "early"], ...]
     sample_rate_hz: int
     speed_m_s: float | None

@@ -27,7 +27,7 @@ from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import Problem, did_you_mean
 from sonicspec.spec.materials import library_material_names
 from sonicspec.spec.microphone import channel_count
-from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec
+from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec, paths_unavailable
 from sonicspec.spec.scene import (
     BoxObstacleSpec,
     CylinderObstacleSpec,
@@ -450,19 +450,21 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             f"{m.utterance_gap_s[0]:g} s of silence each cannot fit in "
             f"{m.duration_s:g} s",
         )
-    if m.interpolation != "sample_crossfade" and isinstance(spec.trajectory, StaticTrajectorySpec):
+    if m.interpolation not in ("auto", "sample_crossfade") and isinstance(
+            spec.trajectory, StaticTrajectorySpec):
         yield _warn(
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
-    if m.interpolation == "paths":
-        if spec.microphone.kind == "binaural" and spec.microphone.hrtf.kind != "sphere":
-            yield _err(("mixture", "interpolation"),
-                       "'paths' renders binaural microphones with the sphere-head model in "
-                       "this version; microphone.hrtf is a SOFA set (use 'sample_crossfade')")
-        elif not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
-            yield _err(("mixture", "interpolation"),
-                       "'paths' renders a static microphone in this version; "
-                       "microphone.trajectory moves (use 'sample_crossfade')")
+    why = paths_unavailable(spec.microphone)
+    if why and m.interpolation == "paths":
+        yield _err(("mixture", "interpolation"),
+                   f"'paths' cannot render this microphone in this version: {why} (use "
+                   "'sample_crossfade')")
+    elif why and m.interpolation == "auto" and not isinstance(spec.trajectory,
+                                                             StaticTrajectorySpec):
+        yield _warn(("mixture", "interpolation"),
+                    f"'auto' renders with 'sample_crossfade' here ({why}); moving sources' "
+                    "direct sound is then comb-filtered (bench/bench_motion.py)")
 
 
 def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:

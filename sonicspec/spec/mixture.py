@@ -10,7 +10,9 @@ from pydantic_core import PydanticCustomError
 from sonicspec.spec.base import SpecModel, value_range
 
 Background = Literal["noise", "music", "both", "none"]
-Interpolation = Literal["sample_crossfade", "stft_crossfade", "segment_ola", "paths"]
+Rendering = Literal["paths", "sample_crossfade", "stft_crossfade", "segment_ola"]
+"""How a build renders a moving source (``mixture.interpolation`` with ``auto`` resolved)."""
+Interpolation = Literal["auto", "paths", "sample_crossfade", "stft_crossfade", "segment_ola"]
 
 
 LOUDNESS_PRESETS: dict[str, dict[str, float]] = {
@@ -21,6 +23,16 @@ LOUDNESS_PRESETS: dict[str, dict[str, float]] = {
     "sonicset_release": {"speech_lufs": -17.0, "noise_lufs": -24.0, "music_lufs": -29.0,
                          "jitter_lu": 2.0},
 }
+
+
+def paths_unavailable(microphone) -> str | None:
+    """Why this version cannot render ``interpolation: paths`` for ``microphone`` (a spec's
+    microphone model), or None."""
+    if getattr(microphone, "kind", None) == "binaural" and microphone.hrtf.kind != "sphere":
+        return "microphone.hrtf is a SOFA set"
+    if getattr(microphone.trajectory, "kind", "static") != "static":
+        return "microphone.trajectory moves"
+    return None
 
 
 class LoudnessSpec(SpecModel):
@@ -117,7 +129,7 @@ class MixtureSpec(SpecModel):
     )
     loudness: LoudnessSpec = Field(default_factory=LoudnessSpec, description="Target levels.")
     interpolation: Interpolation = Field(
-        "sample_crossfade",
+        "auto",
         description="How a moving source is heard along its path. 'paths': the direct sound and "
         "every image-source reflection as a time-varying delay from where the source is at "
         "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
@@ -125,8 +137,17 @@ class MixtureSpec(SpecModel):
         "path are blended: per-sample crossfade of neighbouring convolutions (SonicSet), "
         "STFT-domain interpolation (DCASE/SpatialScaper), or one RIR per segment with "
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "
-        "(bench/bench_motion.py).",
+        "(bench/bench_motion.py). 'auto': 'paths' where this version renders it, else "
+        "'sample_crossfade' (validate says so).",
     )
+
+    def rendering(self, microphone) -> Rendering:
+        """The method a build uses: ``interpolation``, with ``auto`` resolved for the
+        ``microphone`` (:func:`paths_unavailable`)."""
+        if self.interpolation != "auto":
+            return self.interpolation
+        return "sample_crossfade" if paths_unavailable(microphone) else "paths"
+
     targets: list[Literal["dry", "direct", "early"]] = Field(
         default_factory=list,
         description="Extra training targets exported per source besides the reverberant track.",

@@ -98,8 +98,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
     out = {"dry": dry[None, :].astype(np.float32)}
     if len(points) == 1:  # a static source: its RIR is its paths (and needs no pairing)
         paths = None
-    if paths is None:
-        method = params.interpolation
+    if paths is None:  # one RIR is one convolution, whichever blend
+        method = "sample_crossfade" if params.interpolation == "paths" else params.interpolation
         out["reverberant"] = render_moving(dry, rirs, position, method)[:, :clip_samples]
         if wanted:
             direct, early = split_rir(rirs, delays, rate)
