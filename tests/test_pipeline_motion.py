@@ -123,3 +123,25 @@ def test_a_sphere_head_hears_the_walk_on_its_right(tmp_path: Path) -> None:
         ratios.append(right / left)
     # Widest as the source passes the head's side at x = 6, least behind and ahead of it.
     assert min(ratios) > 1.3 and max(ratios) > 2.5, ratios
+
+
+def test_a_walk_can_span_the_whole_clip(tmp_path: Path) -> None:
+    # trajectory.span: clip (the paper: the speed makes the path span the fixed duration):
+    # the exported track moves from t = 0 to the clip's end at one constant speed, path length
+    # over clip length, though the speech starts half a second in.
+    folder = tmp_path / "clip"
+    folder.mkdir()
+    (folder / "spec.yaml").write_text(SPEC.replace("METHOD", "paths").replace(
+        "speed_m_s: 1.5,", "span: clip,").replace("utterance_gap_s: [0.0, 0.0]",
+                                                 "utterance_gap_s: [0.5, 0.5]"))
+    assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) == 0
+    meta = json.loads((folder / "out" / "train" / "000000" / "metadata.json").read_text())
+    track = meta["source1"]["track"]
+    pos = np.asarray(track["positions_m"])
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    assert meta["source1"]["start_end_points"][0][0] >= 0.5 * FS  # speech starts later ...
+    assert step[0] > 0  # ... but the walk does not wait for it
+    speed = meta["source1"]["path_length_m"] / 4.0
+    # (positions are written to 0.1 mm: a 15 mm step is exact to 1 %)
+    assert np.allclose(step[:-1] / track["hop_s"], speed, rtol=0.015), (step[:3], speed)
+    assert np.allclose(pos[-1], [9, 3, 1.6], atol=0.02)  # at the end of the path at the end

@@ -130,6 +130,18 @@ def speech_span(segments: Sequence[Segment]) -> tuple[int, int] | None:
     return (segments[0].start, segments[-1].end) if segments else None
 
 
+def walk_window(span: str, segments: Sequence[Segment], clip_samples: int
+                ) -> tuple[int, int] | None:
+    """The samples a moving source's walk spans: its speech (``"speech"``: from its first
+    segment's start to its last one's end, None without any) or the whole clip
+    (``"clip"``)."""
+    if span == "clip":
+        return (0, clip_samples)
+    if span == "speech":
+        return speech_span(segments)
+    raise AudioError(f"span: expected 'speech' or 'clip', got {span!r}")
+
+
 def assemble(segments: Sequence[Segment], audio: dict[str, np.ndarray], clip_samples: int
              ) -> np.ndarray:
     """The dry track ``(clip_samples,)`` of placed segments, from each clip's audio by id."""

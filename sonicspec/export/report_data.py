@@ -209,15 +209,22 @@ def _distances(entry: dict[str, Any], mic: np.ndarray | None) -> tuple[float, ..
     return float(ends[0]), float(ends[1]), float(segment_distances(p, mic).min())
 
 
-def _speed(entry: dict[str, Any], rate: float | None, speed_m_s: float | None) -> float | None:
-    """Walking speed: the spec's, or (null there) the path over the time from the first
-    utterance's start to the last one's end, as the renderer walks it, m/s."""
+def _speed(entry: dict[str, Any], rate: float | None, speed_m_s: float | None,
+           span: str = "speech", clip_samples: int | None = None) -> float | None:
+    """Walking speed: the spec's, or (null there) the path over the time the walk spans, as
+    the renderer walks it (``trajectory.span``: from the first utterance's start to the last
+    one's end, or the whole clip), m/s."""
     if speed_m_s:
         return float(speed_m_s)
     length, spans = _num(entry.get("path_length_m")), entry.get("start_end_points")
-    if length is None or not spans or not rate:
+    if length is None or not rate:
         return None
-    duration = (float(spans[-1][1]) - float(spans[0][0])) / float(rate)
+    if span == "clip":
+        duration = float(clip_samples or 0) / float(rate)
+    elif not spans:
+        return None
+    else:
+        duration = (float(spans[-1][1]) - float(spans[0][0])) / float(rate)
     return length / duration if duration > 0 else None
 
 
@@ -231,9 +238,11 @@ def source_names(meta: dict[str, Any]) -> list[str]:
     return speech + [k for k in ("noise", "music") if isinstance(meta.get(k), dict)]
 
 
-def group_facts(meta: dict[str, Any], speed_m_s: float | None = None) -> dict[str, Any]:
+def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
+                span: str = "speech") -> dict[str, Any]:
     """One group's figures for the report: per source and per group (see the module doc).
-    ``speed_m_s``: the spec's walking speed (None: the walk spans the speech)."""
+    ``speed_m_s``: the spec's walking speed (None: the walk spans ``span``, the spec's
+    ``trajectory.span``)."""
     mic = np.asarray(meta["mic_m"], dtype=np.float64) if meta.get("mic_m") else None
     n = meta.get("num_samples")
     rate = meta.get("sample_rate_hz")
@@ -258,7 +267,7 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None) -> dict[st
         }
         if role == "speech":
             s.update(path_length_m=_num(e.get("path_length_m")),
-                     speed_m_s=_speed(e, rate, speed_m_s),
+                     speed_m_s=_speed(e, rate, speed_m_s, span, n),
                      speaker=e.get("speaker"), trajectory_m=e.get("trajectory_m"))
         sources.append(s)
     speech = [s for s in sources if s["role"] == "speech"]
@@ -281,7 +290,8 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None) -> dict[st
 
 def read_group_facts(info: DatasetInfo, split: str | None = None) -> list[dict[str, Any]]:
     """Facts of every group (of ``split``) whose metadata file exists, in group order."""
-    speed_m_s = (info.spec.get("trajectory") or {}).get("speed_m_s")
+    trajectory = info.spec.get("trajectory") or {}
+    speed_m_s, span = trajectory.get("speed_m_s"), trajectory.get("span", "speech")
     out = []
     for g in info.groups:
         if split is not None and g["split"] != split:
@@ -290,7 +300,7 @@ def read_group_facts(info: DatasetInfo, split: str | None = None) -> list[dict[s
         if path is None or not path.is_file():
             continue
         meta = read_metadata(path)
-        facts = group_facts(meta, speed_m_s)
+        facts = group_facts(meta, speed_m_s, span)
         facts["group"] = facts["group"] or g["group"]
         facts["split"] = facts["split"] or g["split"]
         facts["scene_id"] = facts["scene_id"] or g["scene_id"] or "unknown"

@@ -372,6 +372,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "targets": targets,
                         "sample_rate_hz": spec.sample_rate_hz,
                         "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
+                        "walk_span": getattr(spec.trajectory, "span", "speech"),
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
                     },
                     (rir.key, arrange.key, placement.key, *corpus_inputs),

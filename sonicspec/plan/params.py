@@ -241,7 +241,9 @@ class RenderParams(ShardParams):
     targets: tuple[Literal["dry", "direct", "early"], ...]
     sample_rate_hz: int
     speed_m_s: float | None
-    """The trajectory's walking speed (None: the walk spans the speech)."""
+    """The trajectory's walking speed (None: the walk spans ``walk_span``)."""
+    walk_span: Literal["speech", "clip"]
+    """What a moving source's walk spans: its speech or the whole clip."""
     speed_of_sound_m_s: float
 
 

@@ -30,7 +30,14 @@ class _MovingBase(SpecModel):
         None,
         gt=0,
         le=10.0,
-        description="Walking speed, m/s; null sets it so the path spans the source's active time.",
+        description="Walking speed, m/s; null sets it so the path spans `span`.",
+    )
+    span: Literal["speech", "clip"] = Field(
+        "speech",
+        description="What the walk spans when speed_m_s is null: the source's speech (from "
+        "its first utterance to the end of its last) or the whole clip (the SonicSim paper: "
+        "the speed is set so the trajectory spans the fixed duration T). With a speed, the "
+        "walk starts at the start of this span.",
     )
 
 

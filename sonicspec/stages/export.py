@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.acoustics.receivers import local_directions
-from sonicspec.audio.arrange import Segment, speech_span
+from sonicspec.audio.arrange import Segment, walk_window
 from sonicspec.audio.render import walk_index
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
@@ -77,7 +77,9 @@ class Motion:
     """How the renderer walked a group's sources and where the microphone faced."""
 
     speed_m_s: float | None
-    """The trajectory's speed (None: each walk spans its source's speech)."""
+    """The trajectory's speed (None: each walk spans ``span``)."""
+    span: str
+    """What a walk spans: ``speech`` or the whole ``clip``."""
     yaw_deg: float
     pitch_deg: float
 
@@ -88,8 +90,9 @@ def position_track(source: SourcePlacement, segments: list[Segment], clip_sample
     after its walk), read from the same walk the renderer used, with its azimuth, elevation
     and distance in the microphone's frame."""
     hop = max(1, round(TRACK_HOP_S * rate))
-    index = walk_index(source.rir_points_distance_m, clip_samples, speech_span(segments),
-                       motion.speed_m_s, rate)[::hop]
+    index = walk_index(source.rir_points_distance_m, clip_samples,
+                       walk_window(motion.span, segments, clip_samples), motion.speed_m_s,
+                       rate)[::hop]
     points = np.asarray(source.rir_points_m, dtype=np.float64)
     at = np.arange(len(points), dtype=np.float64)
     positions = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
@@ -209,8 +212,8 @@ def run(ctx: JobContext) -> None:
     keys = {step: ctx.input_keys(step)[0]
             for step in ("placement", "arrange", "rir", "render", "mix")}
     microphone = ctx.input_params("rir").microphone
-    motion = Motion(ctx.input_params("render").speed_m_s, microphone.yaw_deg,
-                    microphone.pitch_deg)
+    walk = ctx.input_params("render")
+    motion = Motion(walk.speed_m_s, walk.walk_span, microphone.yaw_deg, microphone.pitch_deg)
     groups = []
     for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
                                                rir.groups, strict=True):

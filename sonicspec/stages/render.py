@@ -29,7 +29,7 @@ from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.engine import array_offsets, sphere_head
 from sonicspec.acoustics.hrtf import ear_axes
 from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
-from sonicspec.audio.arrange import Segment, assemble, speech_span
+from sonicspec.audio.arrange import Segment, assemble, walk_window
 from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import render_moving, split_rir, walk_index
 from sonicspec.errors import StageError
@@ -90,7 +90,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
     if len(points) != rirs.shape[0]:
         raise StageError(f"track {track.name}: {len(points)} RIR points in the placement but "
                          f"{rirs.shape[0]} RIRs")
-    position = walk_index(source.rir_points_distance_m, clip_samples, speech_span(segments),
+    position = walk_index(source.rir_points_distance_m, clip_samples,
+                          walk_window(params.walk_span, segments, clip_samples),
                           params.speed_m_s, rate)
     wanted = [t for t in ("direct", "early") if t in params.targets]
     distance = np.linalg.norm(points - mic_m[None, :], axis=1)
