@@ -549,6 +549,11 @@ def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
         )
     if Path(o.dir) == Path(o.store_dir):
         yield _err(("outputs", "store_dir"), "must differ from outputs.dir")
+    if spec.mixture.loudness.peak_limit_dbfs is None and o.subtype != "FLOAT":
+        yield _err(("mixture", "loudness", "peak_limit_dbfs"),
+                   f"null keeps absolute levels, which may pass 0 dBFS: {o.subtype} would clip "
+                   "them; write float WAV (outputs.audio_format: wav, subtype: FLOAT) or set a "
+                   "limit")
     if channel_count(spec.microphone) > 8 and o.audio_format == "flac":
         yield _err(
             ("outputs", "audio_format"),

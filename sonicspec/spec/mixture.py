@@ -76,11 +76,13 @@ class LoudnessSpec(SpecModel):
         description="Which signal is normalised: the reverberant track at the microphone (the "
         "level heard) or the dry source before rendering (the gain then carries over).",
     )
-    peak_limit_dbfs: float = Field(
+    peak_limit_dbfs: float | None = Field(
         -1.0,
         le=0,
-        description="If any mixture peak exceeds this, the whole group is scaled down and the "
-        "gain recorded, dBFS.",
+        description="If any written signal or mixture would peak above this, the whole group "
+        "is scaled down by one gain (recorded as group_gain_db; the build warns when a shard's "
+        "median cut exceeds 1 dB), dBFS. null keeps absolute levels (no guard; needs float "
+        "WAV output: outputs.audio_format wav, subtype FLOAT).",
     )
 
 

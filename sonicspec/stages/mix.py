@@ -12,6 +12,7 @@ description (gains and mixture lists): the export applies it.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
@@ -24,6 +25,8 @@ from sonicspec.stages import artifacts
 from sonicspec.stages.artifacts import ComponentLevel, MixData, MixGroup, Mixture, RenderGroup
 from sonicspec.stages.context import JobContext
 
+log = logging.getLogger("sonicspec.stages.mix")
+
 
 def _db(gain: float) -> float | None:
     """Decibels, or None for silence (JSON has no infinity)."""
@@ -35,7 +38,7 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
     """Gains, loudness and mixtures of one group."""
     loud = params.loudness
     targets = {"speech": loud.speech_lufs, "noise": loud.noise_lufs, "music": loud.music_lufs}
-    limit = 10.0 ** (loud.peak_limit_dbfs / 20.0)
+    keep_levels = loud.peak_limit_dbfs is None  # no guard: absolute levels, float output
     rate = params.sample_rate_hz
     group = render_group.group
     signals: dict[str, np.ndarray] = {}
@@ -61,7 +64,9 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
             # The dry target has its own level and its own guard: its peaks (no room to
             # smooth them) must not pull the whole group down.
             dry_gain, _ = gain_to_loudness(dry, rate, target, where=f"{where} (dry target)")
-            dry_gain = min(dry_gain, limit / float(np.max(np.abs(dry))))
+            if not keep_levels:
+                limit = 10.0 ** (loud.peak_limit_dbfs / 20.0)
+                dry_gain = min(dry_gain, limit / float(np.max(np.abs(dry))))
             dry_gains[f"{name}_dry"] = dry_gain
         report[name] = {"role": role, "target_lufs": target, "measured_lufs": measured,
                         "measured_on": loud.stage}
@@ -74,7 +79,11 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
         raise AudioError(f"{err} (a group's tracks: mixture.speakers speakers, and noise or "
                          "music from corpora.<role> with a non-zero mixture.<role>_clips)"
                          ) from None
-    group_gain, peak = peak_guard(signals, gains, mixtures, loud.peak_limit_dbfs)
+    if keep_levels:
+        _, peak = peak_guard(signals, gains, mixtures, 0.0)  # measured, not applied
+        group_gain = 1.0
+    else:
+        group_gain, peak = peak_guard(signals, gains, mixtures, loud.peak_limit_dbfs)
     final = {k: g * group_gain for k, g in gains.items()} | dry_gains
     for name, entry in report.items():
         entry["gain_db"] = _db(final[name])
@@ -92,6 +101,12 @@ def run(ctx: JobContext) -> None:
     art = ctx.input("render")
     render = artifacts.decode("render", art.data, ctx.job.label)
     groups = [mix_group(g, art.arrays, params, ctx.rng("mix", g.group)) for g in render.groups]
+    cuts = [-g.group_gain_db for g in groups if g.group_gain_db is not None]
+    if cuts and float(np.median(cuts)) > 1.0:
+        log.warning("mixture.loudness: the peak guard lowered %d of %d groups of %s by a median "
+                    "of %.1f dB, so their components sit that far below the targets; "
+                    "peak_limit_dbfs: null keeps absolute levels (with float WAV output)",
+                    sum(c > 0 for c in cuts), len(groups), ctx.job.label, float(np.median(cuts)))
     names = sorted({k for g in groups for k in g.gains})
     table = np.array([[g.gains.get(k, np.nan) for k in names] for g in groups])
     ctx.write({"gains": table}, artifacts.encode("mix", MixData(
