@@ -131,49 +131,61 @@ def test_bad_inputs_are_named() -> None:
         render_path(np.ones(8), np.zeros(3), np.zeros(3), FS)
 
 
+SIZE = [6.0, 5.0, 3.0]
+MIC = np.array([3.0, 2.0, 1.2])
+# A slanted walk: on the level one at 1.5 m, a path to the image mirrored in x = 0 and z = 3
+# meets the wall-ceiling edge exactly at one point, where the validity test may drop it
+# (measure-zero, but it costs that point's path).
+ENDS = np.array([[1.0, 1.1, 1.45], [4.0, 3.5, 1.6]])
+
+
+def engine_walk(microphone=None):
+    """The engine's paths of a walk at 1.5 m/s through RIR points every 0.25 m in a shoebox
+    whose walls reflect 0.8 of the pressure (image sources to order 2), and the fractional
+    point index of each sample as the render stage reads it: ``(points, paths, index,
+    bank)``."""
+    import sonicspec as ss
+    from sonicspec.acoustics.bands import OctaveFilterBank
+    from sonicspec.acoustics.engine import acoustic_scene, simulate_rirs
+    from sonicspec.acoustics.moving import PathSet
+    from sonicspec.geometry.navigation import resample_polyline
+
+    points = resample_polyline(ENDS, 0.25)
+    room = ss.Scene.shoebox(SIZE, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
+                            custom_materials={"r08": {"absorption": 0.36, "scattering": 0.0}})
+    settings = ss.RirSettings(rays=200, image_source_order=2, air_absorption=False,
+                              max_rir_length_s=0.3, speed_of_sound_m_s=C, sample_rate_hz=FS,
+                              diffraction=False).simulation_settings()
+    scene = acoustic_scene(room.mesh, room.library, settings)
+    _, facts = simulate_rirs(scene, MIC, points, settings, np.random.default_rng(0),
+                             microphone=microphone, keep_arrivals=True)
+    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts],
+                             at_mic=None if microphone is None else
+                             [f["early_arrivals_at_mic"] for f in facts])
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    index = np.interp(np.clip(np.arange(2 * FS) / FS * 1.5, 0, along[-1]), along,
+                      np.arange(len(points)))
+    return points, paths, index, OctaveFilterBank(FS, settings.bands_hz)
+
+
 def test_the_engines_paths_of_a_walking_source_match_the_exact_image_sum() -> None:
     """The pipeline's way (issue 18): the engine traces the early arrivals at RIR points every
     0.25 m, :class:`PathSet` follows each path across the points (its image of the microphone
     is fixed), :func:`render_paths` renders them as time-varying delays. In a shoebox whose
     walls reflect 0.8 of the pressure, against the exact moving image-source sum."""
-    import sonicspec as ss
-    from sonicspec.acoustics.bands import OctaveFilterBank
-    from sonicspec.acoustics.engine import simulate_rirs
-    from sonicspec.acoustics.moving import PathSet, render_paths
-    from sonicspec.geometry.navigation import resample_polyline
+    from sonicspec.acoustics.moving import render_paths
 
     n = 2 * FS
     dry = pink(n, seed=3)
-    size = [6.0, 5.0, 3.0]
-    mic = np.array([3.0, 2.0, 1.2])
-    # (A slanted walk: on the level one at 1.5 m, a path to the image mirrored in x = 0 and
-    # z = 3 meets the wall-ceiling edge exactly at one point, where the validity test may
-    # drop it; measure-zero, but it costs that point's path.)
-    ends = np.array([[1.0, 1.1, 1.45], [4.0, 3.5, 1.6]])
-    points = resample_polyline(ends, 0.25)
-    room = ss.Scene.shoebox(size, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
-                            custom_materials={"r08": {"absorption": 0.36, "scattering": 0.0}})
-    settings = ss.RirSettings(rays=200, image_source_order=2, air_absorption=False,
-                              max_rir_length_s=0.3, speed_of_sound_m_s=C,
-                              sample_rate_hz=FS).simulation_settings()
-    from sonicspec.acoustics.engine import acoustic_scene
-
-    scene = acoustic_scene(room.mesh, room.library, settings)
-    _, facts = simulate_rirs(scene, mic, points, settings, np.random.default_rng(0),
-                             keep_arrivals=True)
-    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts])
+    points, paths, index, bank = engine_walk()
     assert len(paths) == 25 and sorted(np.bincount(paths.order)) == [1, 6, 18]
     assert np.allclose(paths.weights, 0.8 ** paths.order[:, None, None])  # valid everywhere
-    # The walk at 1.5 m/s from the first point to the last, as the render stage reads it.
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    index = np.interp(np.clip(np.arange(n) / FS * 1.5, 0, along[-1]), along,
-                      np.arange(len(points)))
-    (ours,) = render_paths(dry, index, points, paths, OctaveFilterBank(FS, settings.bands_hz),
-                           n_out=n + 1200, speed_of_sound_m_s=C)
-    path = walk(ends.tolist(), 1.5, n)
+    (ours,) = render_paths(dry, index, points, paths, bank, n_out=n + 1200,
+                           speed_of_sound_m_s=C)
+    path = walk(ENDS.tolist(), 1.5, n)
     exact = np.zeros(n + 1200)
-    for positions, reflections in shoebox_moving_images(size, path, 2):
-        exact += moving_point_source(dry, positions, mic, FS, speed_of_sound_m_s=C,
+    for positions, reflections in shoebox_moving_images(SIZE, path, 2):
+        exact += moving_point_source(dry, positions, MIC, FS, speed_of_sound_m_s=C,
                                      gain=0.8**reflections, n_out=exact.size)
     snr, dips = figures(exact, ours, n)
     assert snr >= 50 and dips["worst_db"] >= -0.1, (snr, dips)
@@ -257,45 +269,27 @@ def test_the_paths_of_a_walking_source_at_a_directional_receiver(kind: str) -> N
     from the microphone at emission; each capsule the exact moving source at its own place.
     Each path's mirrors are recovered from the data (order 0 and 1 by construction, order 2
     by the Kabsch fit), so directions and capsule images are exact along the walk."""
-    import sonicspec as ss
-    from sonicspec.acoustics.bands import OctaveFilterBank
-    from sonicspec.acoustics.engine import acoustic_scene, array_offsets, simulate_rirs
-    from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
+    from sonicspec.acoustics.engine import array_offsets
+    from sonicspec.acoustics.moving import Receiver, render_paths
     from sonicspec.acoustics.receivers import sh_sn3d
-    from sonicspec.geometry.navigation import resample_polyline
 
     n = 2 * FS
     dry = pink(n, seed=4)
-    size = [6.0, 5.0, 3.0]
-    mic = np.array([3.0, 2.0, 1.2])
-    ends = np.array([[1.0, 1.1, 1.45], [4.0, 3.5, 1.6]])
-    points = resample_polyline(ends, 0.25)
+    mic = MIC
     microphone = ({"kind": "ambisonics", "order": 1, "yaw_deg": 0.0, "pitch_deg": 0.0,
                    "trajectory": {"kind": "static"}} if kind == "ambisonics" else
                   {"kind": "circular_array", "n": 4, "radius_m": 0.05, "yaw_deg": 0.0,
                    "pitch_deg": 0.0, "trajectory": {"kind": "static"}})
-    room = ss.Scene.shoebox(size, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
-                            custom_materials={"r08": {"absorption": 0.36, "scattering": 0.0}})
-    settings = ss.RirSettings(rays=200, image_source_order=2, air_absorption=False,
-                              max_rir_length_s=0.3, speed_of_sound_m_s=C, sample_rate_hz=FS,
-                              diffraction=False).simulation_settings()
-    scene = acoustic_scene(room.mesh, room.library, settings)
-    _, facts = simulate_rirs(scene, mic, points, settings, np.random.default_rng(0),
-                             microphone=microphone, keep_arrivals=True)
-    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts],
-                             at_mic=[f["early_arrivals_at_mic"] for f in facts])
+    points, paths, index, bank = engine_walk(microphone)
     assert len(paths) == 25
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    index = np.interp(np.clip(np.arange(n) / FS * 1.5, 0, along[-1]), along,
-                      np.arange(len(points)))
     offsets = array_offsets(microphone) if kind != "ambisonics" else None
     receiver = (Receiver("ambisonics", order=1, center_m=mic) if kind == "ambisonics"
                 else Receiver("array", offsets_m=offsets, center_m=mic))
-    ours = render_paths(dry, index, points, paths, OctaveFilterBank(FS, settings.bands_hz),
-                        n_out=n + 1200, speed_of_sound_m_s=C, receiver=receiver)
-    path = walk(ends.tolist(), 1.5, n)
+    ours = render_paths(dry, index, points, paths, bank, n_out=n + 1200,
+                        speed_of_sound_m_s=C, receiver=receiver)
+    path = walk(ENDS.tolist(), 1.5, n)
     exact = np.zeros_like(ours)
-    for positions, reflections in shoebox_moving_images(size, path, 2):
+    for positions, reflections in shoebox_moving_images(SIZE, path, 2):
         if kind == "ambisonics":
             gains = sh_sn3d(1, positions - mic)
             for ch in range(4):
