@@ -29,11 +29,6 @@ SCREEN = Wedge.half_plane([0, 0, 0], [0, 0, 1], [0, -1, 0])
 CORNER = Wedge([0.2, 0.1, 0], [0, 0, 1], [1, 0, 0], 1.5 * math.pi)
 
 
-def at(wedge: Wedge, r: float, theta_deg: float, z: float) -> np.ndarray:
-    f1 = np.cross(wedge.edge, wedge.face0)
-    th = math.radians(theta_deg)
-    return wedge.point + r * (math.cos(th) * wedge.face0 + math.sin(th) * f1) + z * wedge.edge
-
 
 def utd(wedge: Wedge, src, rcv) -> tuple[np.ndarray, float]:
     (rs, ts, zs), (rr, tr, zr) = wedge.cylindrical(src), wedge.cylindrical(rcv)
@@ -64,11 +59,11 @@ def band_levels(arrivals: list[tuple[float, np.ndarray]]) -> np.ndarray:
     (CORNER, 0.5, 80.0, 3.0)], ids=["screen", "screen-near", "corner", "corner-far"])
 def test_band_levels_across_the_shadow_zone_within_1_5_db_of_the_exact(
         wedge: Wedge, r_s: float, theta_s: float, r_r: float) -> None:
-    src = at(wedge, r_s, theta_s, 0.2)
+    src = wedge.at(r_s, theta_s, 0.2)
     boundary = theta_s + 180.0
     worst = 0.0
     for theta_r in np.linspace(boundary + 1.0, math.degrees(wedge.open_angle) - 1.0, 5):
-        rcv = at(wedge, r_r, theta_r, -0.4)
+        rcv = wedge.at(r_r, theta_r, -0.4)
         amp, _ = utd(wedge, src, rcv)
         err = 20 * np.log10(np.abs(amp) / exact_band_levels(wedge, src, rcv))
         worst = max(worst, float(np.max(np.abs(err))))
@@ -76,8 +71,8 @@ def test_band_levels_across_the_shadow_zone_within_1_5_db_of_the_exact(
 
 
 def test_the_sign_cancels_half_the_direct_sound_on_the_lit_side() -> None:
-    src = at(SCREEN, 1.0, 60.0, 0.0)
-    lit, shadow = at(SCREEN, 2.0, 239.0, 0.0), at(SCREEN, 2.0, 241.0, 0.0)
+    src = SCREEN.at(1.0, 60.0, 0.0)
+    lit, shadow = SCREEN.at(2.0, 239.0, 0.0), SCREEN.at(2.0, 241.0, 0.0)
     assert np.all(utd(SCREEN, src, lit)[0] < 0)
     assert np.all(utd(SCREEN, src, shadow)[0] > 0)
 
@@ -86,11 +81,11 @@ def test_the_sign_cancels_half_the_direct_sound_on_the_lit_side() -> None:
 def test_total_level_has_no_step_above_1_db_crossing_the_shadow_boundary(wedge: Wedge) -> None:
     # Receiver 2 m from the edge moved across the direct sound's shadow boundary in 1 cm steps;
     # total = direct sound where visible (the geometric field) + the UTD arrival.
-    src = at(wedge, 1.0, 50.0, 0.1)
+    src = wedge.at(1.0, 50.0, 0.1)
     f_mid = band_nodes_hz(BANDS)[0].mean(axis=1)
     levels = []
     for step in range(-30, 31):
-        rcv = at(wedge, 2.0, 230.0 + math.degrees(0.01 * (step + 0.5) / 2.0), -0.2)
+        rcv = wedge.at(2.0, 230.0 + math.degrees(0.01 * (step + 0.5) / 2.0), -0.2)
         amp, length = utd(wedge, src, rcv)
         arrivals = [(length / C, amp)]
         geometric = wedge_geometric_field(wedge, src, rcv, f_mid, C)
@@ -105,7 +100,7 @@ def test_total_level_has_no_step_above_1_db_crossing_the_shadow_boundary(wedge: 
 
 
 def test_arrival_at_the_edge_path_delay() -> None:
-    src, rcv = at(CORNER, 1.2, 30.0, 0.7), at(CORNER, 0.8, 250.0, -0.5)
+    src, rcv = CORNER.at(1.2, 30.0, 0.7), CORNER.at(0.8, 250.0, -0.5)
     _, length = utd(CORNER, src, rcv)
     assert length == pytest.approx(edge_path_length_m(CORNER, src, rcv), rel=1e-12)
     fs = 48000

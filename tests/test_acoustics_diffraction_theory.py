@@ -23,12 +23,6 @@ SCREEN = Wedge.half_plane([0, 0, 0], [0, 0, 1], [0, -1, 0])
 CORNER = Wedge([0.2, 0.1, 0], [0, 0, 1], [1, 0, 0], 1.5 * math.pi)
 
 
-def at(wedge: Wedge, r: float, theta_deg: float, z: float) -> np.ndarray:
-    """The point at cylindrical coordinates (r, θ, z) about the wedge's edge."""
-    f1 = np.cross(wedge.edge, wedge.face0)
-    th = math.radians(theta_deg)
-    return wedge.point + r * (math.cos(th) * wedge.face0 + math.sin(th) * f1) + z * wedge.edge
-
 
 def free_field(source, receiver, f) -> np.ndarray:
     r = float(np.linalg.norm(np.asarray(source) - np.asarray(receiver)))
@@ -42,10 +36,10 @@ def total_db(wedge, source, receiver, f) -> np.ndarray:
 
 
 def test_cylindrical_coordinates_and_edge_path() -> None:
-    p = at(CORNER, 1.3, 200.0, -0.4)
+    p = CORNER.at(1.3, 200.0, -0.4)
     r, th, z = CORNER.cylindrical(p)
     assert (r, math.degrees(th), z) == pytest.approx((1.3, 200.0, -0.4))
-    src, rcv = at(CORNER, 1.0, 30, 0.5), at(CORNER, 2.0, 250, -1.0)
+    src, rcv = CORNER.at(1.0, 30, 0.5), CORNER.at(2.0, 250, -1.0)
     assert edge_path_length_m(CORNER, src, rcv) == pytest.approx(math.hypot(3.0, 1.5))
 
 
@@ -53,11 +47,11 @@ def test_half_plane_at_the_shadow_boundary_is_minus_6_db_from_both_sides() -> No
     # Source 1 m from the edge at θ = 60°, receiver 2 m away on the shadow boundary θ = 240°,
     # approached from the lit side and the shadow side: the total field is continuous and
     # tends to half the free field (−6.02 dB) as kL grows (Sommerfeld; Pierce, Acoustics §9.4).
-    src = at(SCREEN, 1.0, 60.0, 0.0)
+    src = SCREEN.at(1.0, 60.0, 0.0)
     f = np.array([4000.0, 16000.0])
-    lit = total_db(SCREEN, src, at(SCREEN, 2.0, 240.0 - 1e-4, 0.0), f)
-    shadow = total_db(SCREEN, src, at(SCREEN, 2.0, 240.0 + 1e-4, 0.0), f)
-    on = total_db(SCREEN, src, at(SCREEN, 2.0, 240.0, 0.0), f)
+    lit = total_db(SCREEN, src, SCREEN.at(2.0, 240.0 - 1e-4, 0.0), f)
+    shadow = total_db(SCREEN, src, SCREEN.at(2.0, 240.0 + 1e-4, 0.0), f)
+    on = total_db(SCREEN, src, SCREEN.at(2.0, 240.0, 0.0), f)
     assert np.max(np.abs(lit - shadow)) < 0.02
     assert np.max(np.abs(on - shadow)) < 0.02
     assert shadow[1] == pytest.approx(-6.02, abs=0.25)
@@ -67,19 +61,19 @@ def test_half_plane_at_the_shadow_boundary_is_minus_6_db_from_both_sides() -> No
 def test_the_field_is_continuous_across_a_reflection_boundary() -> None:
     # The 270° corner's face-0 reflection boundary θ_R = π − θ_S: the reflection switches off,
     # the diffracted wave jumps by half of it with the opposite sign.
-    src = at(CORNER, 1.5, 40.0, 0.2)
+    src = CORNER.at(1.5, 40.0, 0.2)
     f = np.array([500.0, 2000.0])
-    before = total_db(CORNER, src, at(CORNER, 1.0, 140.0 - 1e-4, -0.3), f)
-    after = total_db(CORNER, src, at(CORNER, 1.0, 140.0 + 1e-4, -0.3), f)
+    before = total_db(CORNER, src, CORNER.at(1.0, 140.0 - 1e-4, -0.3), f)
+    after = total_db(CORNER, src, CORNER.at(1.0, 140.0 + 1e-4, -0.3), f)
     np.testing.assert_allclose(before, after, atol=0.02)
-    jump = (wedge_diffraction_spectrum(CORNER, src, at(CORNER, 1.0, 140.0 + 1e-4, -0.3), f, C)
-            - wedge_diffraction_spectrum(CORNER, src, at(CORNER, 1.0, 140.0 - 1e-4, -0.3), f, C))
+    jump = (wedge_diffraction_spectrum(CORNER, src, CORNER.at(1.0, 140.0 + 1e-4, -0.3), f, C)
+            - wedge_diffraction_spectrum(CORNER, src, CORNER.at(1.0, 140.0 - 1e-4, -0.3), f, C))
     refl_len = math.hypot(2.5, 0.5)
     np.testing.assert_allclose(np.abs(jump), 1 / (4 * math.pi * refl_len), rtol=2e-3)
 
 
 def test_reciprocity_swapping_source_and_receiver() -> None:
-    a, b = at(CORNER, 0.7, 20.0, 0.9), at(CORNER, 2.4, 230.0, -0.6)
+    a, b = CORNER.at(0.7, 20.0, 0.9), CORNER.at(2.4, 230.0, -0.6)
     f = np.array([125.0, 1000.0, 6000.0])
     np.testing.assert_allclose(wedge_diffraction_spectrum(CORNER, a, b, f, C),
                                wedge_diffraction_spectrum(CORNER, b, a, f, C), rtol=1e-7)
@@ -90,8 +84,8 @@ def test_reciprocity_swapping_source_and_receiver() -> None:
 
 @pytest.mark.parametrize("wedge", [SCREEN, CORNER], ids=["half-plane", "corner-270"])
 def test_far_in_the_shadow_the_exact_field_tends_to_kellers_gtd(wedge: Wedge) -> None:
-    src = at(wedge, 1.5, 30.0, 0.0)
-    rcv = at(wedge, 2.5, wedge.open_angle * 180 / math.pi - 20.0, 0.8)
+    src = wedge.at(1.5, 30.0, 0.0)
+    rcv = wedge.at(2.5, wedge.open_angle * 180 / math.pi - 20.0, 0.8)
     f = np.array([250.0, 2000.0, 16000.0])
     err = np.abs(20 * np.log10(np.abs(wedge_diffraction_spectrum(wedge, src, rcv, f, C)
                                       / keller_wedge_diffraction(wedge, src, rcv, f, C))))
@@ -100,7 +94,7 @@ def test_far_in_the_shadow_the_exact_field_tends_to_kellers_gtd(wedge: Wedge) ->
 
 
 def test_impulse_response_onset_and_its_spectrum() -> None:
-    src, rcv = at(SCREEN, 1.0, 60.0, 0.3), at(SCREEN, 2.0, 250.0, -0.5)
+    src, rcv = SCREEN.at(1.0, 60.0, 0.3), SCREEN.at(2.0, 250.0, -0.5)
     fs, n = 96000, 48000
     h = wedge_diffraction_ir(SCREEN, src, rcv, fs, n, C)
     onset = edge_path_length_m(SCREEN, src, rcv) / C * fs
@@ -120,6 +114,6 @@ def test_bad_wedges_and_points_are_named() -> None:
     with pytest.raises(AcousticsError, match="face0: expected a direction not along the edge"):
         Wedge([0, 0, 0], [0, 0, 1], [0, 0, 2], math.pi * 1.5)
     with pytest.raises(AcousticsError, match="inside the wedge"):
-        CORNER.cylindrical(at(CORNER, 1.0, 300.0, 0.0))
+        CORNER.cylindrical(CORNER.at(1.0, 300.0, 0.0))
     with pytest.raises(AcousticsError, match="on the wedge's edge"):
         SCREEN.cylindrical([0, 0, 3.0])

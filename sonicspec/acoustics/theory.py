@@ -456,6 +456,13 @@ class Wedge:
         """Wedge index ν = π / θ_w."""
         return math.pi / self.open_angle
 
+    def at(self, r: float, theta_deg: float, z: float) -> np.ndarray:
+        """The point at cylindrical coordinates ``(r, θ, z)`` about the edge (θ in degrees
+        from face 0 into the air): the inverse of :meth:`cylindrical`."""
+        th = math.radians(theta_deg)
+        across = np.cross(self.edge, self.face0)
+        return self.point + r * (math.cos(th) * self.face0 + math.sin(th) * across) + z * self.edge
+
     def cylindrical(self, x) -> tuple[float, float, float]:
         """``(r, θ, z)`` of a point about the edge; θ measured from face 0 into the air."""
         d = np.asarray(x, dtype=np.float64) - self.point
