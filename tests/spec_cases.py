@@ -94,6 +94,8 @@ CASES = [
     ("mic-kind", "kind: circular_array", "kind: circular", "microphone.kind", 21, True),
     ("mic-one-capsule", "  n: 4", "  n: 1", "microphone.n", 22, True),
     ("mic-radius-zero", "radius_m: 0.05", "radius_m: 0", "microphone.radius_m", 23, True),
+    ("mic-moving", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: line, start_m: [1, 1, 1"
+     ".5], end_m: [2, 1, 1.5]}", "microphone.trajectory.kind", 24, False),
     ("range-negative", "source_start_distance_m: [1, 4]", "source_start_distance_m: [-1, 4]",
      "placement.source_start_distance_m", 25, True),
     ("clearance-negative", "wall_clearance_m: 0.3", "wall_clearance_m: -0.3",

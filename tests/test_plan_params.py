@@ -22,7 +22,8 @@ def _plans(tmp_path: Path):
         yield name, plan_of((ROOT / "specs" / name).read_text(), tmp_path)
     yield "sonicset.yaml", plan_of(sonicset_with_tiny_data(tmp_path), tmp_path)
     # The branches only some specs take: an obj scene with a label map and a mesh
-    # obstacle, a folder corpus, a microphone on a line, waypoints, every target.
+    # obstacle, a folder corpus, waypoints, every target. (A moving microphone does not
+    # validate in this version.)
     shutil.copy(ROOT / "specs" / "meshes" / "room.obj", tmp_path / "room.obj")
     (tmp_path / "voices" / "anna").mkdir(parents=True, exist_ok=True)
     varied = (
@@ -32,8 +33,6 @@ def _plans(tmp_path: Path):
                  "path: room.obj, position_m: [1, 1, 0], scale: 0.1}]}\n  # An L-shaped office")
         .replace("speech: {kind: generated, speakers_per_split: 3, utterances_per_speaker: 4}",
                  "speech: {kind: folder, root: voices}")
-        .replace("  kind: mono\n  height_m: 1.5", "  kind: mono\n  height_m: 1.5\n  trajectory: "
-                 "{kind: line, start_m: [3, 2, 1.5], end_m: [4, 2, 1.5], rir_spacing_m: 0.5}")
         .replace("kind: shortest_path", "kind: waypoints\n  points_m: [[3, 2, 1.6], [4, 3, 1.6]]")
         .replace("  tasks:", "  targets: [dry, direct, early]\n  tasks:")
         .replace("scenes: [living_room]}", "scenes: [living_room, scan]}"))

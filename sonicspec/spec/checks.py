@@ -563,6 +563,11 @@ def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
 
 
 def _check_trajectory(spec: DatasetSpec) -> Iterator[Problem]:
+    if not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
+        # The rir stage would refuse it (acoustics.engine.check_receiver): say so here.
+        yield _err(("microphone", "trajectory", "kind"),
+                   f"a moving microphone ({spec.microphone.trajectory.kind!r}) is not rendered "
+                   "in this version of sonicspec; use kind: static")
     for prefix, traj in (
         (("trajectory",), spec.trajectory),
         (("microphone", "trajectory"), spec.microphone.trajectory),
