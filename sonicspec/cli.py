@@ -274,10 +274,6 @@ def cmd_build(args: argparse.Namespace) -> int:
     return _write_exports(loaded, plan.output_dir)
 
 
-HUB_FORMATS = ("huggingface", "webdataset")
-_HUB_MODULES = {"huggingface": ("datasets", "pyarrow"), "webdataset": ("webdataset",)}
-
-
 def export_folder(output_dir: str | Path, fmt: str) -> Path:
     """Where ``outputs.manifests: [<fmt>]`` writes its export: beside the dataset folder."""
     out = Path(output_dir)
@@ -288,9 +284,11 @@ def _exports_unavailable(loaded, spec: str) -> bool:
     """True (after the message) if an export the spec asks for cannot be written."""
     import importlib.util
 
-    for fmt in HUB_FORMATS:
+    from sonicspec.dataload.hub import FORMATS, REQUIRES
+
+    for fmt in FORMATS:
         if fmt in loaded.spec.outputs.manifests:
-            missing = [m for m in _HUB_MODULES[fmt] if importlib.util.find_spec(m) is None]
+            missing = [m for m in REQUIRES[fmt] if importlib.util.find_spec(m) is None]
             if missing:
                 print(f"sonicspec: error: {spec}: outputs.manifests: {fmt!r} needs "
                       f"{' and '.join(missing)}; pip install 'sonicspec[export]'",
@@ -303,9 +301,9 @@ def _write_exports(loaded, output_dir: str | Path) -> int:
     """The exports ``outputs.manifests`` asks for, after a finished build (only shards whose
     groups changed are written)."""
     from sonicspec.dataload.folder import DatasetError
-    from sonicspec.dataload.hub import export
+    from sonicspec.dataload.hub import FORMATS, export
 
-    for fmt in HUB_FORMATS:
+    for fmt in FORMATS:
         if fmt not in loaded.spec.outputs.manifests:
             continue
         where = export_folder(output_dir, fmt)
@@ -686,6 +684,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def _add_dataset_commands(sub) -> None:
     from sonicspec.audio.metrics import METRICS
+    from sonicspec.dataload.hub import FORMATS
 
     p = sub.add_parser("evaluate", help="score a model's outputs against a built dataset's "
                        "targets (SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s)")
@@ -709,7 +708,7 @@ def _add_dataset_commands(sub) -> None:
     p = sub.add_parser("export", help="a built dataset as Hugging Face datasets (Parquet) or "
                        "WebDataset (tar) shards; only changed shards are rewritten")
     p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
-    p.add_argument("--format", required=True, choices=("huggingface", "webdataset"))
+    p.add_argument("--format", required=True, choices=FORMATS)
     p.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="the export folder (outside the dataset folder)")
     p.add_argument("--split", action="append", metavar="SPLIT",

@@ -33,6 +33,8 @@ from sonicspec.export.checksums import read_checksums
 from sonicspec.hashing import canonical_json, sha256_hex
 
 FORMATS = ("huggingface", "webdataset")
+REQUIRES = {"huggingface": ("datasets", "pyarrow"), "webdataset": ("webdataset",)}
+"""The modules each export needs (to write it, or for a reader to read it)."""
 FORMAT_VERSION = 1
 STATE_NAME = ".sonicspec-export.json"
 _INSTALL = {"huggingface": "pip install 'sonicspec[export]' (datasets)",
