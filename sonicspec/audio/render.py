@@ -305,8 +305,13 @@ def render_moving(dry: np.ndarray, rirs: np.ndarray, path_position: np.ndarray,
                      f"got {interpolation!r}")
 
 
+EARLY_MS = 50.0
+"""The early part (the ``early`` target): what arrives within this long after the direct
+sound."""
+
+
 def split_rir(rirs: np.ndarray, direct_delay_samples: np.ndarray, sample_rate_hz: int, *,
-              direct_window_ms: float = 2.5, early_ms: float = 50.0
+              direct_window_ms: float = 2.5, early_ms: float = EARLY_MS
               ) -> tuple[np.ndarray, np.ndarray]:
     """Direct-path and early parts of RIRs, the targets for dereverberation-style training.
 

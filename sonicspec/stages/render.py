@@ -31,7 +31,7 @@ from sonicspec.acoustics.hrtf import ear_axes
 from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
 from sonicspec.audio.arrange import Segment, assemble, walk_window
 from sonicspec.audio.corpora import load_audio
-from sonicspec.audio.render import render_moving, split_rir, walk_index
+from sonicspec.audio.render import EARLY_MS, render_moving, split_rir, walk_index
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
 from sonicspec.stages import artifacts
@@ -142,10 +142,6 @@ def path_receiver(microphone, center_m) -> Receiver:
                         ear_axes=ear_axes(head, microphone.yaw_deg, microphone.pitch_deg))
     return Receiver("array", offsets_m=array_offsets(microphone.model_dump(mode="json")),
                     center_m=np.asarray(center_m, dtype=np.float64))
-
-
-EARLY_MS = 50.0
-"""The ``early`` target: what arrives within this long after the direct sound."""
 
 
 def _within(paths: PathSet, points: np.ndarray, direct_s: np.ndarray, window_s: float,
