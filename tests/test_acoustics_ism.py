@@ -367,3 +367,29 @@ def test_compiled_prefilter_keeps_every_valid_path_and_drops_most_pairs(monkeypa
         assert runs[0][0] == 3 and len(runs[0][1]) > 8 * 8
     if levels == 0:
         assert np.mean(kept) < 1 / 3, kept
+
+
+def test_each_images_isometry_maps_the_source_to_its_image_and_moves_it_with_the_source():
+    """``Arrivals.isometry`` (issue 18, moving microphones): ``M @ source + b`` is the image
+    the path comes from (direction of arrival times length from the receiver), ``M`` is
+    orthogonal with determinant ``(-1)^order``, and the same map sends a moved source to the
+    image the image-source method finds for it (pyroomacoustics' images, order 3)."""
+    size = [5.0, 4.0, 3.0]
+    verts, faces = shoebox(*size)
+    scene = uniform_scene(verts, faces)
+    src, rcv = np.array([1.2, 1.5, 1.1]), np.array([[3.3, 2.2, 1.7]])
+    arr = image_sources(scene, src, rcv, max_order=3).arrivals[0]
+    m, b = arr.isometry[:, :, :3], arr.isometry[:, :, 3]
+    image = rcv[0] + arr.directions * arr.path_length_m[:, None]
+    np.testing.assert_allclose(np.einsum("nij,j->ni", m, src) + b, image, atol=1e-9)
+    np.testing.assert_allclose(m @ np.transpose(m, (0, 2, 1)),
+                               np.broadcast_to(np.eye(3), m.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(m), (-1.0) ** arr.order, atol=1e-12)
+    moved = src + np.array([0.7, -0.4, 0.3])
+    predicted = np.einsum("nij,j->ni", m, moved) + b
+    lengths, _, _ = pra_images(size, moved, rcv[0], 0.2, 3)
+    distance = np.linalg.norm(predicted - rcv[0], axis=1)
+    # every predicted image is one pyroomacoustics finds for the moved source (the moved
+    # source may see more paths; the ones it shares are where the maps say; pyroomacoustics
+    # keeps its images in single precision)
+    assert np.min(np.abs(distance[:, None] - lengths[None, :] * C), axis=1).max() < 1e-5

@@ -22,8 +22,8 @@ import numpy as np
 
 from sonicspec.errors import AcousticsError
 
-__all__ = ["KIND_DIFFRACTED", "KIND_DIRECT", "KIND_SPECULAR", "Arrivals", "EnergyHistogram",
-           "TraceResult"]
+__all__ = ["IDENTITY", "KIND_DIFFRACTED", "KIND_DIRECT", "KIND_SPECULAR", "Arrivals",
+           "EnergyHistogram", "TraceResult"]
 
 #: ``Arrivals.kind`` code of the direct sound (possibly through transmitting surfaces).
 KIND_DIRECT = 0
@@ -31,6 +31,11 @@ KIND_DIRECT = 0
 KIND_SPECULAR = 1
 #: ``Arrivals.kind`` code of an edge-diffracted path (:mod:`sonicspec.acoustics.edge_paths`).
 KIND_DIFFRACTED = 2
+
+
+#: ``Arrivals.isometry`` of a path that is not mirrored: the direct sound.
+IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
+IDENTITY.setflags(write=False)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -59,6 +64,12 @@ class Arrivals:
         :data:`KIND_DIRECT`, :data:`KIND_SPECULAR` or :data:`KIND_DIFFRACTED`.
     path_length_m : (n,) float64
         Unfolded path length in metres.
+    isometry : (n, 3, 4) float64
+        ``[M | b]``: the rigid map ``x ↦ M x + b`` that takes the point the paths were
+        traced from to the path's image (the identity for the direct sound, the product of
+        the path's mirrors for an image source); NaN where a path has none (an edge-diffracted
+        path, or arrivals made without it). With it a path is followed while both of its
+        ends move (:class:`~sonicspec.acoustics.moving.PathSet`).
     """
 
     times_s: np.ndarray
@@ -67,9 +78,13 @@ class Arrivals:
     order: np.ndarray
     kind: np.ndarray
     path_length_m: np.ndarray
+    isometry: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("times_s", "amplitudes", "directions", "order", "kind", "path_length_m"):
+        if self.isometry is None:
+            object.__setattr__(self, "isometry", np.full((len(self.times_s), 3, 4), np.nan))
+        for name in ("times_s", "amplitudes", "directions", "order", "kind", "path_length_m",
+                     "isometry"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
 
     @property
@@ -105,6 +120,7 @@ class Arrivals:
             order=np.concatenate([p.order for p in parts])[order],
             kind=np.concatenate([p.kind for p in parts])[order],
             path_length_m=np.concatenate([p.path_length_m for p in parts])[order],
+            isometry=np.concatenate([p.isometry for p in parts])[order],
         )
 
     def energy_histogram(self, bin_s: float, n_bins: int) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals
+from sonicspec.acoustics.arrivals import IDENTITY, KIND_DIRECT, Arrivals
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
@@ -101,6 +101,7 @@ def direct_sound(
                 order=np.zeros(1, dtype=np.int64),
                 kind=np.full(1, KIND_DIRECT, dtype=np.int8),
                 path_length_m=np.array([r[i]]),
+                isometry=IDENTITY[None],
             )
         )
     return out

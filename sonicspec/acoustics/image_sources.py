@@ -27,7 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from sonicspec.acoustics import _image_source_kernels as KI
-from sonicspec.acoustics.arrivals import KIND_SPECULAR, Arrivals
+from sonicspec.acoustics.arrivals import IDENTITY, KIND_SPECULAR, Arrivals
 from sonicspec.acoustics.direct import check_air, check_points
 from sonicspec.acoustics.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
@@ -377,6 +377,7 @@ def image_sources(
     # plane on which the pre-image lies (where the reflected sound goes).
     chain = np.zeros((1, 0, 3))
     planes = np.zeros((1, 0), dtype=np.int64)
+    iso = IDENTITY[None].copy()  # [M | b]: the source's image is M @ source + b
     side = np.zeros(1, dtype=np.int64)
     last_pos = src[None, :]
     completed = 0
@@ -422,6 +423,7 @@ def image_sources(
         new_side = np.concatenate([q[3] for q in parts])
         chain = np.concatenate([chain[parent], new_pos[:, None, :]], axis=1)
         planes = np.concatenate([planes[parent], plane[:, None]], axis=1)
+        iso = _mirrored(iso[parent], normals[plane], regions.plane_d[plane])
         side, last_pos = new_side, new_pos
         completed = order
         if len(last_pos) == 0:
@@ -434,6 +436,7 @@ def image_sources(
             chain,
             planes,
             side,
+            iso,
             air,
             speed_of_sound_m_s,
             max_path_length_m,
@@ -446,6 +449,15 @@ def image_sources(
         for parts in per_receiver
     )
     return ImageSourceResult(arrivals=arrivals, max_order=completed)
+
+
+def _mirrored(iso: np.ndarray, normal: np.ndarray, plane_d: np.ndarray) -> np.ndarray:
+    """``[M | b]`` of each image's map followed by the mirror in its plane ``n · x = d``:
+    ``x ↦ x − 2 (n · x − d) n``."""
+    reflect = np.eye(3)[None] - 2.0 * normal[:, :, None] * normal[:, None, :]
+    out = reflect @ iso
+    out[:, :, 3] += 2.0 * plane_d[:, None] * normal
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -516,6 +528,7 @@ def _validate_order(
     chain: np.ndarray,
     planes: np.ndarray,
     side: np.ndarray,
+    iso: np.ndarray,
     air: np.ndarray,
     c: float,
     max_path_length_m: float | None,
@@ -585,6 +598,7 @@ def _validate_order(
     energy = trans_energy * refl_energy
     alive = np.any(energy > 0, axis=1)
     img, rcv, energy = img[alive], rcv[alive], energy[alive]
+    path_iso = iso[img]
     vec = chain[img, -1] - receivers[rcv]
     length = np.linalg.norm(vec, axis=1)
     amp = (
@@ -602,5 +616,6 @@ def _validate_order(
                 order=np.full(int(sel.sum()), order, dtype=np.int64),
                 kind=np.full(int(sel.sum()), KIND_SPECULAR, dtype=np.int8),
                 path_length_m=length[sel],
+                isometry=path_iso[sel],
             )
         )

@@ -224,7 +224,7 @@ def subset(arrivals: Arrivals, keep: np.ndarray) -> Arrivals:
     """The arrivals at indices ``keep``."""
     return Arrivals(arrivals.times_s[keep], arrivals.amplitudes[keep],
                     arrivals.directions[keep], arrivals.order[keep], arrivals.kind[keep],
-                    arrivals.path_length_m[keep])
+                    arrivals.path_length_m[keep], arrivals.isometry[keep])
 
 
 def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
