@@ -144,9 +144,53 @@ class PathSet:
     directions: np.ndarray | None = None
     """(K, N, 3): each path's direction of arrival at the microphone at each point (zero
     where the path is not valid); for directional receivers."""
+    isometries: np.ndarray | None = None
+    """(K, 3, 4): ``[M | b]``, the map taking the microphone to each path's image
+    (:attr:`~sonicspec.acoustics.arrivals.Arrivals.isometry`); given for a moving
+    microphone, whose images move with it (``images_m`` are then those of its first
+    point)."""
 
     def __len__(self) -> int:
         return int(self.images_m.shape[0])
+
+    @staticmethod
+    def identify_moving(points_m, mic_m, arrivals: list[Arrivals], *,
+                        tolerance_m: float = 1e-4) -> PathSet:
+        """The paths of a source and a microphone that both may move: ``arrivals[j]``
+        traced from the microphone at ``mic_m[j]`` to the source at ``points_m[j]``. A path
+        is identified across points by its isometry (the product of its mirrors: the same
+        whatever the two ends do), rounded to ``tolerance_m``; arrivals without one (edge
+        paths) are left out."""
+        points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+        mics = np.asarray(mic_m, dtype=np.float64).reshape(-1, 3)
+        if not len(arrivals) == len(points) == len(mics):
+            raise AcousticsError(f"arrivals: expected one set per point ({len(points)}) and "
+                                 f"one microphone position per point ({len(mics)}), got "
+                                 f"{len(arrivals)}")
+        bands = arrivals[0].n_bands if arrivals else 0
+        index: dict[tuple[int, ...], int] = {}
+        maps: list[np.ndarray] = []
+        orders: list[int] = []
+        entries: list[tuple[int, int, np.ndarray]] = []
+        for j, a in enumerate(arrivals):
+            factor = a.amplitudes * (4 * np.pi * a.path_length_m[:, None])
+            for i in range(len(a)):
+                iso = a.isometry[i]
+                if not np.all(np.isfinite(iso)):
+                    continue
+                key = tuple(np.round(iso.ravel() / tolerance_m).astype(np.int64).tolist())
+                if key not in index:
+                    index[key] = len(maps)
+                    maps.append(iso)
+                    orders.append(int(a.order[i]))
+                entries.append((index[key], j, factor[i]))
+        weights = np.zeros((len(maps), len(points), bands))
+        for k, j, factor in entries:
+            weights[k, j] += factor
+        iso = np.asarray(maps).reshape(-1, 3, 4)
+        images = (iso[:, :, :3] @ mics[0] + iso[:, :, 3]) if len(mics) else np.zeros((0, 3))
+        return PathSet(images.reshape(-1, 3), weights, np.asarray(orders, dtype=np.int64),
+                       None, iso)
 
     @staticmethod
     def identify(points_m, arrivals: list[Arrivals], *, tolerance_m: float = 1e-4,
@@ -195,10 +239,11 @@ class PathSet:
 
     def select(self, keep: np.ndarray) -> PathSet:
         return PathSet(self.images_m[keep], self.weights[keep], self.order[keep],
-                       None if self.directions is None else self.directions[keep])
+                       None if self.directions is None else self.directions[keep],
+                       None if self.isometries is None else self.isometries[keep])
 
     def with_weights(self, weights: np.ndarray) -> PathSet:
-        return PathSet(self.images_m, weights, self.order, self.directions)
+        return PathSet(self.images_m, weights, self.order, self.directions, self.isometries)
 
 
 def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-4
@@ -275,6 +320,9 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     if paths.weights.shape[1:] != (len(points), bank.n_bands):
         raise AcousticsError(f"paths: expected weights for {len(points)} points and "
                              f"{bank.n_bands} bands, got {paths.weights.shape[1:]}")
+    if receiver.mic_track_m is not None:
+        return _render_moving_receiver(s, index, points, paths, bank, n_out,
+                                       float(speed_of_sound_m_s), receiver)
     if receiver.kind != "mono" and paths.directions is None:
         raise AcousticsError(f"paths: a {receiver.kind} receiver needs the paths' directions "
                              "at the microphone (PathSet.identify(..., at_mic=...))")
@@ -401,6 +449,14 @@ class Receiver:
     directions of arrival are exact at every sample; without, directions are interpolated
     between the points and capsules take the plane-wave lead ``d · p / c``."""
 
+    mic_track_m: np.ndarray | None = None
+    """A moving microphone: its centre at each point, ``(N, 3)`` (read at the same
+    fractional index as the source; then ``offsets_m`` and ``ear_axes`` are in the
+    microphone's own frame, turned by ``yaw_deg`` and ``pitch_deg``)."""
+    yaw_deg: np.ndarray | None = None
+    """A moving microphone's yaw at each point, ``(N,)`` degrees (linear between points)."""
+    pitch_deg: float = 0.0
+
     @property
     def channels(self) -> int:
         if self.kind == "ambisonics":
@@ -425,3 +481,97 @@ def _directions_at(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, frac:
     d = a * (1 - frac)[:, None] + b * frac[:, None]
     norm = np.linalg.norm(d, axis=1, keepdims=True)
     return np.divide(d, norm, out=np.zeros_like(d), where=norm > 0)
+
+
+def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray,
+                            paths: PathSet, bank, n_out: int, c: float, receiver: Receiver
+                            ) -> np.ndarray:
+    """:func:`render_paths` for a microphone that moves (and turns) too.
+
+    Path ``k``'s image of the microphone is ``M_k m(t) + b_k`` (its isometry), so the path
+    is one from the source at emission to a moving image at reception
+    (:func:`~sonicspec.acoustics.theory.moving_arrival_times`). Its direction of arrival
+    is from the microphone to the source's image ``M_kᵀ (s − b_k)``, turned into the
+    microphone's frame ``R(t)`` (yaw, pitch); array capsules at ``m(t) + R(t) o`` each hear
+    their own image; ears turn with the head.
+    """
+    from sonicspec.acoustics.receivers import rotation
+
+    if paths.isometries is None:
+        raise AcousticsError("paths: a moving microphone needs each path's isometry "
+                             "(PathSet.identify_moving)")
+    mic_points = np.asarray(receiver.mic_track_m, dtype=np.float64).reshape(-1, 3)
+    if len(mic_points) != len(points):
+        raise AcousticsError(f"receiver.mic_track_m: expected one position per point "
+                             f"({len(points)}), got {len(mic_points)}")
+    fs = bank.sample_rate_hz
+    at = np.arange(len(points), dtype=np.float64)
+
+    def track(values: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(index, at, values[:, i]) for i in range(3)], axis=1)
+
+    source, mic = track(points), track(mic_points)
+    yaw = np.interp(index, at, np.broadcast_to(
+        np.asarray(receiver.yaw_deg if receiver.yaw_deg is not None else 0.0, dtype=np.float64),
+        (len(points),)))
+    out = np.zeros((receiver.channels, n_out))
+    shaded = np.zeros_like(out)
+    if len(paths) == 0 or not np.any(s):
+        return out
+    frames = None
+    if receiver.kind != "mono":  # R(t), local to scene, at every sample
+        cy, sy = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
+        pitch = rotation(0.0, receiver.pitch_deg)
+        frames = np.zeros((s.size, 3, 3))
+        frames[:, 0, 0], frames[:, 0, 1] = cy, -sy
+        frames[:, 1, 0], frames[:, 1, 1] = sy, cy
+        frames[:, 2, 2] = 1.0
+        frames = frames @ pitch
+    band_dry = bank.split(s)
+    lo, hi = np.floor(index).astype(np.int64), np.ceil(index).astype(np.int64)
+    frac = index - lo
+    for k in range(len(paths)):
+        w = paths.weights[k]
+        if not np.any(w):
+            continue
+        x = np.empty(s.size)
+        weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
+        m, b = paths.isometries[k, :, :3], paths.isometries[k, :, 3]
+
+        def heard(at_m: np.ndarray, gain=1.0, extra_delay_s=None, x=x, m=m, b=b) -> np.ndarray:
+            return render_path(x, source, at_m @ m.T + b, fs, speed_of_sound_m_s=c,
+                               n_out=n_out, gain=gain, extra_delay_s=extra_delay_s)
+
+        if receiver.kind == "mono":
+            out[0] += heard(mic)
+            continue
+        apparent = (source - b) @ m - mic  # from the microphone to the source's image
+        d = apparent / np.linalg.norm(apparent, axis=1, keepdims=True)
+        local = np.einsum("tji,tj->ti", frames, d)  # R(t)ᵀ d
+        if receiver.kind == "ambisonics":
+            from sonicspec.acoustics.receivers import sh_sn3d
+
+            gains = sh_sn3d(receiver.order, local)
+            for ch in range(receiver.channels):
+                out[ch] += heard(mic, gain=gains[:, ch])
+        elif receiver.kind == "sphere_head":
+            from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
+
+            for ear, axis in enumerate(receiver.ear_axes):
+                cos_t = local @ axis
+                delay = woodworth_delays_s(cos_t, receiver.head.head_radius_m, c)
+                alpha = shadow_alpha(cos_t)
+                out[ear] += heard(mic, extra_delay_s=delay)
+                shaded[ear] += heard(mic, gain=alpha, extra_delay_s=delay)
+        else:
+            for ch, offset in enumerate(receiver.offsets_m):
+                out[ch] += heard(mic + frames @ offset)
+    if receiver.kind == "sphere_head":
+        from scipy import signal
+
+        from sonicspec.acoustics.hrtf import shadow_filters
+
+        (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(receiver.head, fs, c)
+        out = signal.lfilter(b_lp, a_lp, out, axis=1) + signal.lfilter(b_hp, a_hp, shaded,
+                                                                       axis=1)
+    return out

@@ -70,4 +70,35 @@ TrajectorySpec = Annotated[
     | ShortestPathTrajectorySpec,
     Field(discriminator="kind"),
 ]
-MicrophoneTrajectorySpec = TrajectorySpec
+
+
+class _MovingMicrophone(SpecModel):
+    facing: Literal["walk", "fixed"] = Field(
+        "walk",
+        description="Where a moving microphone faces: 'walk' turns its front (and an "
+        "array's capsules, a head's ears) to its horizontal direction of travel, yaw_deg "
+        "added; 'fixed' keeps yaw_deg throughout.",
+    )
+    span: Literal["speech", "clip"] = Field(
+        "clip",
+        description="What the microphone's walk spans when speed_m_s is null: the group's "
+        "speech (from its first utterance to the end of its last, all speakers) or the whole "
+        "clip. With a speed, the walk starts at the start of this span.",
+    )
+
+
+class MicrophoneLineTrajectorySpec(_MovingMicrophone, LineTrajectorySpec):
+    """A microphone carried along a straight line between two fixed points."""
+
+    start_m: Vec3 = Field(description="Start point, metres.")
+    end_m: Vec3 = Field(description="End point, metres.")
+
+
+class MicrophoneWaypointsTrajectorySpec(_MovingMicrophone, WaypointsTrajectorySpec):
+    """A microphone carried along a polyline through fixed points."""
+
+
+MicrophoneTrajectorySpec = Annotated[
+    StaticTrajectorySpec | MicrophoneLineTrajectorySpec | MicrophoneWaypointsTrajectorySpec,
+    Field(discriminator="kind"),
+]

@@ -34,6 +34,9 @@ def settings_from(params: PlacementParams) -> PlacementSettings:
     the trajectory's smoothing."""
     rules = params.placement.model_dump()
     names = {f.name for f in fields(PlacementSettings)} & set(rules)
+    mic_path = _fixed_path(params.microphone.trajectory, None, None)
+    if mic_path is not None and rules.get("mic_position_m") is None:
+        rules["mic_position_m"] = mic_path[0]  # a moving microphone starts its walk there
     return PlacementSettings(**{name: rules[name] for name in names},
                              mic_height_m=params.microphone.height_m,
                              smooth_paths=getattr(params.trajectory, "smooth", True))
