@@ -94,8 +94,13 @@ CASES = [
     ("mic-kind", "kind: circular_array", "kind: circular", "microphone.kind", 21, True),
     ("mic-one-capsule", "  n: 4", "  n: 1", "microphone.n", 22, True),
     ("mic-radius-zero", "radius_m: 0.05", "radius_m: 0", "microphone.radius_m", 23, True),
-    ("mic-moving", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: line, start_m: [1, 1, 1"
-     ".5], end_m: [2, 1, 1.5]}", "microphone.trajectory.kind", 24, False),
+    ("mic-line-open", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: line, start_m: [1, 1, "
+     "1.5]}", "microphone.trajectory.end_m", 24, True),
+    ("mic-shortest-path", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: shortest_path}",
+     "microphone.trajectory.kind", 24, True),
+    ("mic-moving-and-placed", "kind: circular_array\n  n: 4\n  radius_m: 0.05\nplacement:",
+     "kind: mono\n  trajectory: {kind: line, start_m: [1, 1, 1.5], end_m: [2, 1, 1.5]}\n"
+     "placement:\n  mic_position_m: [3, 3, 1.5]", "placement.mic_position_m", 24, False),
     ("range-negative", "source_start_distance_m: [1, 4]", "source_start_distance_m: [-1, 4]",
      "placement.source_start_distance_m", 25, True),
     ("clearance-negative", "wall_clearance_m: 0.3", "wall_clearance_m: -0.3",

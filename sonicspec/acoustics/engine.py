@@ -397,7 +397,8 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
     if kind == "mono":
         return synthesize_early(arrivals, bank, n_samples)[None, :]
     if kind == "ambisonics":
-        return ambisonic_early(arrivals, microphone["order"], bank, n_samples)
+        return ambisonic_early(arrivals, microphone["order"], bank, n_samples,
+                               yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sphere":
         from sonicspec.acoustics.hrtf import sphere_binaural_early
 
@@ -589,8 +590,9 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
     if kind == "mono":
         return lambda a, h, rng: synthesize_rir(a, h, fs, rng, **common)[None, :]
     if kind == "ambisonics":
-        return lambda a, h, rng: synthesize_ambisonic_rir(a, h, microphone["order"], fs, rng,
-                                                          **common)
+        return lambda a, h, rng: synthesize_ambisonic_rir(
+            a, h, microphone["order"], fs, rng, yaw_deg=microphone["yaw_deg"],
+            pitch_deg=microphone["pitch_deg"], **common)
     if kind == "binaural":
         from sonicspec.acoustics.hrtf import (
             synthesize_hrir_binaural_rir,
@@ -691,8 +693,7 @@ def check_receiver(microphone: Mapping[str, Any], hrirs: HrirSet | None = None) 
     Raises
     ------
     AcousticsError
-        A SOFA HRTF without its loaded set, a kind outside :data:`RENDERED_KINDS`, or a
-        moving microphone.
+        A SOFA HRTF without its loaded set, or a kind outside :data:`RENDERED_KINDS`.
     """
     if (microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa"
             and hrirs is None):
@@ -702,6 +703,3 @@ def check_receiver(microphone: Mapping[str, Any], hrirs: HrirSet | None = None) 
         raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are "
                              "not in this version of sonicspec; use one of "
                              f"{', '.join(RENDERED_KINDS)}")
-    if microphone["trajectory"]["kind"] != "static":
-        raise AcousticsError("microphone.trajectory: a moving microphone is not in this version "
-                             "of sonicspec; use kind: static")

@@ -365,6 +365,10 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         if receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
+            if receiver.yaw_deg is not None or receiver.pitch_deg:  # the microphone's frame
+                from sonicspec.acoustics.receivers import rotation
+
+                d = d @ rotation(float(receiver.yaw_deg or 0.0), receiver.pitch_deg)
             gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
             for ch in range(receiver.channels):
                 out[ch] += path(gain=gains[:, ch] if not static else float(gains[0, ch]))
@@ -453,8 +457,9 @@ class Receiver:
     """A moving microphone: its centre at each point, ``(N, 3)`` (read at the same
     fractional index as the source; then ``offsets_m`` and ``ear_axes`` are in the
     microphone's own frame, turned by ``yaw_deg`` and ``pitch_deg``)."""
-    yaw_deg: np.ndarray | None = None
-    """A moving microphone's yaw at each point, ``(N,)`` degrees (linear between points)."""
+    yaw_deg: np.ndarray | float | None = None
+    """A moving microphone's yaw at each point, ``(N,)`` degrees (linear between points);
+    for a static ambisonic microphone, the one yaw of its frame."""
     pitch_deg: float = 0.0
 
     @property

@@ -49,13 +49,20 @@ def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     return rz @ ry
 
 
-def local_directions(vectors_m: np.ndarray, yaw_deg: float, pitch_deg: float
+def local_directions(vectors_m: np.ndarray, yaw_deg, pitch_deg: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Azimuth and elevation (degrees) and length (m) of vectors from the microphone, in its
     own frame (:func:`rotation`): azimuth 0 along the look direction, positive to the left
-    (counter-clockwise seen from above), elevation positive upwards."""
+    (counter-clockwise seen from above), elevation positive upwards. ``yaw_deg``: one yaw,
+    or one per vector (a microphone that turns)."""
     v = np.asarray(vectors_m, dtype=np.float64).reshape(-1, 3)
-    local = v @ rotation(yaw_deg, pitch_deg)
+    if np.ndim(yaw_deg) == 0:
+        local = v @ rotation(float(yaw_deg), pitch_deg)
+    else:  # R_zᵀ per vector, then the pitch
+        y = np.radians(np.asarray(yaw_deg, dtype=np.float64))
+        turned = np.column_stack([np.cos(y) * v[:, 0] + np.sin(y) * v[:, 1],
+                                  -np.sin(y) * v[:, 0] + np.cos(y) * v[:, 1], v[:, 2]])
+        local = turned @ rotation(0.0, pitch_deg)
     distance = np.linalg.norm(local, axis=1)
     azimuth = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
     elevation = np.degrees(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
@@ -125,9 +132,12 @@ def array_early(arrivals: Arrivals, offsets_m: np.ndarray, bank: OctaveFilterBan
 
 
 def ambisonic_early(arrivals: Arrivals, order: int, bank: OctaveFilterBank, n_samples: int,
-                    taps: int = DEFAULT_TAPS) -> np.ndarray:
-    """The early part of an ambisonic RIR, ``((order + 1)², n_samples)``, ACN/SN3D."""
-    gains = sh_sn3d(order, arrivals.directions) if len(arrivals) else np.zeros(
+                    taps: int = DEFAULT_TAPS, *, yaw_deg: float = 0.0,
+                    pitch_deg: float = 0.0) -> np.ndarray:
+    """The early part of an ambisonic RIR, ``((order + 1)², n_samples)``, ACN/SN3D, in the
+    microphone's frame (:func:`rotation`: its x axis where it faces)."""
+    local = arrivals.directions @ rotation(yaw_deg, pitch_deg)
+    gains = sh_sn3d(order, local) if len(arrivals) else np.zeros(
         (0, (order + 1) ** 2))
     out = np.zeros(((order + 1) ** 2, n_samples))
     for ch in range(out.shape[0]):
@@ -210,12 +220,15 @@ def mix_per_frequency(signals: np.ndarray, mixing: Callable[[np.ndarray], np.nda
 def synthesize_ambisonic_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
                              order: int, sample_rate_hz: float, rng: np.random.Generator, *,
                              max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
-                             taps: int = DEFAULT_TAPS) -> np.ndarray:
-    """Ambisonic RIR, ACN/SN3D, ``((order + 1)², n_samples)``."""
+                             taps: int = DEFAULT_TAPS, yaw_deg: float = 0.0,
+                             pitch_deg: float = 0.0) -> np.ndarray:
+    """Ambisonic RIR, ACN/SN3D, ``((order + 1)², n_samples)``, in the microphone's frame
+    (the late part is diffuse: the same in any frame)."""
     bank = OctaveFilterBank(sample_rate_hz, bands_hz)
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s, taps,
                            bank.padding() // 4)
-    out = ambisonic_early(arrivals, order, bank, n, taps)
+    out = ambisonic_early(arrivals, order, bank, n, taps, yaw_deg=yaw_deg,
+                          pitch_deg=pitch_deg)
     for ch in range(out.shape[0]):
         if histogram is not None:
             degree = math.isqrt(ch)

@@ -29,6 +29,7 @@ from sonicspec.plan.params import ARRANGEMENT_FIELDS, MaterialTable
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
 from sonicspec.spec.scene import MeshObstacleSpec, MeshSceneSpec
+from sonicspec.spec.trajectory import StaticTrajectorySpec
 
 
 @dataclass(frozen=True)
@@ -308,6 +309,11 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     rendering = spec.mixture.rendering(spec.microphone)  # `auto` resolved
+    # A moving microphone: the rir step pairs source and microphone positions in time, so it
+    # reads how the sources walk and the arrangement (when each speaks).
+    walk = {} if isinstance(spec.microphone.trajectory, StaticTrajectorySpec) else {"walk": {
+        "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
+        "walk_span": getattr(spec.trajectory, "span", "speech")}}
     export_keys: list[str] = []
     outputs = _dump(spec.outputs)
     for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard", "report"):
@@ -359,8 +365,9 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "sample_rate_hz": spec.sample_rate_hz,
                         "files": rir_files_shared,
                         "early_paths": rendering == "paths",
+                        **walk,
                     },
-                    (mesh_keys[scene_id], placement.key),
+                    (mesh_keys[scene_id], placement.key, *((arrange.key,) if walk else ())),
                     f"rir {tag}",
                     rir_paths,
                 )

@@ -223,6 +223,14 @@ MaterialTable = _subset(MaterialsSpec, ("library", "custom"),
                         "the mesh job).")
 
 
+class WalkParams(StepParams):
+    """How a source walks (the trajectory's speed and span): the rir step of a moving
+    microphone needs it to know where the source is when the microphone is where."""
+
+    speed_m_s: float | None
+    walk_span: Literal["speech", "clip"]
+
+
 class RirParams(ShardParams):
     acoustics: AcousticsSpec
     materials: MaterialTable  # type: ignore[valid-type]
@@ -233,6 +241,11 @@ class RirParams(ShardParams):
     """SHA-256 of the SOFA file of a binaural microphone (``hrtf``), else empty."""
     early_paths: bool
     """Also store each source's exact early paths and late RIRs (``interpolation: paths``)."""
+    walk: WalkParams | None = None
+    """A moving microphone: how the sources walk (its RIRs are traced at pairs of source
+    and microphone positions, :mod:`sonicspec.stages.motion`); None otherwise."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"walk": None}
 
 
 class RenderParams(ShardParams):

@@ -563,11 +563,16 @@ def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
 
 
 def _check_trajectory(spec: DatasetSpec) -> Iterator[Problem]:
-    if not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
-        # The rir stage would refuse it (acoustics.engine.check_receiver): say so here.
-        yield _err(("microphone", "trajectory", "kind"),
-                   f"a moving microphone ({spec.microphone.trajectory.kind!r}) is not rendered "
-                   "in this version of sonicspec; use kind: static")
+    if (not isinstance(spec.microphone.trajectory, StaticTrajectorySpec)
+            and spec.placement.mic_position_m is not None):
+        start = (spec.microphone.trajectory.start_m
+                 if isinstance(spec.microphone.trajectory, LineTrajectorySpec)
+                 else spec.microphone.trajectory.points_m[0])
+        if math.dist(start, spec.placement.mic_position_m) > 1e-6:
+            yield _err(("placement", "mic_position_m"),
+                       f"{list(spec.placement.mic_position_m)} is not where the moving "
+                       f"microphone starts ({list(start)}, microphone.trajectory); leave it "
+                       "out (a moving microphone is placed at its start)")
     for prefix, traj in (
         (("trajectory",), spec.trajectory),
         (("microphone", "trajectory"), spec.microphone.trajectory),

@@ -30,8 +30,6 @@ def paths_unavailable(microphone) -> str | None:
     microphone model), or None."""
     if getattr(microphone, "kind", None) == "binaural" and microphone.hrtf.kind != "sphere":
         return "microphone.hrtf is a SOFA set"
-    if getattr(microphone.trajectory, "kind", "static") != "static":
-        return "microphone.trajectory moves"
     return None
 
 
@@ -135,7 +133,8 @@ class MixtureSpec(SpecModel):
         description="How a moving source is heard along its path. 'paths': the direct sound and "
         "every image-source reflection as a time-varying delay from where the source is at "
         "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
-        "between RIR points; not SOFA HRTFs or moving microphones). Or the RIRs along the "
+        "between RIR points; a moving microphone's images move with it; not SOFA HRTFs). "
+        "Or the RIRs along the "
         "path are blended: per-sample crossfade of neighbouring convolutions (SonicSet), "
         "STFT-domain interpolation (DCASE/SpatialScaper), or one RIR per segment with "
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "

@@ -229,7 +229,8 @@ class RirSource(_Data):
     :meth:`sonicspec.acoustics.tails.TailReport.to_dict`)."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
-    ``<paths>_images``, ``_weights``, ``_order``: a
+    ``<paths>_images``, ``_weights``, ``_order``, and ``_isometries`` for a moving
+    microphone: a
     :class:`~sonicspec.acoustics.moving.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
 
@@ -315,16 +316,20 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
            f"{prefix}_order": paths.order}
     if paths.directions is not None:
         out[f"{prefix}_directions"] = paths.directions
+    if paths.isometries is not None:
+        out[f"{prefix}_isometries"] = paths.isometries
     return out
 
 
 def read_path_set(arrays, prefix: str) -> PathSet:
     """The :class:`~sonicspec.acoustics.moving.PathSet` :func:`path_set_arrays` stored."""
     directions = arrays.get(f"{prefix}_directions")
+    isometries = arrays.get(f"{prefix}_isometries")
     return PathSet(np.asarray(arrays[f"{prefix}_images"], dtype=np.float64),
                    np.asarray(arrays[f"{prefix}_weights"], dtype=np.float64),
                    np.asarray(arrays[f"{prefix}_order"], dtype=np.int64),
-                   None if directions is None else np.asarray(directions, dtype=np.float64))
+                   None if directions is None else np.asarray(directions, dtype=np.float64),
+                   None if isometries is None else np.asarray(isometries, dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {

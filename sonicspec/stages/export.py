@@ -12,15 +12,12 @@ the next build check), the manifest entries and the metadata for the ``dataset``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sonicspec.acoustics.receivers import local_directions
-from sonicspec.audio.arrange import Segment, walk_window
-from sonicspec.audio.render import walk_index
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -32,9 +29,9 @@ from sonicspec.stages.artifacts import (
     MixGroup,
     RenderGroup,
     RirGroup,
-    SourcePlacement,
 )
 from sonicspec.stages.context import JobContext
+from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 
 class _GroupWriter:
@@ -72,42 +69,40 @@ class _GroupWriter:
 TRACK_HOP_S = 0.01
 
 
-@dataclass(frozen=True)
-class Motion:
-    """How the renderer walked a group's sources and where the microphone faced."""
-
-    speed_m_s: float | None
-    """The trajectory's speed (None: each walk spans ``span``)."""
-    span: str
-    """What a walk spans: ``speech`` or the whole ``clip``."""
-    yaw_deg: float
-    pitch_deg: float
-
-
-def position_track(source: SourcePlacement, segments: list[Segment], clip_samples: int,
-                   rate: int, motion: Motion, mic_m) -> dict[str, Any]:
+def position_track(line: Timeline, rate: int) -> dict[str, Any]:
     """Where a source is every ``TRACK_HOP_S`` from t = 0 over the whole clip (held before and
-    after its walk), read from the same walk the renderer used, with its azimuth, elevation
-    and distance in the microphone's frame."""
+    after its walk), read from the same timeline the renderer used, with its azimuth,
+    elevation and distance in the microphone's frame (where the microphone is and faces
+    then)."""
     hop = max(1, round(TRACK_HOP_S * rate))
-    index = walk_index(source.rir_points_distance_m, clip_samples,
-                       walk_window(motion.span, segments, clip_samples), motion.speed_m_s,
-                       rate)[::hop]
-    points = np.asarray(source.rir_points_m, dtype=np.float64)
-    at = np.arange(len(points), dtype=np.float64)
-    positions = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
-    azimuth, elevation, distance = local_directions(positions - np.asarray(mic_m),
-                                                    motion.yaw_deg, motion.pitch_deg)
+    index = line.index[::hop]
+    positions = line.at(line.source_m, index)
+    mic = line.at(line.mic_m, index)
+    yaw = line.at(line.yaw_deg, index) if line.mic_moves else float(line.yaw_deg[0])
+    azimuth, elevation, distance = local_directions(positions - mic, yaw, line.pitch_deg)
     return {"hop_s": hop / rate, "positions_m": np.round(positions, 4).tolist(),
             "azimuth_deg": np.round(azimuth, 2).tolist(),
             "elevation_deg": np.round(elevation, 2).tolist(),
             "distance_m": np.round(distance, 4).tolist()}
 
 
+def microphone_track(line: Timeline, rate: int) -> dict[str, Any]:
+    """Where the microphone is (and faces) every ``TRACK_HOP_S``, from any source's
+    timeline of its group (they share the microphone's walk)."""
+    hop = max(1, round(TRACK_HOP_S * rate))
+    index = line.index[::hop]
+    track = {"hop_s": hop / rate,
+             "positions_m": np.round(line.at(line.mic_m, index), 4).tolist()}
+    if line.mic_moves:
+        yaw = (line.at(line.yaw_deg, index) + 180.0) % 360.0 - 180.0
+        track["yaw_deg"] = np.round(yaw, 2).tolist()
+    return track
+
+
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
-                 keys: dict[str, str], motion: Motion) -> dict[str, Any]:
+                 keys: dict[str, str], walk: Walk) -> dict[str, Any]:
     """Write one group's folder; its record for ``dataset``."""
     group = render.group
     split, index = group.split("/")
@@ -118,14 +113,16 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     arranged = {t.name: t for t in arrange.tracks}
     metadata: dict[str, Any] = {}
     spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
+    speech = group_speech(arrange.tracks)
     for name, track in tracks.items():
         role = track.role
         a = arranged[name]
         rir_source = rir.source(name)
         signal = gains[name] * np.asarray(arrays[track.arrays["reverberant"]], dtype=np.float64)
         geometry = placement.source(name)
-        track_labels = position_track(geometry, a.segment_list(), render.clip_samples, w.rate,
-                                      motion, placement.mic_m)
+        line = timeline(geometry, a.segment_list(), placement, walk, speech,
+                        render.clip_samples, w.rate)
+        track_labels = position_track(line, w.rate)
         if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
             audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
         else:
@@ -171,8 +168,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         floor=placement.floor_index, sample_rate_hz=w.rate,
         num_samples=render.clip_samples, mixtures=mixtures,
         group_gain_db=mix.group_gain_db, keys=keys,
-        microphone_track={"hop_s": TRACK_HOP_S,
-                          "positions_m": [list(placement.mic_m)] * len(track_labels["distance_m"])})
+        microphone_track=microphone_track(line, w.rate))
     if outputs.metadata:
         write_json(w.folder / "metadata.json", metadata)
         w.files.append({"kind": "metadata", "name": "metadata",
@@ -212,13 +208,13 @@ def run(ctx: JobContext) -> None:
     keys = {step: ctx.input_keys(step)[0]
             for step in ("placement", "arrange", "rir", "render", "mix")}
     microphone = ctx.input_params("rir").microphone
-    walk = ctx.input_params("render")
-    motion = Motion(walk.speed_m_s, walk.walk_span, microphone.yaw_deg, microphone.pitch_deg)
+    render_params = ctx.input_params("render")
+    walk = Walk(render_params.speed_m_s, render_params.walk_span, microphone)
     groups = []
     for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
                                                rir.groups, strict=True):
         groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
                                    rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
-                                   motion))
+                                   walk))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})

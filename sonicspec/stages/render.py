@@ -29,9 +29,9 @@ from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.engine import array_offsets, sphere_head
 from sonicspec.acoustics.hrtf import ear_axes
 from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
-from sonicspec.audio.arrange import Segment, assemble, walk_window
+from sonicspec.audio.arrange import Segment, assemble
 from sonicspec.audio.corpora import load_audio
-from sonicspec.audio.render import EARLY_MS, render_moving, split_rir, walk_index
+from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
 from sonicspec.stages import artifacts
@@ -40,10 +40,10 @@ from sonicspec.stages.artifacts import (
     RenderData,
     RenderedTrack,
     RenderGroup,
-    SourcePlacement,
 )
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
+from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 
 class _AudioCache:
@@ -75,26 +75,26 @@ def track_audio(track: ArrangedTrack, segments: list[Segment], cache: _AudioCach
             for sid, n in need.items()}
 
 
-def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement,
-                 mic_m: np.ndarray, params: RenderParams, cache: _AudioCache,
-                 clip_samples: int, corpus_root: Path,
+def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
+                 params: RenderParams, cache: _AudioCache, clip_samples: int,
+                 corpus_root: Path,
                  paths: tuple[PathSet, np.ndarray, OctaveFilterBank, Receiver] | None = None
                  ) -> dict[str, np.ndarray]:
-    """``{"reverberant", "dry", and any targets}`` arrays of one track. ``paths``: the
-    source's exact early paths, its late RIRs and their bands (``interpolation: paths``);
-    a static source is heard through its RIR, as its paths and late part sum to it."""
+    """``{"reverberant", "dry", and any targets}`` arrays of one track heard along its
+    ``line`` (:func:`sonicspec.stages.motion.timeline`: its RIR points and when it is
+    where). ``paths``: the source's exact early paths, its late RIRs and their bands
+    (``interpolation: paths``); a static source heard by a static microphone is heard through
+    its RIR, as its paths and late part sum to it."""
     rate = params.sample_rate_hz
     segments = track.segment_list()
     dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
-    points = np.asarray(source.rir_points_m, dtype=np.float64)
+    points = line.source_m
     if len(points) != rirs.shape[0]:
         raise StageError(f"track {track.name}: {len(points)} RIR points in the placement but "
                          f"{rirs.shape[0]} RIRs")
-    position = walk_index(source.rir_points_distance_m, clip_samples,
-                          walk_window(params.walk_span, segments, clip_samples),
-                          params.speed_m_s, rate)
+    position = line.index
     wanted = [t for t in ("direct", "early") if t in params.targets]
-    distance = np.linalg.norm(points - mic_m[None, :], axis=1)
+    distance = np.linalg.norm(points - line.mic_m, axis=1)
     delays = distance / params.speed_of_sound_m_s * rate
     out = {"dry": dry[None, :].astype(np.float32)}
     if len(points) == 1:  # a static source: its RIR is its paths (and needs no pairing)
@@ -121,18 +121,34 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, source: SourcePlacement
             out["direct"] = heard(found.select(found.order == 0))
         if "early" in wanted:  # paths within 50 ms of the direct sound, and the tail's start
             _, early_tail = split_rir(late, delays, rate)
-            out["early"] = (heard(_within(found, points, delays / rate, EARLY_MS / 1000.0,
-                                          params.speed_of_sound_m_s))
+            out["early"] = (heard(_within(found, points, line.mic_m, delays / rate,
+                                          EARLY_MS / 1000.0, params.speed_of_sound_m_s))
                             + render_moving(dry, early_tail, position,
                                             "sample_crossfade")[:, :clip_samples])
     return {k: v.astype(np.float32) for k, v in out.items()}
 
 
-def path_receiver(microphone, center_m) -> Receiver:
-    """The receiver :func:`render_paths` renders for a spec's microphone at ``center_m``."""
+def path_receiver(microphone, center_m, line: Timeline | None = None) -> Receiver:
+    """The receiver :func:`render_paths` renders for a spec's microphone at ``center_m``,
+    or moving and turning along ``line`` (a moving microphone's timeline)."""
+    if line is not None and line.mic_moves:
+        moving = {"mic_track_m": line.mic_m, "yaw_deg": line.yaw_deg,
+                  "pitch_deg": line.pitch_deg}
+        mic = microphone.model_dump(mode="json")
+        if microphone.kind == "ambisonics":
+            return Receiver("ambisonics", order=microphone.order, **moving)
+        if microphone.kind == "mono":
+            return Receiver(**moving)
+        if microphone.kind == "binaural":  # its own frame: turned by the timeline's yaw
+            head = sphere_head(mic)
+            return Receiver("sphere_head", head=head, ear_axes=ear_axes(head, 0.0, 0.0),
+                            **moving)
+        return Receiver("array", offsets_m=array_offsets({**mic, "yaw_deg": 0.0,
+                                                          "pitch_deg": 0.0}), **moving)
     if microphone.kind == "ambisonics":
         return Receiver("ambisonics", order=microphone.order,
-                        center_m=np.asarray(center_m, dtype=np.float64))
+                        center_m=np.asarray(center_m, dtype=np.float64),
+                        yaw_deg=microphone.yaw_deg, pitch_deg=microphone.pitch_deg)
     if microphone.kind == "mono":
         return Receiver()
     if microphone.kind == "binaural":  # the sphere head (validate rejects SOFA HRTFs)
@@ -144,11 +160,17 @@ def path_receiver(microphone, center_m) -> Receiver:
                     center_m=np.asarray(center_m, dtype=np.float64))
 
 
-def _within(paths: PathSet, points: np.ndarray, direct_s: np.ndarray, window_s: float,
-            speed_of_sound_m_s: float) -> PathSet:
+def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, direct_s: np.ndarray,
+            window_s: float, speed_of_sound_m_s: float) -> PathSet:
     """``paths`` kept only at the points where they arrive within ``window_s`` of the direct
-    sound (a path that crosses the limit between two points fades there)."""
-    length = np.linalg.norm(points[None, :, :] - paths.images_m[:, None, :], axis=2)
+    sound (a path that crosses the limit between two points fades there); ``mic_m``: the
+    microphone at each point (its images move with it, by the paths' isometries)."""
+    if paths.isometries is not None:
+        images = (np.einsum("kij,nj->kni", paths.isometries[:, :, :3], mic_m)
+                  + paths.isometries[:, None, :, 3])
+    else:
+        images = np.broadcast_to(paths.images_m[:, None, :], (len(paths), len(points), 3))
+    length = np.linalg.norm(points[None, :, :] - images, axis=2)
     inside = (length / speed_of_sound_m_s - direct_s[None, :]) <= window_s
     return paths.with_weights(paths.weights * inside[:, :, None])
 
@@ -163,6 +185,7 @@ def run(ctx: JobContext) -> None:
     roots = corpus_roots(ctx)
     bank = OctaveFilterBank(rir.sample_rate_hz, tuple(rir.bands_hz))
     microphone = ctx.input_params("rir").microphone
+    walk = Walk(params.speed_m_s, params.walk_span, microphone)
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -170,12 +193,14 @@ def run(ctx: JobContext) -> None:
         if not arr.group == placement.group == rir_group.group:
             raise StageError(f"{ctx.job.label}: inputs disagree on group order "
                              f"({arr.group}, {placement.group}, {rir_group.group})")
-        mic = np.asarray(placement.mic_m, dtype=np.float64)
+        speech = group_speech(arr.tracks)
         tracks = []
         for n, track in enumerate(arr.tracks):
             ctx.progress(f"group {g + 1}/{len(arrange)}, track {n + 1}/{len(arr.tracks)}")
             entry = rir_group.source(track.name)
             rirs = np.asarray(rir_art.arrays[entry.array], dtype=np.float64)
+            line = timeline(placement.source(track.name), track.segment_list(), placement,
+                            walk, speech, arr.clip_samples, params.sample_rate_hz)
             paths = None
             if params.interpolation == "paths":
                 if entry.paths is None:
@@ -183,9 +208,9 @@ def run(ctx: JobContext) -> None:
                                      f"group {arr.group} {track.name} hold no early paths")
                 paths = (artifacts.read_path_set(rir_art.arrays, entry.paths),
                          np.asarray(rir_art.arrays[f"{entry.paths}_late"], dtype=np.float64),
-                         bank, path_receiver(microphone, placement.mic_m))
-            signals = render_track(track, rirs, placement.source(track.name), mic, params,
-                                   cache, arr.clip_samples, roots[track.role], paths)
+                         bank, path_receiver(microphone, placement.mic_m, line))
+            signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
+                                   roots[track.role], paths)
             keys = {}
             for kind, x in signals.items():
                 key = f"g{g}_{track.name}_{kind}"

@@ -39,6 +39,7 @@ from sonicspec.stages.artifacts import (
     RirSource,
     speech_track_name,
 )
+from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")
 
@@ -158,8 +159,45 @@ def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+def _traces(placement: GroupPlacement, sources: list[tuple[str, np.ndarray]],
+            lines: list[Timeline | None], mic_m, yaw_deg: float
+            ) -> tuple[list[tuple[np.ndarray, float, list[np.ndarray]]],
+                       list[list[tuple[int, int]]]]:
+    """Which traces a group needs: one per place and heading of the microphone, with the
+    source positions heard there (each once), and for every source point the (trace,
+    position) it is. A static microphone: one trace, every point in order."""
+    traces: list[tuple[np.ndarray, float, list[np.ndarray]]] = []
+    where: dict[tuple, int] = {}
+    spots: dict[tuple, tuple[int, int]] = {}
+    refs: list[list[tuple[int, int]]] = []
+    for (_, pts), line in zip(sources, lines, strict=True):
+        if line is None:
+            mics, yaws, pts_ = np.repeat(np.asarray(mic_m)[None], len(pts), 0), \
+                np.full(len(pts), yaw_deg), pts
+        else:
+            mics, yaws, pts_ = line.mic_m, line.yaw_deg, line.source_m
+        ref = []
+        for m, y, p in zip(mics, yaws, pts_, strict=True):
+            key = (*np.asarray(m).tolist(), float(y))
+            if key not in where:
+                where[key] = len(traces)
+                traces.append((np.asarray(m, dtype=np.float64), float(y), []))
+            t = where[key]
+            spot = (t, *np.asarray(p).tolist())
+            if spot not in spots or line is None:  # a static microphone keeps every point
+                spots[spot] = (t, len(traces[t][2]))
+                traces[t][2].append(np.asarray(p, dtype=np.float64))
+            ref.append(spots[spot])
+        refs.append(ref)
+    return traces, refs
+
+
 def run(ctx) -> None:
-    """Stage ``rir``: every source's RIRs along its path, for every group of a shard."""
+    """Stage ``rir``: every source's RIRs along its path, for every group of a shard.
+
+    A moving microphone: RIRs at the pairs of source and microphone positions of each
+    source's timeline (:func:`sonicspec.stages.motion.timeline`), one trace per place and
+    heading of the microphone."""
     from sonicspec.acoustics.metrics import room_acoustic_figures
 
     params: RirParams = ctx.params
@@ -173,33 +211,54 @@ def run(ctx) -> None:
     scene = acoustic_scene(mesh, spec_materials(params.materials), settings)
     regions = planar_regions(scene)
     placements = artifacts.read(ctx, "placement").groups
+    scene_name = f"scene {mesh_art.data.get('scene_id', '?')!r}"
+    walk = arranged = None
+    if params.walk is not None:
+        walk = Walk(params.walk.speed_m_s, params.walk.walk_span, params.microphone)
+        arranged = {a.group: a for a in artifacts.read(ctx, "arrange").groups}
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, placement in enumerate(placements):
         sources = _source_points(placement)
-        points = np.concatenate([p for _, p in sources])
+        lines: list[Timeline | None] = [None] * len(sources)
+        if walk is not None:
+            check_inside(mesh.vertices, scene_name, **{
+                f"microphone.trajectory point {j}": p for j, p in enumerate(placement.mic_path_m)})
+            arr = arranged[placement.group]
+            tracks = {t.name: t for t in arr.tracks}
+            speech = group_speech(arr.tracks)
+            lines = [timeline(placement.source(name), tracks[name].segment_list(), placement,
+                              walk, speech, arr.clip_samples, params.sample_rate_hz)
+                     for name, _ in sources]
+        traces, refs = _traces(placement, sources, lines, placement.mic_m,
+                               params.microphone.yaw_deg)
         rng = ctx.rng("rir", ctx.job.key, placement.group)
-
-        def progress(done: int, total: int, g: int = g, n: int = len(points)) -> None:
-            ctx.progress(f"group {g + 1}/{len(placements)}: {n} points, "
-                         f"{done:,}/{total:,} rays")
-
+        results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
         # which the build summary collects.
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", SonicspecWarning)
-            rirs, facts = simulate_rirs(
-                scene, np.asarray(placement.mic_m), points, settings, rng, regions, microphone,
-                hrirs, progress=progress, where=f"scene {mesh_art.data.get('scene_id', '?')!r}",
-                keep_arrivals=params.early_paths)
+            for t, (mic_m, yaw, points) in enumerate(traces):
+                def progress(done: int, total: int, g: int = g, n: int = len(points),
+                             t: int = t, places: int = len(traces)) -> None:
+                    where = f", microphone place {t + 1}/{places}" if places > 1 else ""
+                    ctx.progress(f"group {g + 1}/{len(placements)}{where}: {n} points, "
+                                 f"{done:,}/{total:,} rays")
+
+                results.append(simulate_rirs(
+                    scene, mic_m, np.asarray(points), settings, rng, regions,
+                    {**microphone, "yaw_deg": yaw}, hrirs, progress=progress,
+                    where=scene_name, keep_arrivals=params.early_paths))
         for w in caught:
             if issubclass(w.category, SonicspecWarning):
                 log.warning("%s", w.message)
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        entries, start = [], 0
-        for s, (name, pts) in enumerate(sources):
-            block = rirs[start:start + len(pts)]
+        entries = []
+        for s, ((name, _), line, ref) in enumerate(zip(sources, lines, refs, strict=True)):
+            block = [results[t][0][i] for t, i in ref]
+            facts = [results[t][1][i] for t, i in ref]
+            yaws = [traces[t][1] for t, _ in ref]
             length = max(r.shape[-1] for r in block)
             stack = np.zeros((len(block), block[0].shape[0], length), dtype=np.float32)
             for i, r in enumerate(block):
@@ -209,25 +268,28 @@ def run(ctx) -> None:
             paths = None
             if params.early_paths:
                 paths = f"{key}_paths"
-                facts_s = facts[start:start + len(pts)]
-                from_mic = [f["early_arrivals"] for f in facts_s]
-                at_mic = [f["early_arrivals_at_mic"] for f in facts_s]
-                directional = microphone["kind"] != "mono"
-                arrays.update(artifacts.path_set_arrays(paths, PathSet.identify(
-                    pts, from_mic, at_mic=at_mic if directional else None)))
+                from_mic = [f["early_arrivals"] for f in facts]
+                at_mic = [f["early_arrivals_at_mic"] for f in facts]
+                if line is None:
+                    directional = microphone["kind"] != "mono"
+                    found = PathSet.identify(np.asarray(sources[s][1]), from_mic,
+                                             at_mic=at_mic if directional else None)
+                else:
+                    found = PathSet.identify_moving(line.source_m, line.mic_m, from_mic)
+                arrays.update(artifacts.path_set_arrays(paths, found))
                 late = stack.astype(np.float64)
                 for i, early in enumerate(at_mic):  # each as long as its own RIR was made
                     n = block[i].shape[-1]
-                    late[i, :, :n] -= early_part(early, settings, n, microphone)
+                    late[i, :, :n] -= early_part(early, settings, n,
+                                                 {**microphone, "yaw_deg": yaws[i]})
                 arrays[f"{paths}_late"] = late.astype(np.float32)
             first = room_acoustic_figures(block[0][0], settings.sample_rate_hz,
                                           settings.bands_hz)
             entries.append(RirSource(
-                name=name, array=key, points=len(pts),
+                name=name, array=key, points=len(block),
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
-                direct=facts[start]["direct"], tail=facts[start]["tail"],
-                escaped_ray_fraction=facts[start]["escaped_ray_fraction"], paths=paths))
-            start += len(pts)
+                direct=facts[0]["direct"], tail=facts[0]["tail"],
+                escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths))
         groups.append(RirGroup(group=placement.group, sources=entries))
     ctx.write(arrays, artifacts.encode("rir", RirData(
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
