@@ -185,6 +185,7 @@ def test_a_moving_microphone_builds_and_hears_the_exact_relative_motion(kind: st
     heading = np.degrees(np.arctan2(0.4, 3.0))
     assert np.allclose(mic_track["yaw_deg"], heading, atol=0.01)
     dry, fs = sf.read(group / "source1_dry.wav")
+    assert fs == FS
     direct, _ = sf.read(group / "source1_direct.wav", always_2d=True)
     channels = {"mono": 1, "ambisonics": 4, "circular_array": 4, "binaural": 2}[kind]
     assert direct.shape[1] == channels
