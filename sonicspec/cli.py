@@ -74,9 +74,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
                 s = summarize(loaded.spec)
                 extra = f", {len(warnings)} warning{'s' * (len(warnings) != 1)}" if warnings else ""
+                groups = (f"{s.groups} groups" if s.groups is not None
+                          else "groups per speaker and scene")
                 print(
                     f"{path}: valid ({len(loaded.spec.scenes)} scene entries, "
-                    f"{len(s.splits)} splits, {s.groups} groups{extra})"
+                    f"{len(s.splits)} splits, {groups}{extra})"
                 )
         if loaded is None:
             worst = EXIT_INVALID
@@ -175,17 +177,30 @@ def _last_plan_path(plan) -> Path:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from sonicspec.plan.compile import plan_changes, recorded_keys
+    from sonicspec.errors import SonicspecError
+    from sonicspec.plan.compile import layouts_of, plan_changes, recorded_keys
     from sonicspec.plan.summary import format_summary, summarize
+    from sonicspec.spec.splits import EACH_SPEAKER_PER_SCENE
     from sonicspec.stages.workflow import progress
     from sonicspec.store import ArtifactStore
 
     loaded = _load_or_exit(args.spec, args)
     if loaded is None:
         return EXIT_INVALID
-    summary = summarize(loaded.spec)
+    try:
+        layouts = layouts_of(loaded)
+        unread = None
+    except SonicspecError as err:
+        if any(s.groups == EACH_SPEAKER_PER_SCENE for s in loaded.spec.splits.values()):
+            print(f"sonicspec: error: {args.spec}: {err}", file=sys.stderr)
+            return EXIT_INVALID
+        # Fixed group counts: the numbers stand without the data; scenes and speakers do not.
+        layouts, unread = None, str(err)
+    summary = summarize(loaded.spec, layouts)
     if args.summary:
         print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
+        if unread is not None and not args.json:
+            print(f"(scenes and speakers not counted: {unread})")
         return EXIT_OK
     if not _preflight_or_exit(loaded, args.spec):
         return EXIT_INVALID

@@ -347,6 +347,31 @@ def index_librispeech(root: Path, subsets: Mapping[str, Sequence[str]]) -> Corpu
     return _finish("librispeech", items, problems, list(subsets), "LibriSpeech")
 
 
+def librispeech_speakers(root: Path, subsets: Mapping[str, Sequence[str]]
+                         ) -> dict[str, list[str]]:
+    """Split -> its speakers (sorted folder names) in a LibriSpeech-layout corpus, read from
+    the folder names alone (no audio file is opened): what a plan counts before the corpus is
+    indexed. A missing subset folder is an error; a speaker in two splits is one too."""
+    root = Path(root)
+    _require_dir(root, "LibriSpeech root")
+    out: dict[str, list[str]] = {}
+    split_of_speaker: dict[str, str] = {}
+    for split, names in subsets.items():
+        found: set[str] = set()
+        for name in names:
+            _require_dir(root / name, f"LibriSpeech subset '{name}'")
+            for speaker_dir in _subdirs(root / name):
+                other = split_of_speaker.setdefault(speaker_dir.name, split)
+                if other != split:
+                    raise CorpusError(
+                        f"LibriSpeech speaker {speaker_dir.name} ({speaker_dir}): expected in "
+                        f"the subsets of one split, got in '{other}' and '{split}'; speakers "
+                        "must not cross splits")
+                found.add(speaker_dir.name)
+        out[split] = sorted(found)
+    return out
+
+
 def _read_transcript(path: Path, problems: _Findings) -> dict[str, str] | None:
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -647,6 +672,23 @@ def index_folder(root: Path, extensions: Sequence[str], split_ratios: Mapping[st
         split_of = _assign_by_ratio(list(listed), ratios, rng)
     items = _probe_listed(listed, split_of, problems)
     return _finish("folder", items, problems, list(ratios), f"folder corpus {root}")
+
+
+def folder_speakers(root: Path, extensions: Sequence[str], split_ratios: Mapping[str, float],
+                    rng: np.random.Generator) -> dict[str, list[str]]:
+    """Split -> its speakers (sorted) in a folder speech corpus, from the file names alone:
+    the speakers :func:`index_folder` with ``by_speaker`` assigns when given the same ``rng``
+    and every file is readable."""
+    root = Path(root)
+    _require_dir(root, "folder corpus root")
+    ratios = _check_ratios(split_ratios, "folder corpus split_ratios")
+    speakers = {p.relative_to(root).parts[0] for p in audio_files(root,
+                                                                   normalise_extensions(extensions))
+                if len(p.relative_to(root).parts) > 1}
+    out: dict[str, list[str]] = {name: [] for name in ratios}
+    for speaker, split in _assign_by_ratio(sorted(speakers), ratios, rng).items():
+        out[split].append(speaker)
+    return {name: sorted(v) for name, v in out.items()}
 
 
 def _probe_listed(listed: Mapping[str, tuple[Path, str]], split_of: Mapping[str, str],

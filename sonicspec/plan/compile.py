@@ -22,13 +22,17 @@ from pathlib import Path
 from typing import Any
 
 from sonicspec.atomic import write_text
-from sonicspec.errors import CompileError
+from sonicspec.audio.corpora import folder_speakers, librispeech_speakers
+from sonicspec.errors import CompileError, SonicspecError
 from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
 from sonicspec.plan.params import ARRANGEMENT_FIELDS, MaterialTable
+from sonicspec.shares import split_shares
+from sonicspec.spec.corpora import GeneratedSpeechSpec, LibriSpeechCorpusSpec
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import LoadedSpec
 from sonicspec.spec.scene import MeshObstacleSpec, MeshSceneSpec
+from sonicspec.spec.splits import EACH_SPEAKER_PER_SCENE, MAX_GROUPS
 from sonicspec.spec.trajectory import StaticTrajectorySpec
 
 
@@ -153,14 +157,99 @@ def assign_split_scenes(spec: DatasetSpec, entries: list[SceneEntry]) -> dict[st
     return out
 
 
-def group_scenes(spec: DatasetSpec, split: str, scenes: list[str]) -> list[str]:
-    """The scene of every group of ``split``: a seeded permutation, repeated (balanced).
+@dataclass(frozen=True)
+class SplitLayout:
+    """How big a split is once its scenes are expanded and, for a split composed per speaker
+    and scene, its speakers counted."""
 
-    Group ``i`` keeps its scene when the split's group count changes.
+    scenes: tuple[str, ...]
+    groups: int
+    speakers: int | None
+    """Speakers of the split: counted for ``each_speaker_per_scene`` splits, and for every
+    split when asked (the summary); None when not counted."""
+    per_speaker: bool
+    """Composed per speaker and scene (``groups: each_speaker_per_scene``)."""
+
+
+def split_speakers(spec: DatasetSpec, base_dir: Path, splits: list[str]) -> dict[str, int]:
+    """How many speakers the speech corpus gives each of ``splits``, from folder names alone
+    (the corpus is indexed later, by its job; the arrange stage checks the index agrees)."""
+    corpus = spec.corpora.speech
+    try:
+        if isinstance(corpus, GeneratedSpeechSpec):
+            return {s: corpus.speakers_per_split for s in splits}
+        root = base_dir / corpus.root
+        if not root.is_dir():
+            raise CompileError(f"corpora.speech.root: corpus folder {root} does not exist")
+        if isinstance(corpus, LibriSpeechCorpusSpec):
+            found = librispeech_speakers(root, {s: corpus.subsets[s] for s in splits
+                                                if s in corpus.subsets})
+        else:
+            shares = split_shares(corpus.split_ratios, list(spec.splits))
+            # The seed the corpus job's ratio split uses (its rng: "corpus", role).
+            found = folder_speakers(root, corpus.extensions, shares,
+                                    rng_for(spec.seed, "corpus", "speech"))
+    except SonicspecError as err:
+        if isinstance(err, CompileError):
+            raise
+        raise CompileError(f"corpora.speech: {err}") from None
+    return {s: len(found.get(s, [])) for s in splits}
+
+
+def split_layouts(spec: DatasetSpec, entries: list[SceneEntry], base_dir: Path, *,
+                  count_speakers: bool = False) -> dict[str, SplitLayout]:
+    """Scenes, groups and speakers of every split (speakers: of the splits composed per
+    speaker and scene, or of all with ``count_speakers``).
+
+    ``each_speaker_per_scene``: floor(speakers / mixture.speakers) groups in every scene;
+    the speakers left over (fewer than a group) sit that scene out.
+    """
+    scenes = assign_split_scenes(spec, entries)
+    per_speaker = [n for n, s in spec.splits.items() if s.groups == EACH_SPEAKER_PER_SCENE]
+    wanted = list(spec.splits) if count_speakers else per_speaker
+    counts = split_speakers(spec, base_dir, wanted) if wanted else {}
+    out: dict[str, SplitLayout] = {}
+    for name, split in spec.splits.items():
+        if name in per_speaker:
+            per_scene = counts[name] // spec.mixture.speakers
+            if per_scene == 0:
+                raise CompileError(
+                    f"splits.{name}.groups: each_speaker_per_scene needs at least "
+                    f"{spec.mixture.speakers} speakers (mixture.speakers), corpora.speech gives "
+                    f"split '{name}' {counts[name]}")
+            out[name] = SplitLayout(tuple(scenes[name]), per_scene * len(scenes[name]),
+                                    counts[name], True)
+        else:
+            out[name] = SplitLayout(tuple(scenes[name]), int(split.groups), counts.get(name),
+                                    False)
+    total = sum(x.groups for x in out.values())
+    if total > MAX_GROUPS:
+        raise CompileError(
+            f"splits: expected at most {MAX_GROUPS:,} groups in all splits together, got "
+            f"{total:,} (" + ", ".join(f"{k}: {x.groups:,}" for k, x in out.items()) + ")")
+    return out
+
+
+def layouts_of(loaded: LoadedSpec, *, count_speakers: bool = True) -> dict[str, SplitLayout]:
+    """Every split's layout for ``loaded`` (scene globs expanded, speaker folders counted; no
+    file is hashed), for ``sonicspec plan --summary``."""
+    base = loaded.base_dir.resolve()
+    return split_layouts(loaded.spec, expand_scenes(loaded.spec, base), base,
+                         count_speakers=count_speakers)
+
+
+def group_scenes(spec: DatasetSpec, split: str, scenes: list[str] | tuple[str, ...],
+                 groups: int) -> list[str]:
+    """The scene of every one of ``groups`` groups of ``split``: a seeded permutation of the
+    scenes, repeated (balanced).
+
+    Group ``i`` keeps its scene when the split's group count changes; in a split composed per
+    speaker and scene, group ``i`` is slot ``i // len(scenes)`` of its scene (its speakers
+    are that slot of the scene's speaker shuffle), so it keeps scene and slot when the number
+    of speakers changes.
     """
     order = rng_for(spec.seed, "group-scenes", split).permutation(len(scenes))
-    n = spec.splits[split].groups
-    return [scenes[order[i % len(scenes)]] for i in range(n)]
+    return [scenes[order[i % len(scenes)]] for i in range(groups)]
 
 
 def _mesh_params(
@@ -294,7 +383,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     rir_files, rir_paths = _hrtf_file(spec, base, digests)
     digests.save()
 
-    split_scenes = assign_split_scenes(spec, entries)
+    layouts = split_layouts(spec, entries, base)
     # Sub-dicts every shard's jobs repeat are made once, with their canonical JSON, so keying
     # 10^6 groups does not encode them again per job (the keys are the same bytes).
     mic = shared(_dump(spec.microphone))
@@ -320,15 +409,21 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
         outputs.pop(k)  # where and how finely: no export writes other bytes for them
     outputs = shared(outputs)
 
-    for split, scenes in split_scenes.items():
+    for split, layout in layouts.items():
         by_scene: dict[str, list[str]] = {}
-        for i, scene_id in enumerate(group_scenes(spec, split, scenes)):
+        count = len(layout.scenes)
+        for i, scene_id in enumerate(group_scenes(spec, split, layout.scenes, layout.groups)):
             by_scene.setdefault(scene_id, []).append(f"{split}/{i:06d}")
         for scene_id in sorted(by_scene):
             groups = by_scene[scene_id]
             for n, shard in enumerate(_shards(groups, spec.outputs.groups_per_shard)):
                 tag = f"{split}/{scene_id}#{n}"
                 common = {"groups": shared(shard), "split": split, "seed": spec.seed}
+                composition = {} if not layout.per_speaker else {"composition": {
+                    "scene_id": scene_id,
+                    "slots": [int(g[len(split) + 1:]) // count for g in shard],
+                    "speakers": layout.speakers,
+                }}
                 placement = Job(
                     "placement",
                     {
@@ -350,6 +445,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         **common,
                         "mixture": arrangement,
                         "sample_rate_hz": spec.sample_rate_hz,
+                        **composition,
                     },
                     corpus_inputs,
                     f"arrange {tag}",
@@ -422,7 +518,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                 "spec": spec_json,
                 "output_dir": spec.outputs.dir,  # as written: keys do not depend on where
                 "manifests": list(spec.outputs.manifests),
-                "splits": {s: spec.splits[s].groups for s in spec.splits},
+                "splits": {s: layouts[s].groups for s in spec.splits},
             },
             (*corpus_inputs, *export_keys),  # corpora: their skipped files are reported
             "dataset",

@@ -213,9 +213,24 @@ Arrangement = _subset(MixtureSpec, ARRANGEMENT_FIELDS,
                       "The fields of ``mixture`` that decide which clips play when.")
 
 
+class SpeakerComposition(StepParams):
+    """A shard of a split composed per speaker and scene (``each_speaker_per_scene``)."""
+
+    scene_id: str
+    """The shard's scene: its speakers' shuffle is seeded by the split and this id."""
+    slots: tuple[int, ...]
+    """Per group of the shard, which ``mixture.speakers`` run of the shuffle it takes."""
+    speakers: int
+    """Speakers of the split when the plan was made (the index must have as many)."""
+
+
 class ArrangeParams(ShardParams):
     mixture: Arrangement  # type: ignore[valid-type]
     sample_rate_hz: int
+    composition: SpeakerComposition | None = None
+    """Speakers per scene and slot; None: each group draws its speakers at random."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"composition": None}
 
 
 MaterialTable = _subset(MaterialsSpec, ("library", "custom"),

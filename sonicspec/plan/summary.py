@@ -1,14 +1,19 @@
 """What a spec asks for, in numbers, before anything runs.
 
-The summary counts what the spec fixes statically (groups, tracks, audio hours) and estimates
+The summary counts what the spec fixes (groups, speech tracks, audio hours) and estimates
 what depends on placement (RIR points per moving source, from the middle of the travel-distance
-range and the RIR spacing). Estimates are labelled as such.
+range and the RIR spacing). Estimates are labelled as such. Given the split layouts
+(:func:`sonicspec.plan.compile.split_layouts`: scene globs expanded, speaker folders counted) it
+also gives the scenes and speakers of each split and the size of splits composed per speaker
+and scene (``groups: each_speaker_per_scene``), which the spec alone does not fix.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from typing import Protocol
 
 from sonicspec.spec.checks import scene_matches
 from sonicspec.spec.dataset import DatasetSpec
@@ -16,15 +21,31 @@ from sonicspec.spec.microphone import channel_count
 from sonicspec.spec.trajectory import StaticTrajectorySpec
 
 
+class Layout(Protocol):
+    """A split's size once its scenes and speakers are known (``compile.SplitLayout``)."""
+
+    scenes: tuple[str, ...]
+    groups: int
+    speakers: int | None
+
+
 @dataclass(frozen=True)
 class SplitSummary:
     name: str
-    groups: int
+    groups: int | None  # None: composed per speaker and scene, and not counted
     scenes: tuple[str, ...]
     scene_count: int | None
-    speech_tracks: int
-    audio_hours: float
-    rir_points_estimate: int
+    scenes_used: int | None
+    """Concrete scenes the split uses (None if not counted)."""
+    speakers: int | None
+    """Speakers of the split (counted for splits composed per speaker and scene)."""
+    speech_tracks: int | None
+    """Speech tracks (a moving trajectory each, unless sources are static)."""
+    audio_hours: float | None
+    """Hours of mixture audio: groups x mixture.duration_s."""
+    track_hours: float | None
+    """Hours of speech tracks: speech tracks x mixture.duration_s."""
+    rir_points_estimate: int | None
 
 
 @dataclass(frozen=True)
@@ -38,23 +59,29 @@ class SpecSummary:
     rir_points_per_source_estimate: int
     mixtures_per_group: int
 
-    @property
-    def groups(self) -> int:
-        return sum(s.groups for s in self.splits)
+    def _total(self, field: str) -> float | None:
+        values = [getattr(s, field) for s in self.splits]
+        return None if any(v is None for v in values) else sum(values)
 
     @property
-    def audio_hours(self) -> float:
-        return sum(s.audio_hours for s in self.splits)
+    def groups(self) -> int | None:
+        return self._total("groups")  # type: ignore[return-value]
 
     @property
-    def rir_points_estimate(self) -> int:
-        return sum(s.rir_points_estimate for s in self.splits)
+    def audio_hours(self) -> float | None:
+        return self._total("audio_hours")
+
+    @property
+    def rir_points_estimate(self) -> int | None:
+        return self._total("rir_points_estimate")  # type: ignore[return-value]
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d.update(
             groups=self.groups,
             audio_hours=self.audio_hours,
+            speech_tracks=self._total("speech_tracks"),
+            track_hours=self._total("track_hours"),
             rir_points_estimate=self.rir_points_estimate,
         )
         return d
@@ -70,8 +97,9 @@ def _mixtures_per_group(spec: DatasetSpec) -> int:
     return count
 
 
-def summarize(spec: DatasetSpec) -> SpecSummary:
-    """Counts and estimates for ``spec`` (see the module docstring)."""
+def summarize(spec: DatasetSpec, layouts: Mapping[str, Layout] | None = None) -> SpecSummary:
+    """Counts and estimates for ``spec`` (see the module docstring); ``layouts``: every
+    split's layout, when the scenes and corpora were read."""
     traj = spec.trajectory
     if isinstance(traj, StaticTrajectorySpec):
         per_source = 1
@@ -79,19 +107,27 @@ def summarize(spec: DatasetSpec) -> SpecSummary:
         travel = sum(spec.placement.source_travel_distance_m) / 2
         per_source = math.ceil(travel / traj.rir_spacing_m) + 1
     static_points = int(spec.corpora.noise is not None) + int(spec.corpora.music is not None)
+    duration_h = spec.mixture.duration_s / 3600.0
     splits = []
     for name, split in spec.splits.items():
         scenes = sorted({m for p in split.scenes for m in scene_matches(p, spec)})
-        tracks = split.groups * spec.mixture.speakers
+        layout = layouts[name] if layouts is not None else None
+        groups = layout.groups if layout is not None else (
+            split.groups if isinstance(split.groups, int) else None)
+        tracks = None if groups is None else groups * spec.mixture.speakers
         splits.append(
             SplitSummary(
                 name=name,
-                groups=split.groups,
+                groups=groups,
                 scenes=tuple(scenes),
                 scene_count=split.scene_count,
+                scenes_used=None if layout is None else len(layout.scenes),
+                speakers=None if layout is None else layout.speakers,
                 speech_tracks=tracks,
-                audio_hours=split.groups * spec.mixture.duration_s / 3600.0,
-                rir_points_estimate=tracks * per_source + split.groups * static_points,
+                audio_hours=None if groups is None else groups * duration_h,
+                track_hours=None if tracks is None else tracks * duration_h,
+                rir_points_estimate=(None if groups is None or tracks is None
+                                     else tracks * per_source + groups * static_points),
             )
         )
     return SpecSummary(
@@ -106,25 +142,44 @@ def summarize(spec: DatasetSpec) -> SpecSummary:
     )
 
 
+def _n(value: int | None) -> str:
+    return "?" if value is None else f"{value:,}"
+
+
+def _h(value: float | None) -> str:
+    return "?" if value is None else f"{value:,.2f}"
+
+
 def format_summary(s: SpecSummary) -> str:
-    """A short table a person reads in a terminal."""
+    """A short table a person reads in a terminal: per split the scenes, speakers, groups,
+    speech tracks (one moving trajectory each when sources move), hours of mixtures and hours
+    of speech tracks; ``?`` where the scenes or corpora were not read."""
+    head = (f"{s.groups:,} groups, {s.audio_hours:.2f} h of audio" if s.groups is not None
+            else "groups counted per speaker and scene (the corpus is needed)")
     lines = [
-        f"dataset {s.name}: {s.groups} groups, {s.audio_hours:.2f} h of audio at "
-        f"{s.sample_rate_hz} Hz, {s.channels}-channel {s.microphone} microphone",
+        f"dataset {s.name}: {head} at {s.sample_rate_hz} Hz, {s.channels}-channel "
+        f"{s.microphone} microphone",
         f"sources move: {s.trajectory}; about {s.rir_points_per_source_estimate} RIR points "
         f"per moving source (estimate); {s.mixtures_per_group} mixtures per group",
-        f"{'split':<10} {'groups':>7} {'tracks':>7} {'hours':>8} {'RIRs (est.)':>12}  scenes",
+        f"{'split':<10} {'scenes':>6} {'speakers':>8} {'groups':>8} {'tracks':>8} "
+        f"{'hours':>8} {'track h':>8} {'RIRs (est.)':>12}  scenes from",
     ]
     for sp in s.splits:
         scenes = ", ".join(sp.scenes)
         if sp.scene_count is not None:
             scenes = f"{sp.scene_count} of {scenes}"
         lines.append(
-            f"{sp.name:<10} {sp.groups:>7} {sp.speech_tracks:>7} "
-            f"{sp.audio_hours:>8.2f} {sp.rir_points_estimate:>12}  {scenes}"
+            f"{sp.name:<10} {_n(sp.scenes_used):>6} {_n(sp.speakers):>8} {_n(sp.groups):>8} "
+            f"{_n(sp.speech_tracks):>8} {_h(sp.audio_hours):>8} {_h(sp.track_hours):>8} "
+            f"{_n(sp.rir_points_estimate):>12}  {scenes}"
         )
+    d = s.to_dict()
+    used = [x.scenes_used for x in s.splits]
+    speakers = [x.speakers for x in s.splits]
     lines.append(
-        f"{'total':<10} {s.groups:>7} {sum(x.speech_tracks for x in s.splits):>7} "
-        f"{s.audio_hours:>8.2f} {s.rir_points_estimate:>12}"
+        f"{'total':<10} {_n(None if None in used else sum(used)):>6} "  # type: ignore[arg-type]
+        f"{_n(None if None in speakers else sum(speakers)):>8} "  # type: ignore[arg-type]
+        f"{_n(s.groups):>8} {_n(d['speech_tracks']):>8} {_h(s.audio_hours):>8} "
+        f"{_h(d['track_hours']):>8} {_n(s.rir_points_estimate):>12}"
     )
     return "\n".join(lines)

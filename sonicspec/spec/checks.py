@@ -318,10 +318,24 @@ def scene_matches(pattern: str, spec: DatasetSpec) -> list[str]:
 
 def _check_splits(spec: DatasetSpec) -> Iterator[Problem]:
     owner: dict[str, str] = {}
+    pinned: dict[str, str] = {}  # a scene id written out (no glob) -> the split listing it
     for name, split in spec.splits.items():
         matched: list[str] = []
         for k, pattern in enumerate(split.scenes):
+            first = split.scenes.index(pattern)
+            if first < k:
+                yield _err(("splits", name, "scenes", k),
+                           f"{pattern!r} is listed twice (also scenes[{first}])")
+                continue
+            if not glob.has_magic(pattern):
+                other = pinned.setdefault(pattern, name)
+                if other != name:
+                    yield _err(("splits", name, "scenes", k),
+                               f"scene {pattern!r} is also listed by split {other!r}; a scene "
+                               "belongs to one split")
             hits = scene_matches(pattern, spec)
+            if hits == [pattern.split("/")[0] + "/*"] and not glob.has_magic(pattern):
+                hits = [pattern]  # one member of a mesh glob, pinned: it alone is taken
             if not hits:
                 ids = [s.id for s in spec.scenes]
                 yield _err(
@@ -656,6 +670,7 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
         for j, ob in enumerate(scene.obstacles):
             if isinstance(ob, MeshObstacleSpec):
                 exists(("scenes", i, "obstacles", j, "path"), ob.path, "mesh file")
+    problems.extend(_pinned_scene_problems(spec, base_dir))
     hrtf = getattr(spec.microphone, "hrtf", None)
     if hrtf is not None and hrtf.kind == "sofa":
         exists(("microphone", "hrtf", "path"), hrtf.path, "SOFA file")
@@ -684,4 +699,26 @@ def check_files(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
         elif isinstance(corpus, FmaCorpusSpec):
             exists((*path, "size"), f"{root}/fma_{corpus.size}", "FMA audio folder", folder=True)
             exists((*path, "root"), f"{root}/fma_metadata/tracks.csv", "FMA metadata file")
+    return problems
+
+
+def _pinned_scene_problems(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
+    """Scene ids a split writes out (``mp3d/<building>``) that no file of their mesh glob
+    gives: a pinned scene list that names a scan the data does not have."""
+    families: dict[str, list[str]] = {}
+    for scene in spec.scenes:
+        if isinstance(scene, MeshSceneSpec) and glob.has_magic(scene.path):
+            files = [Path(p) for p in glob.glob(str(base_dir / scene.path))]
+            families[scene.id] = sorted(f"{scene.id}/{f.stem}" for f in files if f.is_file())
+    problems = []
+    for name, split in spec.splits.items():
+        for k, pattern in enumerate(split.scenes):
+            family = pattern.split("/")[0]
+            if glob.has_magic(pattern) or "/" not in pattern or family not in families:
+                continue
+            if families[family] and pattern not in families[family]:
+                problems.append(_err(
+                    ("splits", name, "scenes", k),
+                    f"no scene {pattern!r}: glob of scene {family!r} gives no such file"
+                    + did_you_mean(pattern, families[family])))
     return problems

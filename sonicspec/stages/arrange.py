@@ -14,7 +14,8 @@ import numpy as np
 
 from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
-from sonicspec.errors import AudioError
+from sonicspec.errors import AudioError, CorpusError
+from sonicspec.hashing import rng_for
 from sonicspec.plan.params import ArrangeParams
 from sonicspec.stages import artifacts
 from sonicspec.stages.artifacts import speech_track_name
@@ -40,10 +41,31 @@ def _files(items: list[CorpusItem], segments) -> dict[str, dict[str, Any]]:
                    "speaker": by_id[s.id].speaker} for s in segments}
 
 
+def scene_speakers(names: list[str], params: ArrangeParams, seed: int) -> list[list[str]]:
+    """Per group of a shard composed per speaker and scene, its speakers: slot ``j`` takes
+    run ``j`` of ``mixture.speakers`` names of the scene's shuffle of ``names`` (seeded by the
+    spec seed, the split and the scene), so a scene's groups use every speaker at most once.
+    """
+    comp = params.composition
+    if comp is None:
+        raise ValueError("scene_speakers: the shard is not composed per speaker and scene")
+    if len(names) != comp.speakers:
+        raise CorpusError(
+            f"corpora.speech: split '{params.split}' has {len(names)} usable speakers in the "
+            f"corpus index but the plan counted {comp.speakers} speaker folders "
+            "(splits.*.groups: each_speaker_per_scene); a speaker whose every file was "
+            "skipped is not in the index: fix or remove its folder and plan again")
+    k = params.mixture.speakers
+    order = rng_for(seed, "scene-speakers", params.split, comp.scene_id).permutation(len(names))
+    return [[names[i] for i in order[j * k:(j + 1) * k]] for j in comp.slots]
+
+
 def arrange_group(indexes: dict[str, CorpusIndex], params: ArrangeParams, group: str,
-                  rng: np.random.Generator) -> dict[str, Any]:
+                  rng: np.random.Generator, speakers: list[str] | None = None
+                  ) -> dict[str, Any]:
     """The tracks of one group as JSON data: name, role, speaker, segments, files (paths
-    relative to the corpus root of the track's role)."""
+    relative to the corpus root of the track's role). ``speakers``: the group's speakers
+    (a split composed per speaker and scene); None draws them from ``rng``."""
     mix = params.mixture
     rate = params.sample_rate_hz
     split = params.split
@@ -52,7 +74,10 @@ def arrange_group(indexes: dict[str, CorpusIndex], params: ArrangeParams, group:
     speech.require_speakers(split, mix.speakers, "corpora.speech")
     by_speaker = speech.speakers(split)
     names = sorted(by_speaker)
-    chosen = [names[i] for i in rng.choice(len(names), mix.speakers, replace=False)]
+    if speakers is None:
+        chosen = [names[i] for i in rng.choice(len(names), mix.speakers, replace=False)]
+    else:
+        chosen = speakers
     tracks = []
     for k, speaker in enumerate(chosen):
         items = by_speaker[speaker]
@@ -90,6 +115,12 @@ def run(ctx: JobContext) -> None:
         indexes[corpus_role(jobs[key])] = artifacts.read_corpus_index(
             ctx.store.read("corpus", key).arrays)
     params: ArrangeParams = ctx.params
-    groups = [arrange_group(indexes, params, g, ctx.rng("arrange", g)) for g in params.groups]
+    if params.composition is None:
+        chosen: list[list[str] | None] = [None] * len(params.groups)
+    else:
+        chosen = list(scene_speakers(sorted(indexes["speech"].speakers(params.split)), params,
+                                     params.seed))
+    groups = [arrange_group(indexes, params, g, ctx.rng("arrange", g), c)
+              for g, c in zip(params.groups, chosen, strict=True)]
     ctx.write({"group_count": np.array([len(groups)], dtype=np.int64)},
               artifacts.encode("arrange", {"groups": groups}))
