@@ -70,6 +70,10 @@ class Arrivals:
         the path's mirrors for an image source); NaN where a path has none (an edge-diffracted
         path, or arrivals made without it). With it a path is followed while both of its
         ends move (:class:`~sonicspec.acoustics.moving.PathSet`).
+    path_id : (n,) int64
+        Which geometric path an edge-diffracted arrival takes (its edges and reflector, the
+        same for every source and receiver position: :mod:`~sonicspec.acoustics.edge_paths`),
+        so it is followed along a walk; -1 for other arrivals.
     """
 
     times_s: np.ndarray
@@ -79,12 +83,15 @@ class Arrivals:
     kind: np.ndarray
     path_length_m: np.ndarray
     isometry: np.ndarray | None = None
+    path_id: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.isometry is None:
             object.__setattr__(self, "isometry", np.full((len(self.times_s), 3, 4), np.nan))
+        if self.path_id is None:
+            object.__setattr__(self, "path_id", np.full(len(self.times_s), -1, dtype=np.int64))
         for name in ("times_s", "amplitudes", "directions", "order", "kind", "path_length_m",
-                     "isometry"):
+                     "isometry", "path_id"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
 
     @property
@@ -121,6 +128,7 @@ class Arrivals:
             kind=np.concatenate([p.kind for p in parts])[order],
             path_length_m=np.concatenate([p.path_length_m for p in parts])[order],
             isometry=np.concatenate([p.isometry for p in parts])[order],
+            path_id=np.concatenate([p.path_id for p in parts])[order],
         )
 
     def energy_histogram(self, bin_s: float, n_bins: int) -> np.ndarray:

@@ -219,8 +219,26 @@ def _legs_clear(scene: AcousticScene, points: list[np.ndarray]) -> np.ndarray:
     return out
 
 
+# Arrivals.path_id of a diffracted path: its kind and its edges and reflector, 20 bits each.
+_FIRST, _REFLECTED_BEFORE, _REFLECTED_AFTER, _SECOND = 1, 2, 3, 4
+_ID_BITS = 20
+
+
+def path_ids(kind: int, edge1: np.ndarray, edge2: np.ndarray | None = None,
+             region: int | None = None) -> np.ndarray:
+    """The :attr:`~sonicspec.acoustics.arrivals.Arrivals.path_id` of diffracted paths: the
+    same for one geometric path (its edges, its reflector) wherever its ends are."""
+    e1 = np.asarray(edge1, dtype=np.int64)
+    e2 = np.full_like(e1, -1) if edge2 is None else np.asarray(edge2, dtype=np.int64)
+    r = -1 if region is None else int(region)
+    if e1.size and (max(e1.max(), e2.max(), r) + 1 >= 1 << _ID_BITS):
+        raise AcousticsError(f"edges: path ids hold at most {1 << _ID_BITS} edges and regions")
+    return (kind + 8 * (e1 + 1) + (8 << _ID_BITS) * (e2 + 1)
+            + (8 << 2 * _ID_BITS) * (r + 1)).astype(np.int64)
+
+
 def _arrivals(source_idx, lengths, amp, apex_last, receiver, air, c, order, parts,
-              reflections: int = 0) -> None:
+              ids: np.ndarray, reflections: int = 0) -> None:
     amp = amp * np.exp(-0.5 * air[None, :] * lengths[:, None])
     direction = apex_last - receiver[None]
     direction /= np.linalg.norm(direction, axis=1)[:, None]
@@ -230,7 +248,7 @@ def _arrivals(source_idx, lengths, amp, apex_last, receiver, air, c, order, part
             times_s=lengths[sel] / c, amplitudes=amp[sel], directions=direction[sel],
             order=np.full(int(sel.sum()), order + reflections, dtype=np.int64),
             kind=np.full(int(sel.sum()), KIND_DIFFRACTED, dtype=np.int8),
-            path_length_m=lengths[sel]))
+            path_length_m=lengths[sel], path_id=ids[sel]))
 
 
 def _over_edges(edges: DiffractingEdges, a: np.ndarray, b: np.ndarray, lift_m: float
@@ -271,7 +289,8 @@ def _first_order(scene, edges, sources, receiver, bands, air, c, refl0, refl1, p
     if len(sel) == 0:
         return
     amp, length = _amplitudes(cand, sel, bands, c, refl0, refl1)
-    _arrivals(cand["pair"][sel], length, amp, cand["apex"][sel], receiver, air, c, 1, parts)
+    _arrivals(cand["pair"][sel], length, amp, cand["apex"][sel], receiver, air, c, 1, parts,
+              path_ids(_FIRST, cand["edge"][sel]))
 
 
 def _mirror(points: np.ndarray, normal: np.ndarray, d: float) -> np.ndarray:
@@ -320,7 +339,9 @@ def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver,
             if len(keep):
                 amp, length = _amplitudes(cand, keep, bands, c, refl0, refl1)
                 _arrivals(front[cand["pair"][keep]], length, amp * gain[None, :],
-                          cand["apex"][keep], receiver, air, c, 1, parts, reflections=1)
+                          cand["apex"][keep], receiver, air, c, 1, parts,
+                          path_ids(_REFLECTED_BEFORE, cand["edge"][keep], region=region),
+                          reflections=1)
         # (b) source → edge → reflector → receiver: the edge seen in the reflector
         if receiver @ n - d <= _ON_EDGE_TOL_M:
             continue
@@ -341,7 +362,8 @@ def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver,
         if len(keep):
             amp, length = _amplitudes(cand, keep, bands, c, refl0, refl1)
             _arrivals(cand["pair"][keep], length, amp * gain[None, :], point, receiver, air,
-                      c, 1, parts, reflections=1)
+                      c, 1, parts, path_ids(_REFLECTED_AFTER, cand["edge"][keep],
+                                            region=region), reflections=1)
 
 
 def _plane_point(a: np.ndarray, b: np.ndarray, n: np.ndarray, d: float
@@ -406,4 +428,5 @@ def _second_order(scene, edges, pairs, sources, receiver, bands, air, c, refl0, 
         th_in2[sel], th_out2[sel], bands, c,
         (refl0[e1[sel]], refl1[e1[sel]], refl0[e2[sel]], refl1[e2[sel]]))
     length = s1[sel] + d12[sel] + s2[sel]
-    _arrivals(src_i[sel], length, amp, a2[sel], receiver, air, c, 2, parts)
+    _arrivals(src_i[sel], length, amp, a2[sel], receiver, air, c, 2, parts,
+              path_ids(_SECOND, e1[sel], e2[sel]))

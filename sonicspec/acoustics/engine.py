@@ -280,9 +280,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         path's image of the microphone is) and towards it (``"early_arrivals_at_mic"``,
         directions of arrival at the microphone, as rendered into the RIR). A moving source's
         paths are rendered from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late
-        part is the RIR less :func:`early_part` of the latter (edge-diffracted paths, which
-        bend at an edge and so have no fixed image, stay in the late part). Receivers of
-        :data:`PATH_RECEIVERS`.
+        part is the RIR less :func:`early_part` of the latter. Edge-diffracted paths are in
+        both lists (directions at the microphone), identified by their ``path_id``.
+        Receivers of :data:`PATH_RECEIVERS`.
 
     Returns
     -------
@@ -352,11 +352,12 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
-        if keep_arrivals:  # diffracted paths bend at an edge: no fixed image, left in the late
-            facts[-1]["early_arrivals"] = Arrivals.concatenate([direct[k], ism.arrivals[k]])
+        if keep_arrivals:  # diffracted paths: directions at the microphone in both lists
+            facts[-1]["early_arrivals"] = Arrivals.concatenate(
+                [direct[k], ism.arrivals[k], diffracted[k]])
             facts[-1]["early_arrivals_at_mic"] = (
                 facts[-1]["early_arrivals"] if microphone["kind"] == "mono"
-                else Arrivals.concatenate([d, early.arrivals[0]]))
+                else Arrivals.concatenate([d, early.arrivals[0], diffracted[k]]))
     warn_cut_tails(reports, where)
     return rirs, facts
 

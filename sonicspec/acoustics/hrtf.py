@@ -181,7 +181,7 @@ def shadow_filters(head: SphereHead, sample_rate_hz: float, speed_of_sound_m_s: 
 def _with(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arrivals:
     return Arrivals(arrivals.times_s + delays_s, arrivals.amplitudes * gains[:, None],
                     arrivals.directions, arrivals.order, arrivals.kind, arrivals.path_length_m,
-                    arrivals.isometry)
+                    arrivals.isometry, arrivals.path_id)
 
 
 def _check(sample_rate_hz: float) -> None:

@@ -35,7 +35,7 @@ from sonicspec.acoustics._moving_kernels import (
     gradient_inverse,
     weighted_bands,
 )
-from sonicspec.acoustics.arrivals import Arrivals
+from sonicspec.acoustics.arrivals import KIND_DIFFRACTED, Arrivals
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
@@ -90,6 +90,32 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
         tau = t_a * fs  # arrival of each emission, output samples (increasing)
     if np.any(r <= 0):
         raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
+    return _delay_line(s, tau, r, gain, n_out, half_width, beta)
+
+
+def render_length_path(dry, length_m, sample_rate_hz: float, *,
+                       speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, gain=1.0,
+                       n_out: int | None = None, half_width: int = HALF_WIDTH,
+                       beta: float = KAISER_BETA, extra_delay_s=None) -> np.ndarray:
+    """One path given by its unfolded length at each emission, ``(n_out,)``: a path with no
+    image (one bent round an edge), whose length the caller reads from the geometry. The
+    same delay line as :func:`render_path`: ``y[j] = s(u) · g(u) / (4π L(u)) · du/dj`` with
+    the arrival ``u + (L(u) / c + extra(u)) · fs``."""
+    s = np.asarray(dry, dtype=np.float64)
+    if s.ndim != 1 or s.size < 2:
+        raise AcousticsError(f"dry: expected a 1-D signal of >= 2 samples, got shape {s.shape}")
+    length = np.broadcast_to(np.asarray(length_m, dtype=np.float64), s.shape)
+    if np.any(~(length > 0)):
+        raise AcousticsError("length_m: expected path lengths > 0 at every emission")
+    extra = 0.0 if extra_delay_s is None else np.asarray(extra_delay_s, dtype=np.float64)
+    tau = np.arange(s.size) + (length / float(speed_of_sound_m_s) + extra) * sample_rate_hz
+    return _delay_line(s, tau, length, gain, n_out, half_width, beta)
+
+
+def _delay_line(s: np.ndarray, tau: np.ndarray, r: np.ndarray, gain, n_out: int | None,
+                half_width: int, beta: float) -> np.ndarray:
+    """``s`` emitted at samples ``k`` arriving at ``tau[k]`` (increasing) over ``r[k]``
+    metres with gain ``gain[k]``: the compiled loop (:mod:`._moving_kernels`)."""
     if n_out is None:
         n_out = int(np.ceil(tau[-1])) + half_width + 1
     amp = np.broadcast_to(np.asarray(gain, dtype=np.float64), s.shape) / (4 * np.pi * r)
@@ -97,10 +123,23 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     # Before the first arrival and after the last the path is silent (the sinc's own reach
     # covers the edges).
     density = np.empty(s.size)
-    gradient_inverse(tau, density)
-    accumulate_path(s, tau, density, np.ascontiguousarray(amp), _sinc_table(half_width, beta),
-                    half_width, out)
+    gradient_inverse(np.ascontiguousarray(tau), density)
+    accumulate_path(s, np.ascontiguousarray(tau), density, np.ascontiguousarray(amp),
+                    _sinc_table(half_width, beta), half_width, out)
     return out
+
+
+def _length_at(lengths: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """A diffracted path's length at fractional point ``index``: a monotone cubic (PCHIP:
+    continuous slope, so a continuous Doppler shift, and no overshoot) through the points
+    where it is valid, held beyond them (its weight fades there)."""
+    from scipy.interpolate import PchipInterpolator
+
+    at = np.flatnonzero(~np.isnan(lengths))
+    if len(at) == 1:
+        return np.full(index.shape, lengths[at[0]])
+    return PchipInterpolator(at.astype(np.float64), lengths[at])(
+        np.clip(index, at[0], at[-1]))
 
 
 @functools.lru_cache(maxsize=8)
@@ -149,6 +188,17 @@ class PathSet:
     (:attr:`~sonicspec.acoustics.arrivals.Arrivals.isometry`); given for a moving
     microphone, whose images move with it (``images_m`` are then those of its first
     point)."""
+    lengths_m: np.ndarray | None = None
+    """(K, N): the unfolded length of each edge-diffracted path at each point (NaN where it
+    is not valid, and for image paths, whose length their image gives). A diffracted path
+    bends at an edge, so it has no image: its ``images_m`` row is NaN, its length is read
+    between the points (a monotone cubic through them), its direction of arrival from
+    :attr:`directions`."""
+
+    @property
+    def diffracted(self) -> np.ndarray:
+        """(K,) bool: which paths are edge-diffracted."""
+        return np.isnan(self.images_m[:, 0])
 
     def __len__(self) -> int:
         return int(self.images_m.shape[0])
@@ -172,25 +222,34 @@ class PathSet:
         maps: list[np.ndarray] = []
         orders: list[int] = []
         entries: list[tuple[int, int, np.ndarray]] = []
+        edge_entries: list[tuple[int, int, float, np.ndarray]] = []
         for j, a in enumerate(arrivals):
             factor = a.amplitudes * (4 * np.pi * a.path_length_m[:, None])
             for i in range(len(a)):
                 iso = a.isometry[i]
-                if not np.all(np.isfinite(iso)):
+                if a.kind[i] == KIND_DIFFRACTED and a.path_id[i] >= 0:
+                    key = ("edge", int(a.path_id[i]))
+                    iso = np.full((3, 4), np.nan)
+                elif not np.all(np.isfinite(iso)):
                     continue
-                key = tuple(np.round(iso.ravel() / tolerance_m).astype(np.int64).tolist())
+                else:
+                    key = tuple(np.round(iso.ravel() / tolerance_m).astype(np.int64).tolist())
                 if key not in index:
                     index[key] = len(maps)
                     maps.append(iso)
                     orders.append(int(a.order[i]))
                 entries.append((index[key], j, factor[i]))
+                if key[0] == "edge":
+                    edge_entries.append((index[key], j, float(a.path_length_m[i]),
+                                         a.directions[i]))
         weights = np.zeros((len(maps), len(points), bands))
         for k, j, factor in entries:
             weights[k, j] += factor
         iso = np.asarray(maps).reshape(-1, 3, 4)
         images = (iso[:, :, :3] @ mics[0] + iso[:, :, 3]) if len(mics) else np.zeros((0, 3))
+        lengths, directions = _edge_tables(edge_entries, len(maps), len(points))
         return PathSet(images.reshape(-1, 3), weights, np.asarray(orders, dtype=np.int64),
-                       None, iso)
+                       directions, iso, lengths)
 
     @staticmethod
     def identify(points_m, arrivals: list[Arrivals], *, tolerance_m: float = 1e-4,
@@ -213,37 +272,63 @@ class PathSet:
         images: list[np.ndarray] = []
         orders: list[int] = []
         entries: list[tuple[int, int, np.ndarray, np.ndarray | None]] = []
+        edge_entries: list[tuple[int, int, float, np.ndarray]] = []
         for j, (p, a) in enumerate(zip(points, arrivals, strict=True)):
             where = p[None, :] + a.directions * a.path_length_m[:, None]
             factor = a.amplitudes * (4 * np.pi * a.path_length_m[:, None])
             pairs = dict(zip(*matched_paths(a, at_mic[j], tolerance_m), strict=True)
                          ) if at_mic is not None else None
             for i in range(len(a)):
-                key = tuple(np.round(where[i] / tolerance_m).astype(np.int64).tolist())
+                edge = a.kind[i] == KIND_DIFFRACTED and a.path_id[i] >= 0
+                key = (("edge", int(a.path_id[i])) if edge else
+                       tuple(np.round(where[i] / tolerance_m).astype(np.int64).tolist()))
                 if key not in index:
                     index[key] = len(images)
-                    images.append(where[i])
+                    images.append(np.full(3, np.nan) if edge else where[i])
                     orders.append(int(a.order[i]))
                 direction = None
                 if pairs is not None and i in pairs:  # else zero: read from a neighbour
                     direction = at_mic[j].directions[pairs[i]]
                 entries.append((index[key], j, factor[i], direction))
+                if edge:  # its direction is the one at the microphone (edge_paths)
+                    edge_entries.append((index[key], j, float(a.path_length_m[i]),
+                                         a.directions[i]))
         weights = np.zeros((len(images), len(points), bands))
         directions = None if at_mic is None else np.zeros((len(images), len(points), 3))
         for k, j, factor, direction in entries:
             weights[k, j] += factor
             if direction is not None:
                 directions[k, j] = direction
+        lengths, edge_directions = _edge_tables(edge_entries, len(images), len(points))
+        if directions is not None and edge_directions is not None:
+            edge = ~np.isnan(lengths).all(axis=1)
+            directions[edge] = edge_directions[edge]
         return PathSet(np.asarray(images).reshape(-1, 3), weights,
-                       np.asarray(orders, dtype=np.int64), directions)
+                       np.asarray(orders, dtype=np.int64), directions, None, lengths)
 
     def select(self, keep: np.ndarray) -> PathSet:
         return PathSet(self.images_m[keep], self.weights[keep], self.order[keep],
                        None if self.directions is None else self.directions[keep],
-                       None if self.isometries is None else self.isometries[keep])
+                       None if self.isometries is None else self.isometries[keep],
+                       None if self.lengths_m is None else self.lengths_m[keep])
 
     def with_weights(self, weights: np.ndarray) -> PathSet:
-        return PathSet(self.images_m, weights, self.order, self.directions, self.isometries)
+        return PathSet(self.images_m, weights, self.order, self.directions, self.isometries,
+                       self.lengths_m)
+
+
+def _edge_tables(entries: list[tuple[int, int, float, np.ndarray]], paths: int, points: int
+                 ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The lengths ``(K, N)`` (NaN where absent) and directions at the microphone
+    ``(K, N, 3)`` of the diffracted paths among ``paths``, or ``(None, None)`` if none."""
+    if not entries:
+        return None, None
+    lengths = np.full((paths, points), np.nan)
+    directions = np.zeros((paths, points, 3))
+    for k, j, length, direction in entries:
+        lengths[k, j] = length
+        directions[k, j] = direction
+    return lengths, directions
 
 
 def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-4
@@ -255,10 +340,14 @@ def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-
     told apart by these: both are left unpaired."""
     pairs_i, pairs_m = [], []
     for i in range(len(from_mic)):
+        if from_mic.kind[i] == KIND_DIFFRACTED:  # found at the microphone already
+            continue
         same = np.flatnonzero((np.abs(at_mic.path_length_m - from_mic.path_length_m[i])
-                               <= tolerance_m) & (at_mic.order == from_mic.order[i]))
+                               <= tolerance_m) & (at_mic.order == from_mic.order[i])
+                              & (at_mic.kind != KIND_DIFFRACTED))
         rivals = np.flatnonzero((np.abs(from_mic.path_length_m - from_mic.path_length_m[i])
-                                 <= tolerance_m) & (from_mic.order == from_mic.order[i]))
+                                 <= tolerance_m) & (from_mic.order == from_mic.order[i])
+                                & (from_mic.kind != KIND_DIFFRACTED))
         if same.size == 1 and rivals.size == 1:  # two paths as long as each other: ambiguous
             pairs_i.append(i)
             pairs_m.append(int(same[0]))
@@ -269,7 +358,8 @@ def subset(arrivals: Arrivals, keep: np.ndarray) -> Arrivals:
     """The arrivals at indices ``keep``."""
     return Arrivals(arrivals.times_s[keep], arrivals.amplitudes[keep],
                     arrivals.directions[keep], arrivals.order[keep], arrivals.kind[keep],
-                    arrivals.path_length_m[keep], arrivals.isometry[keep])
+                    arrivals.path_length_m[keep], arrivals.isometry[keep],
+                    arrivals.path_id[keep])
 
 
 def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
@@ -347,8 +437,14 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             x = np.empty(s.size)
             weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
         source = track[0] if static else track
+        edge = paths.lengths_m is not None and bool(np.isnan(paths.images_m[k, 0]))
+        length = _length_at(paths.lengths_m[k], index) if edge else None
 
-        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k):
+        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k, length=length):
+            if length is not None:  # bent round an edge: its length read between points
+                return render_length_path(x, length, bank.sample_rate_hz,
+                                          speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out,
+                                          gain=gain, extra_delay_s=extra_delay_s)
             return render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
                                speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out, gain=gain,
                                extra_delay_s=extra_delay_s)
@@ -356,7 +452,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         if receiver.kind == "mono":
             out[0] += path()
             continue
-        mirror = _image_map(paths, k, points, receiver.center_m)
+        mirror = None if edge else _image_map(paths, k, points, receiver.center_m)
         if mirror is not None:  # exact: the direction the image sees the source in, mapped back
             away = np.atleast_2d(source) - paths.images_m[k]
             d = (away / np.linalg.norm(away, axis=1, keepdims=True)) @ mirror
@@ -542,16 +638,25 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         x = np.empty(s.size)
         weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
         m, b = paths.isometries[k, :, :3], paths.isometries[k, :, 3]
+        edge = paths.lengths_m is not None and bool(np.isnan(m[0, 0]))
+        length = _length_at(paths.lengths_m[k], index) if edge else None
 
-        def heard(at_m: np.ndarray, gain=1.0, extra_delay_s=None, x=x, m=m, b=b) -> np.ndarray:
+        def heard(at_m: np.ndarray, gain=1.0, extra_delay_s=None, x=x, m=m, b=b,
+                  length=length) -> np.ndarray:
+            if length is not None:  # bent round an edge: its length read between points
+                return render_length_path(x, length, fs, speed_of_sound_m_s=c, n_out=n_out,
+                                          gain=gain, extra_delay_s=extra_delay_s)
             return render_path(x, source, at_m @ m.T + b, fs, speed_of_sound_m_s=c,
                                n_out=n_out, gain=gain, extra_delay_s=extra_delay_s)
 
         if receiver.kind == "mono":
             out[0] += heard(mic)
             continue
-        apparent = (source - b) @ m - mic  # from the microphone to the source's image
-        d = apparent / np.linalg.norm(apparent, axis=1, keepdims=True)
+        if edge:  # its direction at the microphone, between the points
+            d = _directions_at(paths.directions[k], lo, hi, frac, False)
+        else:
+            apparent = (source - b) @ m - mic  # from the microphone to the source's image
+            d = apparent / np.linalg.norm(apparent, axis=1, keepdims=True)
         local = np.einsum("tji,tj->ti", frames, d)  # R(t)ᵀ d
         if receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
@@ -570,7 +675,11 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
                 shaded[ear] += heard(mic, gain=alpha, extra_delay_s=delay)
         else:
             for ch, offset in enumerate(receiver.offsets_m):
-                out[ch] += heard(mic + frames @ offset)
+                place = frames @ offset  # the capsule's offset in the scene, (T, 3)
+                if edge:  # the plane-wave lead of the capsule, as the array's RIRs have
+                    out[ch] += heard(mic, extra_delay_s=-np.einsum("ti,ti->t", d, place) / c)
+                else:
+                    out[ch] += heard(mic + place)
     if receiver.kind == "sphere_head":
         from scipy import signal
 

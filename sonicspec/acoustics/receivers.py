@@ -114,7 +114,7 @@ def sh_sn3d(order: int, directions: np.ndarray) -> np.ndarray:
 def _scaled(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arrivals:
     return Arrivals(arrivals.times_s + delays_s, arrivals.amplitudes * gains[:, None],
                     arrivals.directions, arrivals.order, arrivals.kind, arrivals.path_length_m,
-                    arrivals.isometry)
+                    arrivals.isometry, arrivals.path_id)
 
 
 def array_early(arrivals: Arrivals, offsets_m: np.ndarray, bank: OctaveFilterBank,

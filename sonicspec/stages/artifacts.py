@@ -229,8 +229,8 @@ class RirSource(_Data):
     :meth:`sonicspec.acoustics.tails.TailReport.to_dict`)."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
-    ``<paths>_images``, ``_weights``, ``_order``, and ``_isometries`` for a moving
-    microphone: a
+    ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
+    microphone and ``_lengths`` for paths bent round edges: a
     :class:`~sonicspec.acoustics.moving.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
 
@@ -318,6 +318,8 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
         out[f"{prefix}_directions"] = paths.directions
     if paths.isometries is not None:
         out[f"{prefix}_isometries"] = paths.isometries
+    if paths.lengths_m is not None:
+        out[f"{prefix}_lengths"] = paths.lengths_m
     return out
 
 
@@ -325,11 +327,13 @@ def read_path_set(arrays, prefix: str) -> PathSet:
     """The :class:`~sonicspec.acoustics.moving.PathSet` :func:`path_set_arrays` stored."""
     directions = arrays.get(f"{prefix}_directions")
     isometries = arrays.get(f"{prefix}_isometries")
+    lengths = arrays.get(f"{prefix}_lengths")
     return PathSet(np.asarray(arrays[f"{prefix}_images"], dtype=np.float64),
                    np.asarray(arrays[f"{prefix}_weights"], dtype=np.float64),
                    np.asarray(arrays[f"{prefix}_order"], dtype=np.int64),
                    None if directions is None else np.asarray(directions, dtype=np.float64),
-                   None if isometries is None else np.asarray(isometries, dtype=np.float64))
+                   None if isometries is None else np.asarray(isometries, dtype=np.float64),
+                   None if lengths is None else np.asarray(lengths, dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {

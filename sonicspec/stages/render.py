@@ -171,6 +171,9 @@ def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, direct_s: np.
     else:
         images = np.broadcast_to(paths.images_m[:, None, :], (len(paths), len(points), 3))
     length = np.linalg.norm(points[None, :, :] - images, axis=2)
+    if paths.lengths_m is not None:  # paths bent round an edge: their own lengths
+        edge = np.isnan(paths.images_m[:, 0])
+        length[edge] = np.nan_to_num(paths.lengths_m[edge], nan=np.inf)
     inside = (length / speed_of_sound_m_s - direct_s[None, :]) <= window_s
     return paths.with_weights(paths.weights * inside[:, :, None])
 
