@@ -318,48 +318,85 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
-    c = settings.speed_of_sound_m_s
     regions = regions if regions is not None else planar_regions(scene)
-    direct = direct_sound(scene, mic, points, air, c)
-    ism = image_sources(scene, mic, points, settings.image_source_order, air, c, regions,
-                        max_path_length_m=c * settings.rir_limit_s)
-    traces = trace_rays(scene, mic, points, rng, ray_trace_settings(settings, ism.max_order),
+    early = early_arrivals(scene, mic, points, settings, regions,
+                           directional=microphone["kind"] != "mono")
+    traces = trace_rays(scene, mic, points, rng,
+                        ray_trace_settings(settings, early.image_source_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
-    diffracted = diffraction_arrivals(scene, mic, points, settings, regions)
     render = receiver_renderer(microphone, settings, hrirs)
     rirs, facts, reports = [], [], []
     for k in range(len(points)):
-        if microphone["kind"] == "mono":
-            arrivals = Arrivals.concatenate([direct[k], ism.arrivals[k], diffracted[k]])
-        else:  # the same paths, traced towards the mic: directions of arrival at the mic
-            (d,) = direct_sound(scene, points[k], mic[None], air, c)
-            early = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
-                                  max_path_length_m=c * settings.rir_limit_s)
-            arrivals = Arrivals.concatenate([d, early.arrivals[0], diffracted[k]])
+        arrivals = early.at_mic[k]
         late, report = late_envelope(traces[k].histogram, settings)
         reports.append(report)
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
-            "through walls" if len(direct[k]) else
-            "diffracted" if len(diffracted[k]) else "blocked")
+            "through walls" if len(early.direct[k]) else
+            "diffracted" if len(early.diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
-                      "image_source_order": ism.max_order,
+                      "image_source_order": early.image_source_order,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction,
                       "tail": report.to_dict()})
         if settings.diffraction:
-            facts[-1]["diffracted_paths"] = len(diffracted[k])
+            facts[-1]["diffracted_paths"] = len(early.diffracted[k])
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
-        if keep_arrivals:  # diffracted paths: directions at the microphone in both lists
-            facts[-1]["early_arrivals"] = Arrivals.concatenate(
-                [direct[k], ism.arrivals[k], diffracted[k]])
-            facts[-1]["early_arrivals_at_mic"] = (
-                facts[-1]["early_arrivals"] if microphone["kind"] == "mono"
-                else Arrivals.concatenate([d, early.arrivals[0], diffracted[k]]))
+        if keep_arrivals:
+            facts[-1]["early_arrivals"] = early.from_mic[k]
+            facts[-1]["early_arrivals_at_mic"] = early.at_mic[k]
     warn_cut_tails(reports, where)
     return rirs, facts
+
+
+@dataclass(frozen=True, eq=False)
+class EarlyArrivals:
+    """The exact early paths of every source position at one microphone: as traced from the
+    microphone (``from_mic``: directions at the source point, where each path's image of the
+    microphone is; isometries) and towards it (``at_mic``: directions of arrival at the
+    microphone, as rendered into the RIR; the same list for a mono receiver). Edge-diffracted
+    paths are in both, with directions at the microphone."""
+
+    from_mic: list[Arrivals]
+    at_mic: list[Arrivals]
+    direct: list[Arrivals]
+    diffracted: list[Arrivals]
+    image_source_order: int
+    """The image-source order completed (the candidate limit may stop it early)."""
+
+
+def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
+                   settings: SimulationSettings, regions=None, directional: bool = False,
+                   image_source_order: int | None = None) -> EarlyArrivals:
+    """Direct sound, image sources and edge-diffracted paths from every source position to
+    the microphone — the deterministic part of :func:`simulate_rirs`, without the ray trace
+    (so cheap enough to evaluate between RIR points). ``image_source_order``: the order to
+    search (default the settings'; a caller matching an earlier call passes its completed
+    order)."""
+    mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
+    points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    air = settings.air()
+    c = settings.speed_of_sound_m_s
+    regions = regions if regions is not None else planar_regions(scene)
+    order = settings.image_source_order if image_source_order is None else image_source_order
+    direct = direct_sound(scene, mic, points, air, c)
+    ism = image_sources(scene, mic, points, order, air, c, regions,
+                        max_path_length_m=c * settings.rir_limit_s)
+    diffracted = diffraction_arrivals(scene, mic, points, settings, regions)
+    from_mic, at_mic = [], []
+    for k in range(len(points)):
+        from_mic.append(Arrivals.concatenate([direct[k], ism.arrivals[k], diffracted[k]]))
+        if not directional:
+            at_mic.append(from_mic[-1])
+            continue
+        # the same paths, traced towards the mic: directions of arrival at the mic
+        (d,) = direct_sound(scene, points[k], mic[None], air, c)
+        towards = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
+                                max_path_length_m=c * settings.rir_limit_s)
+        at_mic.append(Arrivals.concatenate([d, towards.arrivals[0], diffracted[k]]))
+    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order)
 
 
 def scene_edges(scene: AcousticScene, max_edges: int) -> DiffractingEdges:
@@ -704,3 +741,85 @@ def check_receiver(microphone: Mapping[str, Any], hrirs: HrirSet | None = None) 
         raise AcousticsError(f"microphone.kind: RIRs for {microphone['kind']!r} receivers are "
                              "not in this version of sonicspec; use one of "
                              f"{', '.join(RENDERED_KINDS)}")
+
+
+#: How finely :func:`refined_early_paths` locates where a path appears or disappears between
+#: two RIR points (metres of either end's movement): a path cut off by an edge is cut there
+#: within this, not faded over the RIR spacing.
+PATH_RESOLUTION_M = 0.01
+#: ... and where a path's band factor changes by more than this between two points (dB).
+PATH_TOLERANCE_DB = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class RefinedPaths:
+    """Early arrivals at the RIR points and at points added between them where the paths
+    change: ``at_index`` (sorted) is each point's fractional index along the RIR points."""
+
+    at_index: np.ndarray
+    sources_m: np.ndarray
+    mics_m: np.ndarray
+    from_mic: list[Arrivals]
+    at_mic: list[Arrivals]
+
+
+def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sources_m,
+                        mics_m, from_mic: list[Arrivals], at_mic: list[Arrivals], *,
+                        regions=None, directional: bool = False,
+                        image_source_order: int | None = None,
+                        resolution_m: float = PATH_RESOLUTION_M,
+                        tolerance_db: float = PATH_TOLERANCE_DB) -> RefinedPaths:
+    """Where between two consecutive RIR points a path appears or disappears (a wall or an
+    edge comes between the source and the microphone, a reflection leaves its wall) or its
+    band factor changes by more than ``tolerance_db`` (a diffracted path near its shadow
+    boundary), the interval is halved (:func:`early_arrivals` at its middle, no ray trace)
+    until neither end moves more than ``resolution_m`` across it: the renderer then switches
+    and shapes the path there, as the geometry does, instead of fading it over the spacing.
+
+    ``sources_m``, ``mics_m``: ``(N, 3)`` the source and the microphone at each RIR point;
+    ``from_mic``, ``at_mic``: their early arrivals (:class:`EarlyArrivals`).
+    """
+    from sonicspec.acoustics.moving import heard_paths, paths_differ
+
+    src = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    mic = np.asarray(mics_m, dtype=np.float64).reshape(-1, 3)
+    moving = bool(np.any(mic != mic[:1]))
+    at = np.arange(len(src), dtype=np.float64)
+    known: dict[float, tuple[np.ndarray, np.ndarray, Arrivals, Arrivals, dict]] = {
+        float(j): (src[j], mic[j], from_mic[j], at_mic[j],
+                   heard_paths(from_mic[j], src[j], moving)) for j in range(len(src))}
+
+    def place(x: float) -> tuple[np.ndarray, np.ndarray]:
+        return (np.array([np.interp(x, at, src[:, i]) for i in range(3)]),
+                np.array([np.interp(x, at, mic[:, i]) for i in range(3)]))
+
+    segments = [(float(j), float(j + 1)) for j in range(len(src) - 1)
+                if paths_differ(known[float(j)][4], known[float(j + 1)][4], tolerance_db)]
+    while segments:
+        wide = [(a, b) for a, b in segments
+                if max(np.linalg.norm(known[b][0] - known[a][0]),
+                       np.linalg.norm(known[b][1] - known[a][1])) > resolution_m]
+        if not wide:
+            break
+        middles = [0.5 * (a + b) for a, b in wide]
+        places = [place(x) for x in middles]
+        by_mic: dict[tuple, list[int]] = {}
+        for i, (_, m) in enumerate(places):
+            by_mic.setdefault(tuple(m.tolist()), []).append(i)
+        for m, idx in by_mic.items():
+            early = early_arrivals(scene, np.asarray(m), np.array([places[i][0] for i in idx]),
+                                   settings, regions, directional, image_source_order)
+            for n, i in enumerate(idx):
+                known[middles[i]] = (places[i][0], places[i][1], early.from_mic[n],
+                                     early.at_mic[n],
+                                     heard_paths(early.from_mic[n], places[i][0], moving))
+        segments = []
+        for (a, b), x in zip(wide, middles, strict=True):
+            if paths_differ(known[a][4], known[x][4], tolerance_db):
+                segments.append((a, x))
+            if paths_differ(known[x][4], known[b][4], tolerance_db):
+                segments.append((x, b))
+    order = sorted(known)
+    return RefinedPaths(np.asarray(order), np.array([known[x][0] for x in order]),
+                        np.array([known[x][1] for x in order]),
+                        [known[x][2] for x in order], [known[x][3] for x in order])

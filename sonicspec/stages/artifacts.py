@@ -230,7 +230,8 @@ class RirSource(_Data):
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
-    microphone and ``_lengths`` for paths bent round edges: a
+    microphone, ``_lengths`` for paths bent round edges and ``_at_index`` where points were
+    added between the RIR points: a
     :class:`~sonicspec.acoustics.moving.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
 
@@ -320,6 +321,8 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
         out[f"{prefix}_isometries"] = paths.isometries
     if paths.lengths_m is not None:
         out[f"{prefix}_lengths"] = paths.lengths_m
+    if paths.at_index is not None:
+        out[f"{prefix}_at_index"] = paths.at_index
     return out
 
 
@@ -333,7 +336,9 @@ def read_path_set(arrays, prefix: str) -> PathSet:
                    np.asarray(arrays[f"{prefix}_order"], dtype=np.int64),
                    None if directions is None else np.asarray(directions, dtype=np.float64),
                    None if isometries is None else np.asarray(isometries, dtype=np.float64),
-                   None if lengths is None else np.asarray(lengths, dtype=np.float64))
+                   None if lengths is None else np.asarray(lengths, dtype=np.float64),
+                   None if f"{prefix}_at_index" not in arrays else
+                   np.asarray(arrays[f"{prefix}_at_index"], dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {

@@ -121,8 +121,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
             out["direct"] = heard(found.select(found.order == 0))
         if "early" in wanted:  # paths within 50 ms of the direct sound, and the tail's start
             _, early_tail = split_rir(late, delays, rate)
-            out["early"] = (heard(_within(found, points, line.mic_m, delays / rate,
-                                          EARLY_MS / 1000.0, params.speed_of_sound_m_s))
+            out["early"] = (heard(_within(found, points, line.mic_m, EARLY_MS / 1000.0,
+                                          params.speed_of_sound_m_s))
                             + render_moving(dry, early_tail, position,
                                             "sample_crossfade")[:, :clip_samples])
     return {k: v.astype(np.float32) for k, v in out.items()}
@@ -160,11 +160,14 @@ def path_receiver(microphone, center_m, line: Timeline | None = None) -> Receive
                     center_m=np.asarray(center_m, dtype=np.float64))
 
 
-def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, direct_s: np.ndarray,
-            window_s: float, speed_of_sound_m_s: float) -> PathSet:
+def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, window_s: float,
+            speed_of_sound_m_s: float) -> PathSet:
     """``paths`` kept only at the points where they arrive within ``window_s`` of the direct
-    sound (a path that crosses the limit between two points fades there); ``mic_m``: the
-    microphone at each point (its images move with it, by the paths' isometries)."""
+    sound's delay (a path that crosses the limit between two points fades there); ``points``
+    and ``mic_m``: the source and the microphone at each RIR point (the microphone's images
+    move with it, by the paths' isometries)."""
+    points, mic_m = paths.on_points(points), paths.on_points(mic_m)
+    direct_s = np.linalg.norm(points - mic_m, axis=1) / speed_of_sound_m_s
     if paths.isometries is not None:
         images = (np.einsum("kij,nj->kni", paths.isometries[:, :, :3], mic_m)
                   + paths.isometries[:, None, :, 3])

@@ -21,6 +21,7 @@ from sonicspec.acoustics.engine import (
     check_receiver,
     early_part,
     load_hrirs,
+    refined_early_paths,
     rir_results,
     simulate_rirs,
 )
@@ -270,12 +271,22 @@ def run(ctx) -> None:
                 paths = f"{key}_paths"
                 from_mic = [f["early_arrivals"] for f in facts]
                 at_mic = [f["early_arrivals_at_mic"] for f in facts]
+                directional = microphone["kind"] != "mono"
+                src_m = np.asarray(sources[s][1]) if line is None else line.source_m
+                mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
+                         if line is None else line.mic_m)
+                # where a path appears or disappears between two points, points are added
+                fine = refined_early_paths(
+                    scene, settings, src_m, mic_m, from_mic, at_mic, regions=regions,
+                    directional=directional,
+                    image_source_order=facts[0]["image_source_order"])
                 if line is None:
-                    directional = microphone["kind"] != "mono"
-                    found = PathSet.identify(np.asarray(sources[s][1]), from_mic,
-                                             at_mic=at_mic if directional else None)
+                    found = PathSet.identify(fine.sources_m, fine.from_mic,
+                                             at_mic=fine.at_mic if directional else None)
                 else:
-                    found = PathSet.identify_moving(line.source_m, line.mic_m, from_mic)
+                    found = PathSet.identify_moving(fine.sources_m, fine.mics_m, fine.from_mic)
+                added = len(fine.at_index) > len(src_m)
+                found = found.with_index(fine.at_index if added else None)
                 arrays.update(artifacts.path_set_arrays(paths, found))
                 late = stack.astype(np.float64)
                 for i, early in enumerate(at_mic):  # each as long as its own RIR was made
