@@ -364,6 +364,7 @@ def image_sources(
         )
     src = source[0]
     n_rcv = len(receivers)
+    box_lo, box_hi = receivers.min(axis=0), receivers.max(axis=0)
     tol = scene.eps_m
     reach = None
     if max_order >= 2:
@@ -399,10 +400,11 @@ def image_sources(
             d = dist[par, pln]
             pos = last_pos[sl][par] - 2.0 * d[:, None] * normals[pln]
             if max_path_length_m is not None:
-                near = np.min(
-                    np.linalg.norm(pos[:, None, :] - receivers[None, :, :], axis=2), axis=1
-                )
-                keep = near <= max_path_length_m
+                # The distance to the receivers' bounding box bounds the nearest receiver's
+                # from below: a safe prune, O(candidates) however many receivers there are.
+                outside = np.maximum(box_lo[None, :] - pos, 0.0) + np.maximum(
+                    pos - box_hi[None, :], 0.0)
+                keep = np.einsum("ij,ij->i", outside, outside) <= max_path_length_m**2
                 par, pln, d, pos = par[keep], pln[keep], d[keep], pos[keep]
             parts.append((par + r0, pln, pos, (d < 0).astype(np.int64)))
             count += len(par)
