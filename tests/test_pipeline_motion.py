@@ -218,3 +218,32 @@ def test_a_moving_microphone_builds_and_hears_the_exact_relative_motion(kind: st
         gain = float(np.dot(ref, est) / np.dot(est, est))
         snr = 10 * np.log10(np.sum(ref**2) / np.sum((ref - gain * est) ** 2))
         assert snr >= 30, (ch, snr)
+
+
+@pytest.mark.parametrize("mic_moves", [False, True])
+def test_a_sofa_head_hears_the_paths(mic_moves: bool, tmp_path: Path) -> None:
+    """A binaural microphone with a measured (SOFA) HRIR set: `auto` renders the paths
+    (each path at the head's centre through the HRIRs of its direction), for a walking
+    source and for a head carried along a line as well; both ears hear the walk."""
+    pytest.importorskip("sofar")
+    from sonicspec.testing.hrtf import write_tiny_sofa
+
+    folder = tmp_path / ("moving" if mic_moves else "static")
+    folder.mkdir()
+    write_tiny_sofa(str(folder / "tiny.sofa"), FS)
+    text = SPEC.replace("METHOD", "auto").replace(
+        "microphone: {kind: mono,", "microphone: {kind: binaural, hrtf: {kind: sofa, "
+        "path: tiny.sofa},")
+    if mic_moves:
+        for old, new in MOVING_MIC.items():
+            text = text.replace(old, new.replace("KIND", "binaural, hrtf: {kind: sofa, "
+                                                 "path: tiny.sofa}"))
+    (folder / "spec.yaml").write_text(text)
+    assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) == 0
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import load_spec
+
+    plan = compile_spec(load_spec(folder / "spec.yaml"))
+    assert {j.params["interpolation"] for j in plan.jobs if j.step == "render"} == {"paths"}
+    direct, _ = sf.read(folder / "out" / "train" / "000000" / "source1_direct.wav")
+    assert direct.shape[1] == 2 and np.all(np.std(direct, axis=0) > 1e-4)

@@ -310,8 +310,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     """
     microphone = microphone or MONO
     check_receiver(microphone, hrirs)
-    if keep_arrivals and (microphone["kind"] not in PATH_RECEIVERS or (
-            microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] != "sphere")):
+    if keep_arrivals and microphone["kind"] not in PATH_RECEIVERS:
         raise AcousticsError(f"keep_arrivals: the early paths of a moving source are rendered "
                              f"for {', '.join(PATH_RECEIVERS)} receivers, got "
                              f"{microphone['kind']!r}")
@@ -423,11 +422,12 @@ def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.
 
 
 def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
-               microphone: Mapping[str, Any] = MONO) -> np.ndarray:
+               microphone: Mapping[str, Any] = MONO, hrirs: HrirSet | None = None
+               ) -> np.ndarray:
     """The exact early part an RIR of ``n_samples`` holds, ``(channels, n_samples)`` float64:
     its ``arrivals`` (directions of arrival at the microphone) synthesised as the receiver's
     renderer does. The RIR less this is its late, ray-traced part. Receivers of
-    :data:`PATH_RECEIVERS`."""
+    :data:`PATH_RECEIVERS` (a SOFA HRTF with its ``hrirs``)."""
     from sonicspec.acoustics.receivers import ambisonic_early, array_early
 
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
@@ -437,6 +437,13 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
     if kind == "ambisonics":
         return ambisonic_early(arrivals, microphone["order"], bank, n_samples,
                                yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
+    if kind == "binaural" and microphone["hrtf"]["kind"] == "sofa":
+        from sonicspec.acoustics.hrtf import hrir_binaural_early
+
+        check_receiver(microphone, hrirs)
+        return hrir_binaural_early(arrivals, hrirs.resampled(settings.sample_rate_hz), bank,
+                                   n_samples, yaw_deg=microphone["yaw_deg"],
+                                   pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sphere":
         from sonicspec.acoustics.hrtf import sphere_binaural_early
 
@@ -664,8 +671,8 @@ def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
 
 PATH_RECEIVERS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
                   "binaural")
-"""Receivers whose early paths a moving source's renderer follows (``keep_arrivals``);
-binaural with the sphere-head model (not a SOFA HRTF set)."""
+"""Receivers whose early paths a moving source's renderer follows (``keep_arrivals``):
+every kind (binaural with the sphere head or a SOFA HRTF set)."""
 
 
 def sphere_head(microphone: Mapping[str, Any]):

@@ -269,34 +269,89 @@ def synthesize_hrir_binaural_rir(arrivals: Arrivals, histogram: EnergyHistogram 
     h_len = hset.hrirs.shape[-1]
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s, taps,
                            bank.padding() // 4 + h_len)
-    out = np.zeros((2, n))
-    if len(arrivals):
-        if arrivals.n_bands != bank.n_bands:
-            raise AcousticsError(f"arrivals: expected {bank.n_bands} bands like the filter "
-                                 f"bank, got {arrivals.n_bands}")
-        # Directions into the head frame, then the nearest measured direction (max cosine).
-        local = arrivals.directions @ rotation(yaw_deg, pitch_deg)
-        nearest = np.argmax(local @ hset.directions.T, axis=1)
-        idx, w = _fractional_taps(arrivals.times_s, sample_rate_hz, taps)
-        # Each arrival's kernel: its fractional-delay tap convolved with its HRIR pair (FFT,
-        # all arrivals at once); kernels start at the tap's first sample.
-        k_len = taps + h_len - 1
-        n_fft = 1 << math.ceil(math.log2(k_len))
-        kernels = np.fft.irfft(np.fft.rfft(w, n_fft)[:, None, :]
-                               * np.fft.rfft(hset.hrirs[nearest], n_fft, axis=-1),
-                               n_fft, axis=-1)[..., :k_len]
-        pos = idx[:, :1] + np.arange(k_len)[None, :]
-        keep = (pos >= 0) & (pos < n)
-        for ear in range(2):
-            trains = np.zeros((bank.n_bands, n))
-            for b in range(bank.n_bands):
-                np.add.at(trains[b], pos[keep],
-                          (kernels[:, ear] * arrivals.amplitudes[:, b][:, None])[keep])
-            out[ear] = _filter_bands(trains, bank)
+    out = hrir_binaural_early(arrivals, hset, bank, n, yaw_deg=yaw_deg, pitch_deg=pitch_deg,
+                              taps=taps)
     if histogram is not None:
         tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in range(2)])
         # The set as given (not ``hset``, a new object per call when resampled) keys the cache.
         out += diffuse_binaural_tails(tails, hrirs, sample_rate_hz)
+    return out
+
+
+def hrir_binaural_early(arrivals: Arrivals, hrirs: HrirSet, bank: OctaveFilterBank,
+                        n_samples: int, *, yaw_deg: float = 0.0, pitch_deg: float = 0.0,
+                        taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """The early part of a binaural RIR through measured HRIRs, ``(2, n_samples)``: each
+    arrival through the HRIR pair of the nearest measured direction (``hrirs`` at the bank's
+    rate)."""
+    out = np.zeros((2, n_samples))
+    if not len(arrivals):
+        return out
+    if arrivals.n_bands != bank.n_bands:
+        raise AcousticsError(f"arrivals: expected {bank.n_bands} bands like the filter "
+                             f"bank, got {arrivals.n_bands}")
+    h_len = hrirs.hrirs.shape[-1]
+    # Directions into the head frame, then the nearest measured direction (max cosine).
+    local = arrivals.directions @ rotation(yaw_deg, pitch_deg)
+    nearest = np.argmax(local @ hrirs.directions.T, axis=1)
+    idx, w = _fractional_taps(arrivals.times_s, bank.sample_rate_hz, taps)
+    # Each arrival's kernel: its fractional-delay tap convolved with its HRIR pair (FFT,
+    # all arrivals at once); kernels start at the tap's first sample.
+    k_len = taps + h_len - 1
+    n_fft = 1 << math.ceil(math.log2(k_len))
+    kernels = np.fft.irfft(np.fft.rfft(w, n_fft)[:, None, :]
+                           * np.fft.rfft(hrirs.hrirs[nearest], n_fft, axis=-1),
+                           n_fft, axis=-1)[..., :k_len]
+    pos = idx[:, :1] + np.arange(k_len)[None, :]
+    keep = (pos >= 0) & (pos < n_samples)
+    for ear in range(2):
+        trains = np.zeros((bank.n_bands, n_samples))
+        for b in range(bank.n_bands):
+            np.add.at(trains[b], pos[keep],
+                      (kernels[:, ear] * arrivals.amplitudes[:, b][:, None])[keep])
+        out[ear] = _filter_bands(trains, bank)
+    return out
+
+
+def covering_angle_rad(hrirs: HrirSet, n_points: int = 1 << 14) -> float:
+    """The largest angle from any direction to its nearest measured one (the set's
+    covering radius, from ``n_points`` Fibonacci directions)."""
+    from scipy.spatial import cKDTree
+
+    chord, _ = cKDTree(hrirs.directions).query(fibonacci_sphere(n_points))
+    return float(2 * np.arcsin(min(1.0, chord.max() / 2)))
+
+
+def hrir_weights(hrirs: HrirSet, directions: np.ndarray, radius_rad: float
+                 ) -> dict[int, np.ndarray]:
+    """Weights of the measured HRIRs for directions that move, by measured direction:
+    ``w_m ∝ (1 − θ_m / radius)²`` over the measurements within ``radius`` of each
+    direction (``θ_m`` the angle to it), normalised to sum to 1. Continuous in the
+    direction (a fixed radius, at least the set's covering angle, so the sum never
+    vanishes): a source that turns round the head glides from one HRIR to the next instead
+    of switching."""
+    from scipy.spatial import cKDTree
+
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    # A zero direction (a path not heard at either neighbouring point, so silent there):
+    # any weights do; the front's.
+    d = np.where(norm > 0, d / np.where(norm > 0, norm, 1.0), np.array([1.0, 0.0, 0.0]))
+    chord = 2 * math.sin(min(radius_rad, math.pi) / 2)
+    near = cKDTree(hrirs.directions).query_ball_point(d, chord + 1e-12)
+    rows = np.repeat(np.arange(len(d)), [len(x) for x in near])
+    cols = np.concatenate([np.asarray(x, dtype=np.int64) for x in near]) if len(d) else \
+        np.zeros(0, np.int64)
+    cos = np.einsum("ij,ij->i", d[rows], hrirs.directions[cols])
+    w = np.maximum(0.0, 1.0 - np.arccos(np.clip(cos, -1.0, 1.0)) / radius_rad) ** 2
+    total = np.bincount(rows, w, minlength=len(d))
+    w = w / np.where(total > 0, total, 1.0)[rows]
+    out: dict[int, np.ndarray] = {}
+    for m in np.unique(cols):
+        sel = cols == m
+        weights = np.zeros(len(d))
+        weights[rows[sel]] = w[sel]
+        out[int(m)] = weights
     return out
 
 

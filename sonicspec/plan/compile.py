@@ -397,7 +397,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     targets = shared(list(spec.mixture.targets))
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
-    rendering = spec.mixture.rendering(spec.microphone)  # `auto` resolved
+    rendering = spec.mixture.rendering()  # `auto` resolved
     # A moving microphone: the rir step pairs source and microphone positions in time, so it
     # reads how the sources walk and the arrangement (when each speaks).
     walk = {} if isinstance(spec.microphone.trajectory, StaticTrajectorySpec) else {"walk": {
@@ -480,6 +480,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                     },
                     (rir.key, arrange.key, placement.key, *corpus_inputs),
                     f"render {tag}",
+                    rir_paths if rendering == "paths" else {},  # a SOFA set hears the paths
                 )
                 mix = Job(
                     "mix",

@@ -27,7 +27,7 @@ from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import Problem, did_you_mean
 from sonicspec.spec.materials import library_material_names
 from sonicspec.spec.microphone import channel_count
-from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec, paths_unavailable
+from sonicspec.spec.mixture import EnhancementTaskSpec, SeparationTaskSpec
 from sonicspec.spec.scene import (
     BoxObstacleSpec,
     CylinderObstacleSpec,
@@ -469,16 +469,6 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
         yield _warn(
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
-    why = paths_unavailable(spec.microphone)
-    if why and m.interpolation == "paths":
-        yield _err(("mixture", "interpolation"),
-                   f"'paths' cannot render this microphone in this version: {why} (use "
-                   "'sample_crossfade')")
-    elif why and m.interpolation == "auto" and not isinstance(spec.trajectory,
-                                                             StaticTrajectorySpec):
-        yield _warn(("mixture", "interpolation"),
-                    f"'auto' renders with 'sample_crossfade' here ({why}); moving sources' "
-                    "direct sound is then comb-filtered (bench/bench_motion.py)")
 
 
 def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:

@@ -25,14 +25,6 @@ LOUDNESS_PRESETS: dict[str, dict[str, float]] = {
 }
 
 
-def paths_unavailable(microphone) -> str | None:
-    """Why this version cannot render ``interpolation: paths`` for ``microphone`` (a spec's
-    microphone model), or None."""
-    if getattr(microphone, "kind", None) == "binaural" and microphone.hrtf.kind != "sphere":
-        return "microphone.hrtf is a SOFA set"
-    return None
-
-
 class LoudnessSpec(SpecModel):
     """Target loudness of each component (ITU-R BS.1770), before mixing."""
 
@@ -133,21 +125,18 @@ class MixtureSpec(SpecModel):
         description="How a moving source is heard along its path. 'paths': the direct sound and "
         "every image-source reflection as a time-varying delay from where the source is at "
         "each emission (Doppler, level and delay exact; the ray-traced late part crossfaded "
-        "between RIR points; a moving microphone's images move with it; not SOFA HRTFs). "
-        "Or the RIRs along the "
+        "between RIR points; edge-diffracted paths too; a moving microphone's images move "
+        "with it; every receiver, SOFA HRIRs blended by direction). Or the RIRs along the "
         "path are blended: per-sample crossfade of neighbouring convolutions (SonicSet), "
         "STFT-domain interpolation (DCASE/SpatialScaper), or one RIR per segment with "
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "
-        "(bench/bench_motion.py). 'auto': 'paths' where this version renders it, else "
-        "'sample_crossfade' (validate says so).",
+        "(bench/bench_motion.py). 'auto': 'paths'.",
     )
 
-    def rendering(self, microphone) -> Rendering:
-        """The method a build uses: ``interpolation``, with ``auto`` resolved for the
-        ``microphone`` (:func:`paths_unavailable`)."""
-        if self.interpolation != "auto":
-            return self.interpolation
-        return "sample_crossfade" if paths_unavailable(microphone) else "paths"
+    def rendering(self) -> Rendering:
+        """The method a build uses: ``interpolation``, with ``auto`` resolved (``paths``,
+        which this version renders for every receiver)."""
+        return "paths" if self.interpolation == "auto" else self.interpolation
 
     targets: list[Literal["dry", "direct", "early"]] = Field(
         default_factory=list,

@@ -21,12 +21,13 @@ with ``paths``, the paths arriving within 50 ms of the direct sound and the late
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.engine import array_offsets, sphere_head
+from sonicspec.acoustics.engine import array_offsets, load_hrirs, sphere_head
 from sonicspec.acoustics.hrtf import ear_axes
 from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
 from sonicspec.audio.arrange import Segment, assemble
@@ -34,6 +35,7 @@ from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
+from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages import artifacts
 from sonicspec.stages.artifacts import (
     ArrangedTrack,
@@ -128,9 +130,19 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
     return {k: v.astype(np.float32) for k, v in out.items()}
 
 
-def path_receiver(microphone, center_m, line: Timeline | None = None) -> Receiver:
+def path_receiver(microphone, center_m, line: Timeline | None = None, hrirs=None,
+                  sample_rate_hz: float | None = None) -> Receiver:
     """The receiver :func:`render_paths` renders for a spec's microphone at ``center_m``,
-    or moving and turning along ``line`` (a moving microphone's timeline)."""
+    or moving and turning along ``line`` (a moving microphone's timeline); ``hrirs``: the
+    loaded set of a SOFA HRTF (rendered at ``sample_rate_hz``)."""
+    if isinstance(getattr(microphone, "hrtf", None), SofaHrtfSpec):
+        if hrirs is None or sample_rate_hz is None:
+            raise StageError("microphone.hrtf: a SOFA HRTF needs its HRIR set and the rate")
+        hset = hrirs.resampled(sample_rate_hz)
+        frame = ({"mic_track_m": line.mic_m, "yaw_deg": line.yaw_deg}
+                 if line is not None and line.mic_moves else {"yaw_deg": microphone.yaw_deg})
+        return Receiver("hrir", hrirs=hset, hrir_radius_rad=hrir_radius(hrirs),
+                        pitch_deg=microphone.pitch_deg, **frame)
     if line is not None and line.mic_moves:
         moving = {"mic_track_m": line.mic_m, "yaw_deg": line.yaw_deg,
                   "pitch_deg": line.pitch_deg}
@@ -151,13 +163,27 @@ def path_receiver(microphone, center_m, line: Timeline | None = None) -> Receive
                         yaw_deg=microphone.yaw_deg, pitch_deg=microphone.pitch_deg)
     if microphone.kind == "mono":
         return Receiver()
-    if microphone.kind == "binaural":  # the sphere head (validate rejects SOFA HRTFs)
+    if microphone.kind == "binaural":  # the sphere head (SOFA sets: above)
         mic = microphone.model_dump(mode="json")
         head = sphere_head(mic)
         return Receiver("sphere_head", head=head, center_m=np.asarray(center_m, dtype=float),
                         ear_axes=ear_axes(head, microphone.yaw_deg, microphone.pitch_deg))
     return Receiver("array", offsets_m=array_offsets(microphone.model_dump(mode="json")),
                     center_m=np.asarray(center_m, dtype=np.float64))
+
+
+#: A SOFA set's HRIRs are blended over this many times its covering angle (so every
+#: direction has at least one measurement within the blend).
+HRIR_RADIUS_FACTOR = 1.25
+
+
+@functools.lru_cache(maxsize=4)
+def hrir_radius(hrirs) -> float:
+    """The angle a SOFA set's HRIRs are blended over (:data:`HRIR_RADIUS_FACTOR` times its
+    covering angle), radians."""
+    from sonicspec.acoustics.hrtf import covering_angle_rad
+
+    return HRIR_RADIUS_FACTOR * covering_angle_rad(hrirs)
 
 
 def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, window_s: float,
@@ -192,6 +218,7 @@ def run(ctx: JobContext) -> None:
     bank = OctaveFilterBank(rir.sample_rate_hz, tuple(rir.bands_hz))
     microphone = ctx.input_params("rir").microphone
     walk = Walk(params.speed_m_s, params.walk_span, microphone)
+    hrirs = load_hrirs(ctx.job.paths["hrtf"]) if "hrtf" in ctx.job.paths else None
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -214,7 +241,8 @@ def run(ctx: JobContext) -> None:
                                      f"group {arr.group} {track.name} hold no early paths")
                 paths = (artifacts.read_path_set(rir_art.arrays, entry.paths),
                          np.asarray(rir_art.arrays[f"{entry.paths}_late"], dtype=np.float64),
-                         bank, path_receiver(microphone, placement.mic_m, line))
+                         bank, path_receiver(microphone, placement.mic_m, line, hrirs,
+                                             params.sample_rate_hz))
             signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
                                    roots[track.role], paths)
             keys = {}

@@ -292,7 +292,7 @@ def run(ctx) -> None:
                 for i, early in enumerate(at_mic):  # each as long as its own RIR was made
                     n = block[i].shape[-1]
                     late[i, :, :n] -= early_part(early, settings, n,
-                                                 {**microphone, "yaw_deg": yaws[i]})
+                                                 {**microphone, "yaw_deg": yaws[i]}, hrirs)
                 arrays[f"{paths}_late"] = late.astype(np.float32)
             first = room_acoustic_figures(block[0][0], settings.sample_rate_hz,
                                           settings.bands_hz)
