@@ -130,6 +130,32 @@ def test_door_room_second_order_round_both_jamb_edges() -> None:
     assert off["direct"] == "blocked" and "diffracted_paths" not in off
 
 
+def test_a_thin_thick_screen_heard_over_both_edges_is_the_half_plane() -> None:
+    """Two edges: a screen 2 cm thick (two right-angled edges 2 cm apart) is heard over both
+    (second order); as the thickness goes to zero the exact field is the half-plane's, so
+    the two-edge path's first arrival must match the exact half-plane (Biot–Tolstoy–Medwin)
+    within the issue's 3 dB in every octave 250–4000 Hz (measured: 2.3–2.6 dB high)."""
+    w = 0.02
+    xs, ys, zs = np.array([0.0, 4.0 - w / 2, 4.0 + w / 2, 8.0]), np.array([0.0, 4.0]), \
+        np.array([0.0, 1.8, 3.0])
+    air = np.ones((3, 1, 2), bool)
+    air[1, 0, 0] = False
+    mesh = voxel_air_surface(xs, ys, zs, air)
+    scene = rigid(mesh.vertices, mesh.faces)
+    src, mic = np.array([2.5, 2.0, 1.0]), np.array([6.0, 2.0, 1.2])
+    (rir,), (facts,) = rirs(scene, mic, [src])
+    assert facts["direct"] == "diffracted"
+    top = Wedge.half_plane([4.0, 0.0, 1.8], [0, 1, 0], [0, 0, -1])
+    onset = (edge_path_length_m(top, src, mic) + w) / C  # over the two edges
+    fs_ref = 4 * FS
+    exact = wedge_diffraction_ir(top, src, mic, fs_ref, int((onset + 0.05) * fs_ref), C)
+    ours = band_energy(rir[0].astype(np.float64), FS, onset - 0.002, onset + 0.0025)
+    shift = w / C  # the half-plane's path is w shorter
+    err = 10 * np.log10(ours / band_energy(exact, fs_ref, onset - 0.002 - shift,
+                                           onset + 0.0025 - shift))
+    assert np.all(np.abs(err[CHECKED]) < 3.0), err
+
+
 def walk_levels(scene, mic, points, diffraction=True) -> np.ndarray:
     """Level (dB) of each position's early sound: the first 5 ms after the earliest path."""
     out, facts = rirs(scene, mic, points, diffraction)
