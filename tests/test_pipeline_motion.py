@@ -247,3 +247,21 @@ def test_a_sofa_head_hears_the_paths(mic_moves: bool, tmp_path: Path) -> None:
     assert {j.params["interpolation"] for j in plan.jobs if j.step == "render"} == {"paths"}
     direct, _ = sf.read(folder / "out" / "train" / "000000" / "source1_direct.wav")
     assert direct.shape[1] == 2 and np.all(np.std(direct, axis=0) > 1e-4)
+
+
+def test_a_source_walking_into_the_moving_microphone_is_refused(tmp_path: Path, capsys
+                                                                ) -> None:
+    """Head-on: the microphone carried along y = 2.5 towards a source walking the other way
+    on the same line; the rir job names the group, the track and when they meet."""
+    folder = tmp_path / "collide"
+    folder.mkdir()
+    text = SPEC.replace("METHOD", "auto")
+    for old, new in MOVING_MIC.items():
+        text = text.replace(old, new.replace("KIND", "mono"))
+    text = text.replace("start_m: [4.5, 5.0, 1.5], end_m: [7.5, 5.4, 1.5]",
+                        "start_m: [4.0, 2.5, 1.6], end_m: [7.0, 2.5, 1.6]")
+    (folder / "spec.yaml").write_text(text)
+    assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) != 0
+    err = capsys.readouterr().err
+    assert "train/000000 source1: the source comes within" in err
+    assert "of the moving microphone (at" in err

@@ -27,7 +27,7 @@ from sonicspec.acoustics.engine import (
 )
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.moving import PathSet
-from sonicspec.errors import SonicspecWarning
+from sonicspec.errors import SonicspecWarning, StageError
 from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
 from sonicspec.spec.materials import MaterialsSpec
@@ -160,6 +160,10 @@ def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+#: The closest a source may come to a moving microphone (the rir step refuses closer).
+MIN_MOVING_GAP_M = 0.1
+
+
 def _traces(placement: GroupPlacement, sources: list[tuple[str, np.ndarray]],
             lines: list[Timeline | None], mic_m, yaw_deg: float
             ) -> tuple[list[tuple[np.ndarray, float, list[np.ndarray]]],
@@ -231,6 +235,16 @@ def run(ctx) -> None:
             lines = [timeline(placement.source(name), tracks[name].segment_list(), placement,
                               walk, speech, arr.clip_samples, params.sample_rate_hz)
                      for name, _ in sources]
+            for (name, _), line in zip(sources, lines, strict=True):
+                gap = np.linalg.norm(line.source_m - line.mic_m, axis=1)
+                if gap.min() < MIN_MOVING_GAP_M:
+                    at = float(np.interp(np.argmin(gap), line.index, np.arange(
+                        len(line.index)))) / params.sample_rate_hz
+                    raise StageError(
+                        f"group {placement.group} {name}: the source comes within "
+                        f"{gap.min():.2f} m of the moving microphone (at {at:.2f} s); expected "
+                        f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
+                        "microphone's path (microphone.trajectory) or the sources' rules")
         traces, refs = _traces(placement, sources, lines, placement.mic_m,
                                params.microphone.yaw_deg)
         rng = ctx.rng("rir", ctx.job.key, placement.group)
