@@ -108,3 +108,18 @@ def weighted_bands(bands: np.ndarray, weights: np.ndarray, lo: np.ndarray, hi: n
         for b in range(n_bands):
             acc += (weights[lo[t], b] * (1.0 - f) + weights[hi[t], b] * f) * bands[b, t]
         out[t] = acc
+
+
+@njit(cache=True, nogil=True)
+def image_directions(track: np.ndarray, image: np.ndarray, mirror: np.ndarray,
+                     out: np.ndarray) -> None:
+    """``out[k] = (track[k] − image) / |track[k] − image| @ mirror``: a path's direction of
+    arrival at the microphone at each emission, the direction its image sees the source in
+    mapped back by the path's mirrors (numpy's ``(T, 3) @ (3, 3)`` takes ~60x this)."""
+    for k in range(track.shape[0]):
+        dx = track[k, 0] - image[0]
+        dy = track[k, 1] - image[1]
+        dz = track[k, 2] - image[2]
+        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        for i in range(3):
+            out[k, i] = (dx * mirror[0, i] + dy * mirror[1, i] + dz * mirror[2, i]) * inv

@@ -33,6 +33,7 @@ from sonicspec.acoustics._moving_kernels import (
     accumulate_path,
     fixed_receiver_arrivals,
     gradient_inverse,
+    image_directions,
     weighted_bands,
 )
 from sonicspec.acoustics.arrivals import Arrivals
@@ -297,53 +298,65 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         w = paths.weights[k]  # (N, B)
         if not np.any(w):
             continue
+        # Only the emissions the path is heard from (one valid over part of the walk is
+        # rendered over that part): output j of the part is sample start + j of the whole.
+        start, stop = (0, s.size) if static else _heard(w, lo, hi)
+        if start >= min(stop, n_out):
+            continue
+        part = slice(start, stop)
         if static:
             at_point = int(np.rint(index[0]))
             x = w[at_point] @ band_dry
         else:  # band factors at each emission, linear between points
-            x = np.empty(s.size)
-            weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
-        source = track[0] if static else track
+            x = np.empty(stop - start)
+            weighted_bands(band_dry[:, part], np.ascontiguousarray(w), lo[part], hi[part],
+                           frac[part], x)
+        source = track[0] if static else track[part]
 
-        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k):
+        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k, start=start):
             return render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
-                               speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out, gain=gain,
-                               extra_delay_s=extra_delay_s)
+                               speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out - start,
+                               gain=gain, extra_delay_s=extra_delay_s)
 
         if receiver.kind == "mono":
-            out[0] += path()
+            out[0, start:] += path()
             continue
         mirror = _image_map(paths, k, points, receiver.center_m)
-        if mirror is not None:  # exact: the direction the image sees the source in, mapped back
-            away = np.atleast_2d(source) - paths.images_m[k]
-            d = (away / np.linalg.norm(away, axis=1, keepdims=True)) @ mirror
+        if receiver.kind == "array" and mirror is not None:
+            d = None  # each capsule hears its own image: no direction needed
+        elif mirror is not None:  # exact: the direction the image sees the source in, mapped back
+            away = np.atleast_2d(source)
+            d = np.empty(away.shape)
+            image_directions(away, paths.images_m[k], mirror, d)
         else:
-            d = _directions_at(paths.directions[k], lo, hi, frac, static)
+            d = _directions_at(paths.directions[k], lo[part], hi[part], frac[part], static)
         if receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
             gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
             for ch in range(receiver.channels):
-                out[ch] += path(gain=gains[:, ch] if not static else float(gains[0, ch]))
+                out[ch, start:] += path(gain=gains[:, ch] if not static
+                                        else float(gains[0, ch]))
         elif receiver.kind == "sphere_head":
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
             for ear, axis in enumerate(receiver.ear_axes):
                 cos_t = d @ axis
                 delay = np.broadcast_to(woodworth_delays_s(
-                    cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), s.shape)
-                alpha = np.broadcast_to(shadow_alpha(cos_t), s.shape)
-                out[ear] += path(extra_delay_s=delay)
-                shaded[ear] += path(gain=alpha, extra_delay_s=delay)
+                    cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), x.shape)
+                alpha = np.broadcast_to(shadow_alpha(cos_t), x.shape)
+                out[ear, start:] += path(extra_delay_s=delay)
+                shaded[ear, start:] += path(gain=alpha, extra_delay_s=delay)
         else:
             for m, offset in enumerate(receiver.offsets_m):
                 if mirror is not None:  # the capsule's own image: exact
-                    out[m] += render_path(x, source, paths.images_m[k] + mirror @ offset,
-                                          bank.sample_rate_hz,
-                                          speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out)
+                    out[m, start:] += render_path(x, source, paths.images_m[k] + mirror @ offset,
+                                                  bank.sample_rate_hz,
+                                                  speed_of_sound_m_s=speed_of_sound_m_s,
+                                                  n_out=n_out - start)
                 else:
                     lead = -(d @ offset) / speed_of_sound_m_s
-                    out[m] += path(extra_delay_s=np.broadcast_to(lead, s.shape))
+                    out[m, start:] += path(extra_delay_s=np.broadcast_to(lead, x.shape))
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
 
@@ -354,6 +367,20 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         out = signal.lfilter(b_lp, a_lp, out, axis=1) + signal.lfilter(b_hp, a_hp, shaded,
                                                                        axis=1)
     return out
+
+
+def _heard(weights: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[int, int]:
+    """The emissions ``[start, stop)`` a path is heard from: where its band factors at the
+    points either side (``weights[lo]``, ``weights[hi]``) are not all zero, widened by the
+    sinc's reach and two samples, so the silent emissions kept at each end cover every
+    output sample the path reaches (and the one-sided arrival density at the ends of the
+    part) and the part renders what the whole would."""
+    valid = np.any(weights != 0, axis=1)
+    heard = np.flatnonzero(valid[lo] | valid[hi])
+    if heard.size == 0:
+        return 0, 0
+    reach = HALF_WIDTH + 2
+    return max(int(heard[0]) - reach, 0), min(int(heard[-1]) + 1 + reach, lo.size)
 
 
 def _image_map(paths: PathSet, k: int, points: np.ndarray, center_m) -> np.ndarray | None:
