@@ -31,14 +31,12 @@ def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np
     the two dot products with the ``2·half`` input samples run over contiguous memory (and
     vectorise: ``reassoc`` only reorders their sums, ~1e-16).
     """
-    n = x.size
     n_out = out.size
+    n = x.size
     taps = phase.shape[1]
     half = taps // 2
-    j0 = max(0, math.ceil(tau[0] - half))
-    j1 = min(n_out - 1, math.floor(tau[n - 1] + half))
     k = 0
-    for j in range(j0, j1 + 1):
+    for j in range(max(0, math.ceil(tau[0] - half)), min(n_out, math.floor(tau[n - 1] + half) + 1)):
         if j <= tau[0]:
             u = 0.0
             d = density[0]
@@ -53,7 +51,6 @@ def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np
             d = density[k] + f * (density[k + 1] - density[k])
         ku = int(u)
         fu = u - ku
-        a = amp[ku] if ku >= n - 1 else amp[ku] + fu * (amp[ku + 1] - amp[ku])
         pos = fu * TABLE_STEPS
         p = int(pos)
         r = pos - p
@@ -68,7 +65,60 @@ def accumulate_path(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np
             for t in range(max(0, -first), min(taps, n - first)):
                 acc0 += x[first + t] * phase[p, t]
                 acc1 += x[first + t] * slope[p, t]
-        out[j] += (acc0 + r * acc1) * a * d
+        heard = (acc0 + r * acc1) * d
+        a = amp[ku] if ku >= n - 1 else amp[ku] + fu * (amp[ku + 1] - amp[ku])
+        out[j] += heard * a
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def accumulate_channels(x: np.ndarray, tau: np.ndarray, density: np.ndarray, amp: np.ndarray,
+                        phase: np.ndarray, slope: np.ndarray, out: np.ndarray) -> None:
+    """:func:`accumulate_path` for channels that hear one path through the same arrivals
+    and differ only in gain (ambisonic channels; a sphere-head ear and its shadowed part):
+    ``amp[k, c]`` the gain of channel ``c``, ``out`` ``(C, n_out)``. The taps are summed
+    once per output sample, not once per channel. (The loop is accumulate_path's, written
+    out again: as a shared numba function it ran 5x slower, no longer vectorised.)"""
+    n_out = out.shape[1]
+    n = x.size
+    taps = phase.shape[1]
+    half = taps // 2
+    k = 0
+    for j in range(max(0, math.ceil(tau[0] - half)), min(n_out, math.floor(tau[n - 1] + half) + 1)):
+        if j <= tau[0]:
+            u = 0.0
+            d = density[0]
+        elif j >= tau[n - 1]:
+            u = n - 1.0
+            d = density[n - 1]
+        else:
+            while tau[k + 1] < j:
+                k += 1
+            f = (j - tau[k]) / (tau[k + 1] - tau[k])
+            u = k + f
+            d = density[k] + f * (density[k + 1] - density[k])
+        ku = int(u)
+        fu = u - ku
+        pos = fu * TABLE_STEPS
+        p = int(pos)
+        r = pos - p
+        first = ku + 1 - half
+        acc0 = 0.0
+        acc1 = 0.0
+        if first >= 0 and first + taps <= n:
+            for t in range(taps):
+                acc0 += x[first + t] * phase[p, t]
+                acc1 += x[first + t] * slope[p, t]
+        else:  # the first and last samples: taps outside the signal read nothing
+            for t in range(max(0, -first), min(taps, n - first)):
+                acc0 += x[first + t] * phase[p, t]
+                acc1 += x[first + t] * slope[p, t]
+        heard = (acc0 + r * acc1) * d
+        if ku >= n - 1:
+            for c in range(out.shape[0]):
+                out[c, j] += heard * amp[ku, c]
+        else:
+            for c in range(out.shape[0]):
+                out[c, j] += heard * (amp[ku, c] + fu * (amp[ku + 1, c] - amp[ku, c]))
 
 
 @njit(cache=True, nogil=True)

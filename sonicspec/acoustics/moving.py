@@ -30,6 +30,7 @@ import numpy as np
 
 from sonicspec.acoustics._moving_kernels import (
     TABLE_STEPS,
+    accumulate_channels,
     accumulate_path,
     fixed_receiver_arrivals,
     gradient_inverse,
@@ -78,12 +79,8 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     fs = float(sample_rate_hz)
     receiver = np.asarray(receiver_m, dtype=np.float64)
     if receiver.shape == (3,):  # a receiver that stays put: arrivals in one compiled pass
-        track = np.ascontiguousarray(np.broadcast_to(
-            np.asarray(source_m, dtype=np.float64), (s.size, 3)))
-        extra = np.zeros(1) if extra_delay_s is None else np.ascontiguousarray(
-            np.broadcast_to(np.asarray(extra_delay_s, dtype=np.float64), s.shape))
-        tau, r = np.empty(s.size), np.empty(s.size)
-        fixed_receiver_arrivals(track, receiver, fs, float(speed_of_sound_m_s), extra, tau, r)
+        tau, r = _fixed_arrivals(s.size, source_m, receiver, fs, speed_of_sound_m_s,
+                                 extra_delay_s)
     else:
         t_a, r = moving_arrival_times(source_m, receiver_m, s.size, fs, speed_of_sound_m_s)
         if extra_delay_s is not None:
@@ -102,6 +99,35 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     accumulate_path(s, tau, density, np.ascontiguousarray(amp), *_sinc_table(half_width, beta),
                     out)
     return out
+
+
+def _fixed_arrivals(n: int, source_m, receiver_m: np.ndarray, fs: float,
+                    speed_of_sound_m_s: float, extra_delay_s) -> tuple[np.ndarray, np.ndarray]:
+    """Arrival (output samples) and distance of each of ``n`` emissions from ``source_m``
+    (``(3,)`` or ``(n, 3)``) to a receiver that does not move, ``extra_delay_s`` added."""
+    track = np.ascontiguousarray(np.broadcast_to(
+        np.asarray(source_m, dtype=np.float64), (n, 3)))
+    extra = np.zeros(1) if extra_delay_s is None else np.ascontiguousarray(
+        np.broadcast_to(np.asarray(extra_delay_s, dtype=np.float64), (n,)))
+    tau, r = np.empty(n), np.empty(n)
+    fixed_receiver_arrivals(track, receiver_m, fs, float(speed_of_sound_m_s), extra, tau, r)
+    return tau, r
+
+
+def _render_channels(x: np.ndarray, source_m, image_m: np.ndarray, fs: float,
+                     speed_of_sound_m_s: float, gains: np.ndarray, out: np.ndarray, *,
+                     extra_delay_s=None) -> None:
+    """:func:`render_path` of one path to a receiver that does not move, heard by channels
+    that differ only in gain (``gains`` ``(n, C)`` or ``(1, C)`` per emission), added to
+    ``out`` ``(C, n_out)``: the arrivals and the sinc's taps once for all channels."""
+    tau, r = _fixed_arrivals(x.size, source_m, image_m, fs, speed_of_sound_m_s, extra_delay_s)
+    if np.any(r <= 0):
+        raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
+    density = np.empty(x.size)
+    gradient_inverse(tau, density)
+    amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0]))
+                               / (4 * np.pi * r)[:, None])
+    accumulate_channels(x, tau, density, amp, *_sinc_table(HALF_WIDTH, KAISER_BETA), out)
 
 
 @functools.lru_cache(maxsize=8)
@@ -333,10 +359,8 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         if receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
-            gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
-            for ch in range(receiver.channels):
-                out[ch, start:] += path(gain=gains[:, ch] if not static
-                                        else float(gains[0, ch]))
+            _render_channels(x, source, paths.images_m[k], bank.sample_rate_hz,
+                             speed_of_sound_m_s, sh_sn3d(receiver.order, d), out[:, start:])
         elif receiver.kind == "sphere_head":
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
@@ -344,9 +368,13 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 cos_t = d @ axis
                 delay = np.broadcast_to(woodworth_delays_s(
                     cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), x.shape)
-                alpha = np.broadcast_to(shadow_alpha(cos_t), x.shape)
-                out[ear, start:] += path(extra_delay_s=delay)
-                shaded[ear, start:] += path(gain=alpha, extra_delay_s=delay)
+                both = np.zeros((2, n_out - start))  # the ear, and its α-weighted part
+                _render_channels(x, source, paths.images_m[k], bank.sample_rate_hz,
+                                 speed_of_sound_m_s, np.stack(np.broadcast_arrays(
+                                     1.0, shadow_alpha(cos_t)), axis=-1), both,
+                                 extra_delay_s=delay)
+                out[ear, start:] += both[0]
+                shaded[ear, start:] += both[1]
         else:
             for m, offset in enumerate(receiver.offsets_m):
                 if mirror is not None:  # the capsule's own image: exact
