@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.signal import hilbert
 
-from sonicspec.acoustics.moving import render_path
+from sonicspec.acoustics.moving import PathSet, render_path
 from sonicspec.acoustics.theory import (
     moving_arrival_times,
     moving_point_source,
@@ -369,3 +369,28 @@ def test_the_paths_of_a_walking_source_at_a_directional_receiver(kind: str) -> N
     for ch in range(exact.shape[0]):
         snr, dips = figures(exact[ch], ours[ch], n)
         assert snr >= 55 and dips["worst_db"] >= -0.1, (ch, snr, dips)
+
+
+def test_an_ambisonic_path_with_no_known_direction_between_two_points_stays_finite() -> None:
+    """Bug: where a path was valid at neither point around an emission, its interpolated
+    direction of arrival is zero, and the spherical harmonics of 0 / 0 made the whole
+    ambisonic render NaN (directions interpolated: no microphone position to recover the
+    mirrors from). Now those emissions, silent anyway, get zero gain: the W channel is the
+    mono render of the same paths."""
+    from sonicspec.acoustics.moving import Receiver, render_paths
+
+    n = 2 * FS
+    dry = pink(n, seed=9)
+    points, paths, index, bank = engine_walk({"kind": "ambisonics", "order": 1, "yaw_deg": 0.0,
+                                              "pitch_deg": 0.0,
+                                              "trajectory": {"kind": "static"}})
+    weights, directions = paths.weights.copy(), paths.directions.copy()
+    weights[paths.order == 2, :5] = 0.0
+    directions[paths.order == 2, :5] = 0.0
+    partly = PathSet(paths.images_m, weights, paths.order, directions)
+    foa = render_paths(dry, index, points, partly, bank, n_out=n + 1200, speed_of_sound_m_s=C,
+                       receiver=Receiver("ambisonics", order=1))
+    (mono,) = render_paths(dry, index, points, partly, bank, n_out=n + 1200,
+                           speed_of_sound_m_s=C)
+    assert np.all(np.isfinite(foa))
+    assert snr_db(mono, foa[0]) >= 150

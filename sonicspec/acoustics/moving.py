@@ -359,8 +359,12 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         if receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
+            # No direction is known where the path is silent at the points either side (a
+            # zero row): gains 0 there, not the spherical harmonics of 0 / 0.
+            known = np.any(d != 0, axis=1, keepdims=True)
+            gains = sh_sn3d(receiver.order, np.where(known, d, 1.0)) * known
             _render_channels(x, source, paths.images_m[k], bank.sample_rate_hz,
-                             speed_of_sound_m_s, sh_sn3d(receiver.order, d), out[:, start:])
+                             speed_of_sound_m_s, gains, out[:, start:])
         elif receiver.kind == "sphere_head":
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
