@@ -272,7 +272,7 @@ def test_channels_that_differ_in_gain_are_the_vectorised_sum_each() -> None:
     """The loop that renders one path for several channels at once (ambisonic channels, a
     sphere-head ear and its shadowed part: one pass of arrivals and taps, a gain per
     channel) against the vectorised sum of each channel alone, to 120 dB."""
-    from sonicspec.acoustics.moving import _render_channels
+    from sonicspec.acoustics.moving import _render_into
 
     n = 2 * FS
     dry = pink(n, seed=5)
@@ -280,7 +280,7 @@ def test_channels_that_differ_in_gain_are_the_vectorised_sum_each() -> None:
     mic = np.array([0.0, 1.2, 1.4])
     gains = np.stack([np.ones(n), np.linspace(1.0, -0.5, n), np.cos(np.arange(n) / FS)], 1)
     ours = np.zeros((3, n + 200))
-    _render_channels(dry, path, mic, FS, C, gains, ours)
+    _render_into(dry, path, mic, FS, C, gains, ours)
     for ch in range(3):
         assert snr_db(vectorised_path(dry, path, mic, gains[:, ch], n + 200), ours[ch]) >= 120
 

@@ -114,20 +114,27 @@ def _fixed_arrivals(n: int, source_m, receiver_m: np.ndarray, fs: float,
     return tau, r
 
 
-def _render_channels(x: np.ndarray, source_m, image_m: np.ndarray, fs: float,
-                     speed_of_sound_m_s: float, gains: np.ndarray, out: np.ndarray, *,
-                     extra_delay_s=None) -> None:
-    """:func:`render_path` of one path to a receiver that does not move, heard by channels
-    that differ only in gain (``gains`` ``(n, C)`` or ``(1, C)`` per emission), added to
-    ``out`` ``(C, n_out)``: the arrivals and the sinc's taps once for all channels."""
+def _render_into(x: np.ndarray, source_m, image_m: np.ndarray, fs: float,
+                 speed_of_sound_m_s: float, gains, out: np.ndarray, *,
+                 extra_delay_s=None) -> None:
+    """:func:`render_path` of one path to a receiver that does not move, added to ``out``
+    in place (no output of its own to allocate and add: the render stage's signals are
+    minutes long). ``out`` ``(n_out,)`` with ``gains`` a float or ``(n,)``; or ``(C, n_out)``
+    for channels that differ only in gain, ``gains`` ``(n, C)`` or ``(1, C)`` per emission:
+    the arrivals and the sinc's taps once for all channels."""
     tau, r = _fixed_arrivals(x.size, source_m, image_m, fs, speed_of_sound_m_s, extra_delay_s)
-    if np.any(r <= 0):
+    if np.min(r) <= 0:
         raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
     density = np.empty(x.size)
     gradient_inverse(tau, density)
-    amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0]))
-                               / (4 * np.pi * r)[:, None])
-    accumulate_channels(x, tau, density, amp, *_sinc_table(HALF_WIDTH, KAISER_BETA), out)
+    r *= 4 * np.pi
+    phase, slope = _sinc_table(HALF_WIDTH, KAISER_BETA)
+    if out.ndim == 1:
+        amp = np.divide(np.asarray(gains, dtype=np.float64), r, out=r)
+        accumulate_path(x, tau, density, amp, phase, slope, out)
+    else:
+        amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0])) / r[:, None])
+        accumulate_channels(x, tau, density, amp, phase, slope, out)
 
 
 @functools.lru_cache(maxsize=8)
@@ -339,13 +346,13 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                            frac[part], x)
         source = track[0] if static else track[part]
 
-        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k, start=start):
-            return render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
-                               speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out - start,
-                               gain=gain, extra_delay_s=extra_delay_s)
+        def path(into, gains=1.0, extra_delay_s=None, x=x, source=source, k=k, image=None):
+            _render_into(x, source, paths.images_m[k] if image is None else image,
+                         bank.sample_rate_hz, speed_of_sound_m_s, gains, into,
+                         extra_delay_s=extra_delay_s)
 
         if receiver.kind == "mono":
-            out[0, start:] += path()
+            path(out[0, start:])
             continue
         mirror = _image_map(paths, k, points, receiver.center_m)
         if receiver.kind == "array" and mirror is not None:
@@ -363,8 +370,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             # zero row): gains 0 there, not the spherical harmonics of 0 / 0.
             known = np.any(d != 0, axis=1, keepdims=True)
             gains = sh_sn3d(receiver.order, np.where(known, d, 1.0)) * known
-            _render_channels(x, source, paths.images_m[k], bank.sample_rate_hz,
-                             speed_of_sound_m_s, gains, out[:, start:])
+            path(out[:, start:], gains)
         elif receiver.kind == "sphere_head":
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
@@ -373,22 +379,17 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 delay = np.broadcast_to(woodworth_delays_s(
                     cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), x.shape)
                 both = np.zeros((2, n_out - start))  # the ear, and its α-weighted part
-                _render_channels(x, source, paths.images_m[k], bank.sample_rate_hz,
-                                 speed_of_sound_m_s, np.stack(np.broadcast_arrays(
-                                     1.0, shadow_alpha(cos_t)), axis=-1), both,
-                                 extra_delay_s=delay)
+                path(both, np.stack(np.broadcast_arrays(1.0, shadow_alpha(cos_t)), axis=-1),
+                     extra_delay_s=delay)
                 out[ear, start:] += both[0]
                 shaded[ear, start:] += both[1]
         else:
             for m, offset in enumerate(receiver.offsets_m):
                 if mirror is not None:  # the capsule's own image: exact
-                    out[m, start:] += render_path(x, source, paths.images_m[k] + mirror @ offset,
-                                                  bank.sample_rate_hz,
-                                                  speed_of_sound_m_s=speed_of_sound_m_s,
-                                                  n_out=n_out - start)
+                    path(out[m, start:], image=paths.images_m[k] + mirror @ offset)
                 else:
                     lead = -(d @ offset) / speed_of_sound_m_s
-                    out[m, start:] += path(extra_delay_s=np.broadcast_to(lead, x.shape))
+                    path(out[m, start:], extra_delay_s=np.broadcast_to(lead, x.shape))
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
 
