@@ -272,10 +272,11 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     """The early part heard from a source walking through its RIR points, ``(channels,
     n_out)``.
 
-    Every path of ``paths`` is rendered by :func:`render_path` from the source's position at
-    each emission (``points_m`` read at the fractional ``point_index`` of each dry sample) to
-    its fixed image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift
-    are exact at every sample. Its band factors are read at the same fractional index (a
+    Every path of ``paths`` is rendered as :func:`render_path` renders it (added in place,
+    over the emissions it is heard from) from the source's position at each emission
+    (``points_m`` read at the fractional ``point_index`` of each dry sample) to its fixed
+    image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift are exact
+    at every sample. Its band factors are read at the same fractional index (a
     path that becomes invalid between two points fades over that stretch) and applied to the
     dry signal's octave bands (``bank.split``, which sums back to the signal) at emission.
     A directional ``receiver`` needs each path's direction of arrival at the microphone: from
