@@ -376,7 +376,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
             for ear, axis in enumerate(receiver.ear_axes):
-                cos_t = d @ axis
+                cos_t = np.einsum("ij,j->i", d, axis)  # not BLAS, whose threads fight other jobs
                 delay = np.broadcast_to(woodworth_delays_s(
                     cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), x.shape)
                 both = np.zeros((2, n_out - start))  # the ear, and its α-weighted part
@@ -389,7 +389,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 if mirror is not None:  # the capsule's own image: exact
                     path(out[m, start:], image=paths.images_m[k] + mirror @ offset)
                 else:
-                    lead = -(d @ offset) / speed_of_sound_m_s
+                    lead = -np.einsum("ij,j->i", d, offset) / speed_of_sound_m_s
                     path(out[m, start:], extra_delay_s=np.broadcast_to(lead, x.shape))
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
