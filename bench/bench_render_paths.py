@@ -127,11 +127,11 @@ def main() -> None:
                                       ).model_validate(microphone), mic)
         else:
             receiver = Receiver()
-        if not loaded:  # numba's compiled loops, loaded once per process (a 1 s walk over
-            # the whole path, so every path and every loop is met)
-            step = SECONDS
-            _, cpu, _, _ = timed(paths_and_tail, dry[::step], index[::step], points, paths,
-                                 bank, late, receiver)
+        # numba's compiled loops, loaded once per process: a 1 s walk over the whole path
+        # first, so every path and every loop this receiver uses is met before the timing
+        _, cpu, _, _ = timed(paths_and_tail, dry[::SECONDS], index[::SECONDS], points, paths,
+                             bank, late, receiver)
+        if not loaded:
             print(f"(loading the compiled loops, once per process: {cpu:.2f} s)")
             loaded = True
         _, c_paths, t_paths, m_paths = timed(paths_and_tail, dry, index, points, paths, bank,
