@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.signal import hilbert
 
-from sonicspec.acoustics.moving import render_path
+from sonicspec.acoustics.moving import PathSet, render_path
 from sonicspec.acoustics.theory import (
     moving_arrival_times,
     moving_point_source,
@@ -235,19 +235,15 @@ def test_paths_and_late_part_of_a_static_source_are_its_rir(kind: str) -> None:
         assert snr_db(whole[band], mine[band]) >= 60, (ch, snr_db(whole[band], mine[band]))
 
 
-def test_the_compiled_loop_is_the_vectorised_sum() -> None:
-    """render_path's compiled loop (a sinc table, a pointer over the arrival times) against
-    the vectorised sum it replaced, written out here: the same signal to 120 dB."""
-    from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
+def vectorised_path(dry: np.ndarray, path: np.ndarray, mic: np.ndarray, gain: np.ndarray,
+                    n_out: int) -> np.ndarray:
+    """One path's time-varying delay as the vectorised numpy sum the compiled loops replaced
+    (the naive reference of bench/bench_render_paths.py), written out here."""
+    from sonicspec.acoustics.theory import windowed_sinc
 
-    n = 2 * FS
-    dry = pink(n, seed=2)
-    path = walk([[-2.0, 0.0, 1.5], [2.0, 0.3, 1.4]], 1.5, n)
-    mic = np.array([0.0, 1.0, 1.5])
-    gain = np.linspace(1.0, 0.5, n)
-    ours = render_path(dry, path, mic, FS, speed_of_sound_m_s=C, gain=gain, n_out=n + 200)
+    n = dry.size
     t_a, r = moving_arrival_times(path, mic, n, FS, C)
-    tau, j, k = t_a * FS, np.arange(n + 200.0), np.arange(float(n))
+    tau, j, k = t_a * FS, np.arange(float(n_out)), np.arange(float(n))
     u = np.interp(j, tau, k)
     acc = np.zeros(j.size)
     base = np.floor(u).astype(np.int64)
@@ -256,9 +252,78 @@ def test_the_compiled_loop_is_the_vectorised_sum() -> None:
         ok = (m >= 0) & (m < n)
         acc[ok] += dry[m[ok]] * windowed_sinc(u[ok] - m[ok], 8, 6.0)
     heard = (j >= tau[0] - 8) & (j <= tau[-1] + 8)
-    ref = np.where(heard, acc * np.interp(u, k, gain / (4 * np.pi * r))
-                   * np.interp(j, tau, 1.0 / np.gradient(tau)), 0.0)
-    assert snr_db(ref, ours) >= 120
+    return np.where(heard, acc * np.interp(u, k, gain / (4 * np.pi * r))
+                    * np.interp(j, tau, 1.0 / np.gradient(tau)), 0.0)
+
+
+def test_the_compiled_loop_is_the_vectorised_sum() -> None:
+    """render_path's compiled loop (a sinc table phase by phase, a pointer over the arrival
+    times) against the vectorised sum it replaced: the same signal to 120 dB."""
+    n = 2 * FS
+    dry = pink(n, seed=2)
+    path = walk([[-2.0, 0.0, 1.5], [2.0, 0.3, 1.4]], 1.5, n)
+    mic = np.array([0.0, 1.0, 1.5])
+    gain = np.linspace(1.0, 0.5, n)
+    ours = render_path(dry, path, mic, FS, speed_of_sound_m_s=C, gain=gain, n_out=n + 200)
+    assert snr_db(vectorised_path(dry, path, mic, gain, n + 200), ours) >= 120
+
+
+def test_channels_that_differ_in_gain_are_the_vectorised_sum_each() -> None:
+    """The loop that renders one path for several channels at once (ambisonic channels, a
+    sphere-head ear and its shadowed part: one pass of arrivals and taps, a gain per
+    channel) against the vectorised sum of each channel alone, to 120 dB."""
+    from sonicspec.acoustics.moving import _render_into
+
+    n = 2 * FS
+    dry = pink(n, seed=5)
+    path = walk([[-2.0, 0.5, 1.5], [1.0, -0.5, 1.6], [2.5, 0.3, 1.4]], 1.5, n)
+    mic = np.array([0.0, 1.2, 1.4])
+    gains = np.stack([np.ones(n), np.linspace(1.0, -0.5, n), np.cos(np.arange(n) / FS)], 1)
+    ours = np.zeros((3, n + 200))
+    _render_into(dry, path, mic, FS, C, gains, ours)
+    for ch in range(3):
+        assert snr_db(vectorised_path(dry, path, mic, gains[:, ch], n + 200), ours[ch]) >= 120
+
+
+def test_directions_from_an_image_are_the_numpy_form() -> None:
+    """The compiled directions of arrival (the direction the image sees the source in,
+    mapped back by the path's mirrors) against numpy's normalise-and-multiply."""
+    from sonicspec.acoustics._moving_kernels import image_directions
+
+    rng = np.random.default_rng(8)
+    track = rng.uniform(-3, 3, (500, 3))
+    image = np.array([7.0, -1.0, 2.0])
+    mirror, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    ours = np.empty_like(track)
+    image_directions(track, image, mirror, ours)
+    away = track - image
+    assert np.allclose(ours, (away / np.linalg.norm(away, axis=1, keepdims=True)) @ mirror,
+                       rtol=0, atol=1e-14)
+
+
+def test_a_path_valid_over_part_of_the_walk_renders_what_the_whole_would() -> None:
+    """render_paths renders a path only over the emissions it is heard from (its band
+    factors are zero elsewhere), a few silent ones kept each side: the same signal as the
+    whole walk rendered, the band factors interpolated between the points in numpy."""
+    from sonicspec.acoustics.moving import render_paths
+
+    n = 2 * FS
+    dry = pink(n, seed=6)
+    points, paths, index, bank = engine_walk()
+    one = paths.select(paths.order == 0)
+    weights = one.weights.copy()
+    valid = (np.arange(len(points)) >= 3) & (np.arange(len(points)) <= 6)
+    weights[:, ~valid] = 0.0
+    weights[0, valid] *= np.outer(np.linspace(0.5, 1.0, 4), np.linspace(1.0, 0.3, bank.n_bands))
+    (ours,) = render_paths(dry, index, points, one.with_weights(weights), bank, n_out=n + 600,
+                           speed_of_sound_m_s=C)
+    at = np.arange(len(points), dtype=np.float64)
+    factors = np.stack([np.interp(index, at, weights[0, :, b]) for b in range(bank.n_bands)])
+    x = np.sum(factors * bank.split(dry), axis=0)
+    track = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
+    whole = render_path(x, track, one.images_m[0], FS, speed_of_sound_m_s=C, n_out=n + 600)
+    assert np.count_nonzero(x) < n / 2  # the path is silent over most of the walk
+    assert snr_db(whole, ours) >= 150
 
 
 @pytest.mark.parametrize("kind", ["ambisonics", "circular_array"])
@@ -304,3 +369,28 @@ def test_the_paths_of_a_walking_source_at_a_directional_receiver(kind: str) -> N
     for ch in range(exact.shape[0]):
         snr, dips = figures(exact[ch], ours[ch], n)
         assert snr >= 55 and dips["worst_db"] >= -0.1, (ch, snr, dips)
+
+
+def test_an_ambisonic_path_with_no_known_direction_between_two_points_stays_finite() -> None:
+    """Bug: where a path was valid at neither point around an emission, its interpolated
+    direction of arrival is zero, and the spherical harmonics of 0 / 0 made the whole
+    ambisonic render NaN (directions interpolated: no microphone position to recover the
+    mirrors from). Now those emissions, silent anyway, get zero gain: the W channel is the
+    mono render of the same paths."""
+    from sonicspec.acoustics.moving import Receiver, render_paths
+
+    n = 2 * FS
+    dry = pink(n, seed=9)
+    points, paths, index, bank = engine_walk({"kind": "ambisonics", "order": 1, "yaw_deg": 0.0,
+                                              "pitch_deg": 0.0,
+                                              "trajectory": {"kind": "static"}})
+    weights, directions = paths.weights.copy(), paths.directions.copy()
+    weights[paths.order == 2, :5] = 0.0
+    directions[paths.order == 2, :5] = 0.0
+    partly = PathSet(paths.images_m, weights, paths.order, directions)
+    foa = render_paths(dry, index, points, partly, bank, n_out=n + 1200, speed_of_sound_m_s=C,
+                       receiver=Receiver("ambisonics", order=1))
+    (mono,) = render_paths(dry, index, points, partly, bank, n_out=n + 1200,
+                           speed_of_sound_m_s=C)
+    assert np.all(np.isfinite(foa))
+    assert snr_db(mono, foa[0]) >= 150

@@ -30,9 +30,11 @@ import numpy as np
 
 from sonicspec.acoustics._moving_kernels import (
     TABLE_STEPS,
+    accumulate_channels,
     accumulate_path,
     fixed_receiver_arrivals,
     gradient_inverse,
+    image_directions,
     weighted_bands,
 )
 from sonicspec.acoustics.arrivals import KIND_DIFFRACTED, Arrivals
@@ -77,12 +79,8 @@ def render_path(dry, source_m, receiver_m, sample_rate_hz: float, *,
     fs = float(sample_rate_hz)
     receiver = np.asarray(receiver_m, dtype=np.float64)
     if receiver.shape == (3,):  # a receiver that stays put: arrivals in one compiled pass
-        track = np.ascontiguousarray(np.broadcast_to(
-            np.asarray(source_m, dtype=np.float64), (s.size, 3)))
-        extra = np.zeros(1) if extra_delay_s is None else np.ascontiguousarray(
-            np.broadcast_to(np.asarray(extra_delay_s, dtype=np.float64), s.shape))
-        tau, r = np.empty(s.size), np.empty(s.size)
-        fixed_receiver_arrivals(track, receiver, fs, float(speed_of_sound_m_s), extra, tau, r)
+        tau, r = _fixed_arrivals(s.size, source_m, receiver, fs, speed_of_sound_m_s,
+                                 extra_delay_s)
     else:
         t_a, r = moving_arrival_times(source_m, receiver_m, s.size, fs, speed_of_sound_m_s)
         if extra_delay_s is not None:
@@ -125,7 +123,7 @@ def _delay_line(s: np.ndarray, tau: np.ndarray, r: np.ndarray, gain, n_out: int 
     density = np.empty(s.size)
     gradient_inverse(np.ascontiguousarray(tau), density)
     accumulate_path(s, np.ascontiguousarray(tau), density, np.ascontiguousarray(amp),
-                    _sinc_table(half_width, beta), half_width, out)
+                    *_sinc_table(half_width, beta), out)
     return out
 
 
@@ -146,14 +144,77 @@ def _length_at(lengths: np.ndarray, index: np.ndarray) -> np.ndarray:
     return CubicSpline(at.astype(np.float64), lengths[at])(where)
 
 
+def _fixed_arrivals(n: int, source_m, receiver_m: np.ndarray, fs: float,
+                    speed_of_sound_m_s: float, extra_delay_s) -> tuple[np.ndarray, np.ndarray]:
+    """Arrival (output samples) and distance of each of ``n`` emissions from ``source_m``
+    (``(3,)`` or ``(n, 3)``) to a receiver that does not move, ``extra_delay_s`` added."""
+    track = np.ascontiguousarray(np.broadcast_to(
+        np.asarray(source_m, dtype=np.float64), (n, 3)))
+    extra = np.zeros(1) if extra_delay_s is None else np.ascontiguousarray(
+        np.broadcast_to(np.asarray(extra_delay_s, dtype=np.float64), (n,)))
+    tau, r = np.empty(n), np.empty(n)
+    fixed_receiver_arrivals(track, receiver_m, fs, float(speed_of_sound_m_s), extra, tau, r)
+    return tau, r
+
+
+def _render_into(x: np.ndarray, source_m, image_m: np.ndarray, fs: float,
+                 speed_of_sound_m_s: float, gains, out: np.ndarray, *,
+                 extra_delay_s=None) -> None:
+    """:func:`render_path` of one path to a receiver that does not move, added to ``out``
+    in place (no output of its own to allocate and add: the render stage's signals are
+    minutes long). ``out`` ``(n_out,)`` with ``gains`` a float or ``(n,)``; or ``(C, n_out)``
+    for channels that differ only in gain, ``gains`` ``(n, C)`` or ``(1, C)`` per emission:
+    the arrivals and the sinc's taps once for all channels."""
+    tau, r = _fixed_arrivals(x.size, source_m, image_m, fs, speed_of_sound_m_s, extra_delay_s)
+    if np.min(r) <= 0:
+        raise AcousticsError("source_m: the source passes through the receiver (r = 0)")
+    density = np.empty(x.size)
+    gradient_inverse(tau, density)
+    r *= 4 * np.pi
+    phase, slope = _sinc_table(HALF_WIDTH, KAISER_BETA)
+    if out.ndim == 1:
+        amp = np.divide(np.asarray(gains, dtype=np.float64), r, out=r)
+        accumulate_path(x, tau, density, amp, phase, slope, out)
+    else:
+        amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0])) / r[:, None])
+        accumulate_channels(x, tau, density, amp, phase, slope, out)
+
+
+def _render_length_into(x: np.ndarray, length_m: np.ndarray, fs: float,
+                        speed_of_sound_m_s: float, gains, out: np.ndarray, *,
+                        extra_delay_s=None) -> None:
+    """:func:`render_length_path` added to ``out`` in place (as :func:`_render_into`): a
+    path bent round an edge, its length given at each emission."""
+    length = np.ascontiguousarray(np.broadcast_to(np.asarray(length_m, dtype=np.float64),
+                                                  x.shape))
+    extra = 0.0 if extra_delay_s is None else np.asarray(extra_delay_s, dtype=np.float64)
+    tau = np.ascontiguousarray(np.arange(x.size) + (length / speed_of_sound_m_s + extra) * fs)
+    density = np.empty(x.size)
+    gradient_inverse(tau, density)
+    r = 4 * np.pi * length
+    phase, slope = _sinc_table(HALF_WIDTH, KAISER_BETA)
+    if out.ndim == 1:
+        accumulate_path(x, tau, density, np.ascontiguousarray(
+            np.broadcast_to(np.asarray(gains, dtype=np.float64), x.shape) / r), phase, slope,
+                        out)
+    else:
+        amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0])) / r[:, None])
+        accumulate_channels(x, tau, density, amp, phase, slope, out)
+
+
 @functools.lru_cache(maxsize=8)
-def _sinc_table(half_width: int, beta: float) -> np.ndarray:
-    """The windowed sinc on ``[-half, half]`` at ``TABLE_STEPS`` points per sample (and one
-    zero beyond, so the kernel's linear interpolation may read past the end)."""
-    x = np.arange(2 * half_width * TABLE_STEPS + 2) / TABLE_STEPS - half_width
-    table = windowed_sinc(x, half_width, beta)
-    table.setflags(write=False)
-    return table
+def _sinc_table(half_width: int, beta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The windowed sinc at ``TABLE_STEPS`` fractional parts per sample, phase by phase:
+    ``phase[p, t]`` the tap at offset ``t + 1 − half`` from ``floor(u)`` for the fractional
+    part ``p / TABLE_STEPS`` of ``u``, and ``slope[p] = phase[p + 1] − phase[p]`` (the
+    kernel's linear interpolation between phases), each ``(TABLE_STEPS, 2·half)``."""
+    fraction = np.arange(TABLE_STEPS + 1)[:, None] / TABLE_STEPS
+    offsets = np.arange(1 - half_width, half_width + 1)[None, :]
+    taps = windowed_sinc(fraction - offsets, half_width, beta)
+    phase, slope = np.ascontiguousarray(taps[:-1]), np.ascontiguousarray(np.diff(taps, axis=0))
+    phase.setflags(write=False)
+    slope.setflags(write=False)
+    return phase, slope
 
 
 # --------------------------------------------------------------------------- a source's paths
@@ -445,10 +506,11 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     """The early part heard from a source walking through its RIR points, ``(channels,
     n_out)``.
 
-    Every path of ``paths`` is rendered by :func:`render_path` from the source's position at
-    each emission (``points_m`` read at the fractional ``point_index`` of each dry sample) to
-    its fixed image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift
-    are exact at every sample. Its band factors are read at the same fractional index (a
+    Every path of ``paths`` is rendered as :func:`render_path` renders it (added in place,
+    over the emissions it is heard from) from the source's position at each emission
+    (``points_m`` read at the fractional ``point_index`` of each dry sample) to its fixed
+    image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift are exact
+    at every sample. Its band factors are read at the same fractional index (a
     path that becomes invalid between two points fades over that stretch) and applied to the
     dry signal's octave bands (``bank.split``, which sums back to the signal) at emission.
     A directional ``receiver`` needs each path's direction of arrival at the microphone: from
@@ -519,68 +581,83 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         w = paths.weights[k]  # (N, B)
         if not np.any(w):
             continue
+        # Only the emissions the path is heard from (one valid over part of the walk is
+        # rendered over that part): output j of the part is sample start + j of the whole.
+        start, stop = (0, s.size) if static else _heard(w, lo, hi)
+        if start >= min(stop, n_out):
+            continue
+        part = slice(start, stop)
         if static:
             at_point = int(np.rint(index[0]))
             x = w[at_point] @ band_dry
         else:  # band factors at each emission, linear between points
-            x = np.empty(s.size)
-            weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
-        source = track[0] if static else track
+            x = np.empty(stop - start)
+            weighted_bands(band_dry[:, part], np.ascontiguousarray(w), lo[part], hi[part],
+                           frac[part], x)
+        source = track[0] if static else track[part]
         edge = paths.lengths_m is not None and bool(np.isnan(paths.images_m[k, 0]))
-        length = _length_at(paths.lengths_m[k], index) if edge else None
+        length = _length_at(paths.lengths_m[k], index[part]) if edge else None
 
-        def path(gain=1.0, extra_delay_s=None, x=x, source=source, k=k, length=length):
+        def path(into, gains=1.0, extra_delay_s=None, x=x, source=source, k=k, image=None,
+                 length=length):
             if length is not None:  # bent round an edge: its length read between points
-                return render_length_path(x, length, bank.sample_rate_hz,
-                                          speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out,
-                                          gain=gain, extra_delay_s=extra_delay_s)
-            return render_path(x, source, paths.images_m[k], bank.sample_rate_hz,
-                               speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out, gain=gain,
-                               extra_delay_s=extra_delay_s)
+                _render_length_into(x, length, bank.sample_rate_hz, speed_of_sound_m_s, gains,
+                                    into, extra_delay_s=extra_delay_s)
+                return
+            _render_into(x, source, paths.images_m[k] if image is None else image,
+                         bank.sample_rate_hz, speed_of_sound_m_s, gains, into,
+                         extra_delay_s=extra_delay_s)
 
         if receiver.kind == "mono":
-            out[0] += path()
+            path(out[0, start:])
             continue
         mirror = None if edge else _image_map(paths, k, points, receiver.center_m)
-        if mirror is not None:  # exact: the direction the image sees the source in, mapped back
-            away = np.atleast_2d(source) - paths.images_m[k]
-            d = (away / np.linalg.norm(away, axis=1, keepdims=True)) @ mirror
+        if receiver.kind == "array" and mirror is not None:
+            d = None  # each capsule hears its own image: no direction needed
+        elif mirror is not None:  # exact: the direction the image sees the source in, mapped back
+            away = np.atleast_2d(source)
+            d = np.empty(away.shape)
+            image_directions(away, paths.images_m[k], mirror, d)
         else:
-            d = _directions_at(paths.directions[k], lo, hi, frac, static)
-        if receiver.kind == "hrir":
+            d = _directions_at(paths.directions[k], lo[part], hi[part], frac[part], static)
+        if receiver.kind in ("hrir", "ambisonics") and (receiver.yaw_deg is not None
+                                                        or receiver.pitch_deg):
             from sonicspec.acoustics.receivers import rotation
 
-            local = d @ rotation(float(receiver.yaw_deg or 0.0), receiver.pitch_deg)
-            _hrir_accumulate(hrir_buffers, path(), local, receiver)
+            # into the microphone's frame (einsum, not BLAS: its threads fight other jobs)
+            d = np.einsum("ij,jk->ik", d, rotation(float(receiver.yaw_deg or 0.0),
+                                                   receiver.pitch_deg))
+        if receiver.kind == "hrir":
+            heard = np.zeros(n_out)
+            path(heard[start:])
+            _hrir_accumulate(hrir_buffers, heard, d, receiver, offset=start)
         elif receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
-            if receiver.yaw_deg is not None or receiver.pitch_deg:  # the microphone's frame
-                from sonicspec.acoustics.receivers import rotation
-
-                d = d @ rotation(float(receiver.yaw_deg or 0.0), receiver.pitch_deg)
-            gains = sh_sn3d(receiver.order, d)  # (T or 1, channels)
-            for ch in range(receiver.channels):
-                out[ch] += path(gain=gains[:, ch] if not static else float(gains[0, ch]))
+            # No direction is known where the path is silent at the points either side (a
+            # zero row): gains 0 there, not the spherical harmonics of 0 / 0.
+            known = np.any(d != 0, axis=1, keepdims=True)
+            gains = sh_sn3d(receiver.order, np.where(known, d, 1.0)) * known
+            path(out[:, start:], gains)
         elif receiver.kind == "sphere_head":
             from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
 
             for ear, axis in enumerate(receiver.ear_axes):
-                cos_t = d @ axis
+                cos_t = np.einsum("ij,j->i", d, axis)  # not BLAS, whose threads fight other jobs
                 delay = np.broadcast_to(woodworth_delays_s(
-                    cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), s.shape)
-                alpha = np.broadcast_to(shadow_alpha(cos_t), s.shape)
-                out[ear] += path(extra_delay_s=delay)
-                shaded[ear] += path(gain=alpha, extra_delay_s=delay)
+                    cos_t, receiver.head.head_radius_m, speed_of_sound_m_s), x.shape)
+                both = np.zeros((2, n_out - start))  # the ear, and its α-weighted part
+                path(both, np.stack(np.broadcast_arrays(1.0, shadow_alpha(cos_t)), axis=-1),
+                     extra_delay_s=delay)
+                out[ear, start:] += both[0]
+                shaded[ear, start:] += both[1]
         else:
             for m, offset in enumerate(receiver.offsets_m):
                 if mirror is not None:  # the capsule's own image: exact
-                    out[m] += render_path(x, source, paths.images_m[k] + mirror @ offset,
-                                          bank.sample_rate_hz,
-                                          speed_of_sound_m_s=speed_of_sound_m_s, n_out=n_out)
+                    path(out[m, start:], image=paths.images_m[k] + mirror @ offset)
                 else:
-                    lead = -(d @ offset) / speed_of_sound_m_s
-                    out[m] += path(extra_delay_s=np.broadcast_to(lead, s.shape))
+                    lead = -np.einsum("ij,j->i", d, offset) / speed_of_sound_m_s
+                    path(out[m, start:], extra_delay_s=np.broadcast_to(lead, x.shape))
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
 
@@ -601,10 +678,11 @@ _HRIR_STEP = 32
 
 
 def _hrir_accumulate(buffers: dict[int, np.ndarray], y: np.ndarray, local: np.ndarray,
-                     receiver: Receiver) -> None:
+                     receiver: Receiver, offset: int = 0) -> None:
     """Add one path heard at the head's centre (``y``) to the buffer of each measured
     direction, weighted by :func:`~sonicspec.acoustics.hrtf.hrir_weights` of its direction
-    in the head's frame (``local``: one, or one per sample, read at the output sample)."""
+    in the head's frame (``local``: one, or one per sample from sample ``offset`` on, read
+    at the output sample; held beyond)."""
     from sonicspec.acoustics.hrtf import hrir_weights
 
     n = y.size
@@ -616,7 +694,7 @@ def _hrir_accumulate(buffers: dict[int, np.ndarray], y: np.ndarray, local: np.nd
     if at[-1] != len(local) - 1:
         at = np.append(at, len(local) - 1)
     for m, w in hrir_weights(receiver.hrirs, local[at], receiver.hrir_radius_rad).items():
-        buffers[m] = buffers.get(m, 0.0) + np.interp(np.arange(n), at, w) * y
+        buffers[m] = buffers.get(m, 0.0) + np.interp(np.arange(n), at + offset, w) * y
 
 
 def _hrir_filtered(buffers: dict[int, np.ndarray], receiver: Receiver, n_out: int
@@ -629,6 +707,20 @@ def _hrir_filtered(buffers: dict[int, np.ndarray], receiver: Receiver, n_out: in
         for ear in range(2):
             out[ear] += oaconvolve(x, receiver.hrirs.hrirs[m, ear])[:n_out]
     return out
+
+
+def _heard(weights: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[int, int]:
+    """The emissions ``[start, stop)`` a path is heard from: where its band factors at the
+    points either side (``weights[lo]``, ``weights[hi]``) are not all zero, widened by the
+    sinc's reach and two samples, so the silent emissions kept at each end cover every
+    output sample the path reaches (and the one-sided arrival density at the ends of the
+    part) and the part renders what the whole would."""
+    valid = np.any(weights != 0, axis=1)
+    heard = np.flatnonzero(valid[lo] | valid[hi])
+    if heard.size == 0:
+        return 0, 0
+    reach = HALF_WIDTH + 2
+    return max(int(heard[0]) - reach, 0), min(int(heard[-1]) + 1 + reach, lo.size)
 
 
 def _image_map(paths: PathSet, k: int, points: np.ndarray, center_m) -> np.ndarray | None:
@@ -803,7 +895,8 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         elif receiver.kind == "ambisonics":
             from sonicspec.acoustics.receivers import sh_sn3d
 
-            gains = sh_sn3d(receiver.order, local)
+            known = np.any(local != 0, axis=1, keepdims=True)  # zero: silent there (edges)
+            gains = sh_sn3d(receiver.order, np.where(known, local, 1.0)) * known
             for ch in range(receiver.channels):
                 out[ch] += heard(mic, gain=gains[:, ch])
         elif receiver.kind == "sphere_head":

@@ -37,7 +37,7 @@ STEPS: tuple[Step, ...] = (
     Step("placement", 2, 1, 2000, 10, "mic, sources and trajectories per group"),
     Step("arrange", 1, 1, 2000, 10, "utterances and clips per track"),
     Step("rir", 16, 1, 4000, 60, "room impulse responses along every trajectory"),
-    Step("render", 1, 1, 4000, 30, "moving-source convolution of every track"),
+    Step("render", 2, 1, 4000, 30, "moving-source convolution of every track"),
     Step("mix", 2, 1, 4000, 10, "loudness normalisation and task mixtures"),
     Step("export", 4, 1, 2000, 10, "audio files and metadata per group"),
     Step("dataset", 2, 1, 2000, 10, "dataset.json and manifests"),
