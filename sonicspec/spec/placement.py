@@ -36,7 +36,8 @@ class PlacementSpec(SpecModel):
         ge=0,
         description="Smallest distance between the microphone and any point of a moving "
         "source's path, metres (the distance ranges bound only a path's start and end; a "
-        "shortest path between them can pass right by the microphone).",
+        "shortest path between them can pass right by the microphone). A moving microphone: "
+        "from where it starts; the rir step refuses a source within 0.1 m of it at any time.",
     )
     same_floor: bool = Field(
         True, description="Keep mic and all sources on one floor (level) of the building."
