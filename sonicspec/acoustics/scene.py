@@ -133,6 +133,8 @@ class AcousticScene:
         #: Largest transmission coefficient of any face and band.
         self.max_transmission = float(self.transmission.max())
         self.has_transmission = self.max_transmission > 0
+        #: Faces that transmit nothing in any band (a walk through surfaces stops there).
+        self._opaque = ~np.any(self.transmission > 0, axis=1)
         self._memo: dict[str, object] = {}
 
         self._embree = rtcore_scene.EmbreeScene()
@@ -281,11 +283,15 @@ class AcousticScene:
         return (res != -1) & (tfar > 0)
 
     def crossings(
-        self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64
+        self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64,
+        stop_at_opaque: bool = False,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Every surface crossed strictly between origins and targets.
 
         Repeated first-hit queries, each restarting ``eps_m`` beyond the previous hit.
+        ``stop_at_opaque``: a segment's walk ends at the first surface that transmits nothing
+        in any band (its crossings up to there are returned: enough for a product of ``τ``,
+        which that surface makes 0).
 
         Returns
         -------
@@ -318,9 +324,13 @@ class AcousticScene:
             crossed = (face >= 0) & (dist < _EMBREE_MISS)
             crossed &= travelled[live] + dist < length[live] - self.eps_m
             live = live[crossed]
+            hit = face[crossed].astype(np.int64)
             seg_out.append(live)
-            face_out.append(face[crossed].astype(np.int64))
+            face_out.append(hit)
             travelled[live] += dist[crossed] + self.eps_m
+            if stop_at_opaque:
+                go_on = ~self._opaque[hit]
+                live = live[go_on]
         else:
             if live.size:
                 raise AcousticsError(
@@ -354,7 +364,7 @@ class AcousticScene:
     def crossed_transmission(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """``Π τ`` per band over the surfaces each segment crosses, walked surface by surface
         (no occlusion screen: for segments already known to be blocked), ``(n, n_bands)``."""
-        seg, face = self.crossings(origins, targets)
+        seg, face = self.crossings(origins, targets, stop_at_opaque=True)
         # log-sum keeps the product order-independent and exact zeros exact.
         with np.errstate(divide="ignore"):
             log_tau = np.log(self.transmission[face])
