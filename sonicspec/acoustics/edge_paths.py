@@ -398,9 +398,18 @@ def _second_order(scene, edges, pairs, sources, receiver, bands, air, c, refl0, 
     s = sources[src_i]
     r = np.broadcast_to(receiver, s.shape)
     a2 = 0.5 * (edges.start[e2] + edges.end[e2])
+    a1, z1, z2 = np.empty_like(a2), np.empty(len(a2)), np.empty(len(a2))
+    live = np.arange(len(a2))
     for _ in range(_APEX_ITERATIONS):
-        a1, z1 = _apex(edges, e1, s, a2)
-        a2, z2 = _apex(edges, e2, a1, r)
+        # A path whose second apex did not move is at its fixed point: later rounds would
+        # give it the same apexes, so it leaves the iteration (parallel edges: after one).
+        b1, y1 = _apex(edges, e1[live], s[live], a2[live])
+        b2, y2 = _apex(edges, e2[live], b1, r[live])
+        moved = np.any(b2 != a2[live], axis=1)
+        a1[live], z1[live], a2[live], z2[live] = b1, y1, b2, y2
+        live = live[moved]
+        if not live.size:
+            break
     _, th_in1, _ = _cylindrical(edges, e1, s)
     _, th_out1, _ = _cylindrical(edges, e1, a2)
     _, th_in2, _ = _cylindrical(edges, e2, a1)
