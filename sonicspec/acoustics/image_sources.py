@@ -372,17 +372,18 @@ def image_sources(
     candidates = _CandidateTest(normals, regions.plane_d, tol, reach, counts)
 
     per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
-    # The image tree, one order at a time: chain[i, j] is the image after j+1 reflections,
-    # planes[i, j] the region of reflection j+1, side[i] the side (0 front, 1 back) of the last
-    # plane on which the pre-image lies (where the reflected sound goes).
-    chain = np.zeros((1, 0, 3))
-    planes = np.zeros((1, 0), dtype=np.int64)
+    # The image tree, one order at a time: levels[k] holds the images after k+1 reflections
+    # (their parent's row in levels[k-1], their position, the region of reflection k+1);
+    # side[i] is the side (0 front, 1 back) of the last plane on which the pre-image lies
+    # (where the reflected sound goes). Whole chains are built only for the images whose
+    # paths are backtracked (:func:`_chains`).
+    levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     side = np.zeros(1, dtype=np.int64)
     last_pos = src[None, :]
     completed = 0
     for order in range(1, max_order + 1):
         # Candidates (parent image, region), compiled: at most min(pairs, limit) rows.
-        last_plane = planes[:, -1] if order > 1 else None
+        last_plane = levels[-1][2] if order > 1 else None
         count = max_candidates + 1  # decided without building the images
         if not _provably_too_many(candidates, last_pos, last_plane, side, receivers,
                                   max_path_length_m, max_candidates):
@@ -406,8 +407,7 @@ def image_sources(
             break
         parent, plane, new_pos, new_side = (x[:count] for x in (parent, plane, new_pos,
                                                                  new_side))
-        chain = np.concatenate([chain[parent], new_pos[:, None, :]], axis=1)
-        planes = np.concatenate([planes[parent], plane[:, None]], axis=1)
+        levels.append((parent, new_pos, plane))
         side, last_pos = new_side, new_pos
         completed = order
         if len(last_pos) == 0:
@@ -417,8 +417,7 @@ def image_sources(
             regions,
             src,
             receivers,
-            chain,
-            planes,
+            levels,
             side,
             air,
             speed_of_sound_m_s,
@@ -487,33 +486,55 @@ def _provably_too_many(
         receivers, -1.0 if max_path_length_m is None else float(max_path_length_m), limit))
 
 
+def _chains(levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]], rows: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The images ``chain (n, order, 3)`` after each reflection and the regions ``planes (n,
+    order)`` reflected in, of the images ``rows`` of the last level, followed back through
+    their parents."""
+    order = len(levels)
+    chain = np.empty((len(rows), order, 3))
+    planes = np.empty((len(rows), order), dtype=np.int64)
+    for j in range(order - 1, -1, -1):
+        parent, pos, plane = levels[j]
+        chain[:, j] = pos[rows]
+        planes[:, j] = plane[rows]
+        rows = parent[rows]
+    return chain, planes
+
+
 def _validate_order(
     scene: AcousticScene,
     regions: PlanarRegions,
     src: np.ndarray,
     receivers: np.ndarray,
-    chain: np.ndarray,
-    planes: np.ndarray,
+    levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     side: np.ndarray,
     air: np.ndarray,
     c: float,
     max_path_length_m: float | None,
     per_receiver: list[list[Arrivals]],
 ) -> None:
-    """Backtrack every (image, receiver) pair of one order; append the valid arrivals."""
-    n_img, order = planes.shape
+    """Backtrack every (image, receiver) pair of one order (the last of ``levels``); append
+    the valid arrivals."""
+    _, last_pos, last_plane = levels[-1]
+    n_img = len(last_pos)
     normals, plane_d = regions.normals, regions.plane_d
     # A compiled prefilter drops most pairs (a superset of the valid ones is kept); the exact
     # tests below then decide on the rest, as they would on all of them.
     keep = np.empty(n_img * len(receivers), dtype=bool)
     KI.last_reflection_prefilter(
-        receivers, np.ascontiguousarray(chain[:, -1]), np.ascontiguousarray(planes[:, -1]),
+        receivers, np.ascontiguousarray(last_pos), np.ascontiguousarray(last_plane),
         side.astype(np.int64), normals, plane_d, scene.eps_m,
         -1.0 if max_path_length_m is None else float(max_path_length_m),
         _region_boxes(scene, regions), regions.region_start, regions.region_faces,
         scene.faces, scene.vertices, _MAX_TRIANGLES_FOR_BARYCENTRIC, keep)
     pairs = np.flatnonzero(keep)
     img, rcv = pairs // len(receivers), pairs % len(receivers)
+    # From here on, images are rows of the chains of those the prefilter kept.
+    kept, img = np.unique(img, return_inverse=True)
+    chain, planes = _chains(levels, kept)
+    side = side[kept]
+    order = len(levels)
     # The receiver must be on the side the last reflection sends sound to.
     dist_r = (
         np.einsum("ij,ij->i", receivers[rcv], normals[planes[img, -1]]) - plane_d[planes[img, -1]]
