@@ -842,9 +842,16 @@ def _visible_air(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
     dirs, solid = _cube_cells(n_cells)
     depth = _hit_distances(scene, receivers, dirs)
     volume = np.empty((len(receivers), n_radii))
-    for k in range(len(receivers)):  # per receiver: (radii × cells) stays small
-        reach = np.minimum(depth[k][None, :], np.linspace(0.0, cap[k], n_radii)[:, None])
-        volume[k] = (reach**3 @ solid) / 3.0
+    for k in range(len(receivers)):
+        # Cells sorted by depth: within r, the nearer ones count their whole cone (running
+        # sums of ΔΩ·d³) and the rest a cone cut at r (r³ × the rest of their ΔΩ).
+        order = np.argsort(depth[k], kind="stable")
+        d, w = depth[k][order], solid[order]
+        near = np.concatenate([[0.0], np.cumsum(w * np.where(np.isfinite(d), d, 0.0) ** 3)])
+        seen = np.concatenate([[0.0], np.cumsum(w)])
+        radii = np.linspace(0.0, cap[k], n_radii)
+        j = np.searchsorted(d, radii, side="left")  # cells nearer than each radius
+        volume[k] = (near[j] + radii**3 * (seen[-1] - seen[j])) / 3.0
     return depth, volume
 
 
