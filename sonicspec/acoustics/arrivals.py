@@ -208,6 +208,8 @@ class EnergyHistogram:
         lo, hi = np.maximum(k - half, 0), np.minimum(k + half, n - 1)
 
         def mean(x: np.ndarray) -> np.ndarray:
+            if x.size and np.isnan(x).all():  # direction sums not traced: NaN they stay
+                return x
             # Window sums from running sums: a window of empty bins subtracts two equal sums,
             # so it stays exactly 0 (the RIR ends at the last bin with energy), and running
             # sums of energies never decrease, so no energy goes below 0.

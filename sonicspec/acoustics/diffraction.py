@@ -43,6 +43,7 @@ of a diffracted wave far from the boundaries is dropped (a band amplitude carrie
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -132,13 +133,22 @@ def kp_real(k, open_angle, theta_s, theta_r, distance_l, sin_beta0, reflection0=
     return out
 
 
+@functools.cache
+def _legendre_rule() -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre nodes and weights on [−1, 1] (read-only; computed once)."""
+    x, w = np.polynomial.legendre.leggauss(NODES_PER_BAND)
+    x.setflags(write=False)
+    w.setflags(write=False)
+    return x, w
+
+
 def band_nodes_hz(bands_hz) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies ``(n_bands, NODES_PER_BAND)`` and weights (summing to 1 per band) of the
     Gauss–Legendre rule over each octave band ``[f/√2, f√2]`` in linear frequency."""
     centres = np.asarray(bands_hz, dtype=np.float64).reshape(-1)
     if centres.size == 0 or np.any(~np.isfinite(centres)) or np.any(centres <= 0):
         raise AcousticsError(f"bands_hz: expected positive band centres, got {bands_hz!r}")
-    x, w = np.polynomial.legendre.leggauss(NODES_PER_BAND)
+    x, w = _legendre_rule()
     lo, hi = centres / math.sqrt(2), centres * math.sqrt(2)
     f = 0.5 * (hi - lo)[:, None] * x[None, :] + 0.5 * (hi + lo)[:, None]
     return f, np.broadcast_to(w / 2, f.shape)

@@ -51,22 +51,30 @@ REFLECTORS = 12
 def _cylindrical(edges: DiffractingEdges, idx: np.ndarray, x: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(r, θ, z)`` of points ``x`` about edges ``idx`` (broadcast), z from the edge start."""
-    d = x - edges.start[idx]
+    r, z, radial = _radial(edges, idx, x)
     e, f0 = edges.direction[idx], edges.face0[idx]
-    z = np.einsum("...i,...i->...", d, e)
-    radial = d - z[..., None] * e
-    r = np.linalg.norm(radial, axis=-1)
     th = np.arctan2(np.einsum("...i,...i->...", np.cross(f0, radial), e),
                     np.einsum("...i,...i->...", f0, radial)) % (2 * math.pi)
     th = np.where(th > 2 * math.pi - 1e-9, 0.0, th)  # on face 0's plane, from the air side
     return r, th, z
 
 
+def _radial(edges: DiffractingEdges, idx: np.ndarray, x: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(r, z, radial vector)`` of points ``x`` about edges ``idx``: :func:`_cylindrical`
+    without the angle."""
+    d = x - edges.start[idx]
+    e = edges.direction[idx]
+    z = np.einsum("...i,...i->...", d, e)
+    radial = d - z[..., None] * e
+    return np.linalg.norm(radial, axis=-1), z, radial
+
+
 def _apex(edges: DiffractingEdges, idx: np.ndarray, a: np.ndarray, b: np.ndarray
           ) -> tuple[np.ndarray, np.ndarray]:
     """The stationary point on edge ``idx``'s line of a path a → edge → b; and its z."""
-    ra, _, za = _cylindrical(edges, idx, a)
-    rb, _, zb = _cylindrical(edges, idx, b)
+    ra, za, _ = _radial(edges, idx, a)
+    rb, zb, _ = _radial(edges, idx, b)
     z = za + (zb - za) * ra / np.maximum(ra + rb, 1e-300)
     return edges.start[idx] + z[..., None] * edges.direction[idx], z
 
@@ -225,13 +233,14 @@ _ID_BITS = 20
 
 
 def path_ids(kind: int, edge1: np.ndarray, edge2: np.ndarray | None = None,
-             region: int | None = None) -> np.ndarray:
+             region=None) -> np.ndarray:
     """The :attr:`~sonicspec.acoustics.arrivals.Arrivals.path_id` of diffracted paths: the
     same for one geometric path (its edges, its reflector) wherever its ends are."""
     e1 = np.asarray(edge1, dtype=np.int64)
     e2 = np.full_like(e1, -1) if edge2 is None else np.asarray(edge2, dtype=np.int64)
-    r = -1 if region is None else int(region)
-    if e1.size and (max(e1.max(), e2.max(), r) + 1 >= 1 << _ID_BITS):
+    r = np.full_like(e1, -1) if region is None else np.broadcast_to(
+        np.asarray(region, dtype=np.int64), e1.shape)
+    if e1.size and (max(e1.max(), e2.max(), r.max()) + 1 >= 1 << _ID_BITS):
         raise AcousticsError(f"edges: path ids hold at most {1 << _ID_BITS} edges and regions")
     return (kind + 8 * (e1 + 1) + (8 << _ID_BITS) * (e2 + 1)
             + (8 << 2 * _ID_BITS) * (r + 1)).astype(np.int64)
@@ -293,14 +302,11 @@ def _first_order(scene, edges, sources, receiver, bands, air, c, refl0, refl1, p
               path_ids(_FIRST, cand["edge"][sel]))
 
 
-def _mirror(points: np.ndarray, normal: np.ndarray, d: float) -> np.ndarray:
-    return points - 2 * (points @ normal - d)[:, None] * normal[None, :]
-
-
-def _on_region(scene: AcousticScene, regions, region: int, origin: np.ndarray,
+def _on_region(scene: AcousticScene, regions, region: np.ndarray, origin: np.ndarray,
                target: np.ndarray) -> np.ndarray:
-    """Whether the first surface from ``origin`` towards ``target`` is region ``region``, hit
-    at ``target`` (the reflection point lies on the region and the leg to it is clear)."""
+    """Whether the first surface from ``origin`` towards ``target`` is region ``region`` (one
+    per row, or one for all), hit at ``target`` (the reflection point lies on the region and
+    the leg to it is clear)."""
     vec = target - origin
     dist = np.linalg.norm(vec, axis=1)
     face, hit = scene.intersect(origin, vec / np.maximum(dist, 1e-300)[:, None])
@@ -311,65 +317,87 @@ def _on_region(scene: AcousticScene, regions, region: int, origin: np.ndarray,
 def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver, bands, air,
                            c, refl0, refl1, parts) -> None:
     """Paths with one specular reflection before or after the edge (its image-source path
-    bent into the shadow: what keeps a floor reflection continuous where an edge hides it)."""
-    rcv = np.broadcast_to(receiver, sources.shape)
-    for region in reflectors:
-        n, d = regions.normals[region], regions.plane_d[region]
-        gain = np.sqrt(regions.reflection_energy[region])
-        if not np.any(gain > 0):
+    bent into the shadow: what keeps a floor reflection continuous where an edge hides it).
+
+    (a) source → reflector → edge → receiver: the image source over the edge; (b) source →
+    edge → reflector → receiver: the edge seen in the reflector. Every reflector's candidates
+    go through each test together (one Embree call per test, one amplitude evaluation), in
+    rows ordered by reflector, source and edge."""
+    normals, plane_d = regions.normals[reflectors], regions.plane_d[reflectors]
+    gains = np.sqrt(regions.reflection_energy[reflectors])
+    live = np.any(gains > 0, axis=1)
+    rcv_front = receiver @ normals.T - plane_d > _ON_EDGE_TOL_M  # (R,)
+    # (a): every (reflector, source in front of it) pair, the source mirrored in it
+    src_side = sources @ normals.T - plane_d[None, :]  # (S, R)
+    refl_a, src_a = np.nonzero((src_side > _ON_EDGE_TOL_M).T & (live & rcv_front)[:, None])
+    image = _mirror_rows(sources[src_a], normals[refl_a], plane_d[refl_a])
+    cand = _over_edges(edges, image, np.broadcast_to(receiver, image.shape), 4 * scene.eps_m)
+    row = cand["pair"]
+    ok, point = _plane_point_rows(image[row], cand["apex"], normals[refl_a[row]],
+                                  plane_d[refl_a[row]])
+    keep = np.flatnonzero(ok)
+    point = point[keep]
+    on = _on_region(scene, regions, reflectors[refl_a[row[keep]]], sources[src_a[row[keep]]],
+                    point)
+    keep, point = keep[on], point[on]
+    lifted_point = point + scene.eps_m * normals[refl_a[row[keep]]]
+    clear = _legs_clear(scene, [lifted_point, cand["lifted"][keep],
+                                np.broadcast_to(receiver, lifted_point.shape)])
+    keep = keep[clear]
+    found = [(refl_a[row[keep]], 0, src_a[row[keep]], cand, keep, cand["apex"][keep])]
+    # (b): every (reflector, source) pair, the receiver mirrored in the reflector
+    refl_b = np.flatnonzero(live & rcv_front)
+    image_r = _mirror_rows(np.broadcast_to(receiver, (len(refl_b), 3)), normals[refl_b],
+                           plane_d[refl_b])
+    refl_b, src_b = np.repeat(refl_b, len(sources)), np.tile(np.arange(len(sources)),
+                                                              len(refl_b))
+    image_b = np.repeat(image_r, len(sources), axis=0)
+    cand = _over_edges(edges, sources[src_b], image_b, 4 * scene.eps_m)
+    row = cand["pair"]
+    ok, point = _plane_point_rows(cand["apex"], image_b[row], normals[refl_b[row]],
+                                  plane_d[refl_b[row]])
+    keep = np.flatnonzero(ok)
+    point = point[keep]
+    on = _on_region(scene, regions, reflectors[refl_b[row[keep]]],
+                    np.broadcast_to(receiver, point.shape), point)
+    keep, point = keep[on], point[on]
+    clear = _legs_clear(scene, [sources[src_b[row[keep]]], cand["lifted"][keep],
+                                point + scene.eps_m * normals[refl_b[row[keep]]]])
+    keep, point = keep[clear], point[clear]
+    found.append((refl_b[row[keep]], 1, src_b[row[keep]], cand, keep, point))
+    # One amplitude evaluation for both kinds; arrivals by reflector, (a) before (b).
+    amps, lengths = [], []
+    for refl, _, _, cand, keep, _ in found:
+        if len(keep) == 0:
+            amps.append(np.zeros((0, len(bands))))
+            lengths.append(np.zeros(0))
             continue
-        # (a) source → reflector → edge → receiver: the image source over the edge
-        front = np.flatnonzero(sources @ n - d > _ON_EDGE_TOL_M)
-        if len(front) and receiver @ n - d > _ON_EDGE_TOL_M:
-            image = _mirror(sources[front], n, d)
-            cand = _over_edges(edges, image, rcv[front], 4 * scene.eps_m)
-            src = sources[front][cand["pair"]]
-            ok = _plane_point(image[cand["pair"]], cand["apex"], n, d)
-            keep = np.flatnonzero(ok[0])
-            if len(keep):
-                point = ok[1][keep]
-                on = _on_region(scene, regions, region, src[keep], point)
-                keep = keep[on]
-                point = point[on]
-            if len(keep):
-                lifted_point = point + scene.eps_m * n
-                clear = _legs_clear(scene, [lifted_point, cand["lifted"][keep],
-                                            rcv[front][cand["pair"][keep]]])
-                keep = keep[clear]
-            if len(keep):
-                amp, length = _amplitudes(cand, keep, bands, c, refl0, refl1)
-                _arrivals(front[cand["pair"][keep]], length, amp * gain[None, :],
-                          cand["apex"][keep], receiver, air, c, 1, parts,
-                          path_ids(_REFLECTED_BEFORE, cand["edge"][keep], region=region),
-                          reflections=1)
-        # (b) source → edge → reflector → receiver: the edge seen in the reflector
-        if receiver @ n - d <= _ON_EDGE_TOL_M:
-            continue
-        image_r = _mirror(receiver[None], n, d)[0]
-        cand = _over_edges(edges, sources, np.broadcast_to(image_r, sources.shape),
-                           4 * scene.eps_m)
-        ok = _plane_point(cand["apex"], np.broadcast_to(image_r, cand["apex"].shape), n, d)
-        keep = np.flatnonzero(ok[0])
-        if len(keep):
-            point = ok[1][keep]
-            on = _on_region(scene, regions, region, np.broadcast_to(receiver, point.shape),
-                            point)
-            keep, point = keep[on], point[on]
-        if len(keep):
-            clear = _legs_clear(scene, [sources[cand["pair"][keep]], cand["lifted"][keep],
-                                        point + scene.eps_m * n])
-            keep, point = keep[clear], point[clear]
-        if len(keep):
-            amp, length = _amplitudes(cand, keep, bands, c, refl0, refl1)
-            _arrivals(cand["pair"][keep], length, amp * gain[None, :], point, receiver, air,
-                      c, 1, parts, path_ids(_REFLECTED_AFTER, cand["edge"][keep],
-                                            region=region), reflections=1)
+        amp, length = _amplitudes(cand, keep, bands, c, refl0, refl1)
+        amps.append(amp * gains[refl])
+        lengths.append(length)
+    ids = [path_ids(_REFLECTED_AFTER if kind else _REFLECTED_BEFORE, cand["edge"][keep],
+                    region=reflectors[refl]) for refl, kind, _, cand, keep, _ in found]
+    refl = np.concatenate([f[0] for f in found])
+    if len(refl) == 0:
+        return
+    order = np.lexsort((np.concatenate([np.full(len(f[0]), f[1]) for f in found]), refl))
+    _arrivals(np.concatenate([f[2] for f in found])[order], np.concatenate(lengths)[order],
+              np.concatenate(amps)[order], np.concatenate([f[5] for f in found])[order],
+              receiver, air, c, 1, parts, np.concatenate(ids)[order], reflections=1)
 
 
-def _plane_point(a: np.ndarray, b: np.ndarray, n: np.ndarray, d: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Where segments ``a → b`` cross the plane ``n·x = d`` (strictly inside), and whether."""
-    da, db = a @ n - d, b @ n - d
+def _mirror_rows(points: np.ndarray, normals: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Each point mirrored in its own plane ``normals[i]·x = d[i]``."""
+    side = np.einsum("ij,ij->i", points, normals) - d
+    return points - 2 * side[:, None] * normals
+
+
+def _plane_point_rows(a: np.ndarray, b: np.ndarray, normals: np.ndarray, d: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Where segments ``a → b`` cross each row's plane ``normals[i]·x = d[i]`` (strictly
+    inside), and whether."""
+    da = np.einsum("ij,ij->i", a, normals) - d
+    db = np.einsum("ij,ij->i", b, normals) - d
     denom = np.where(np.abs(da - db) > 1e-300, da - db, 1.0)
     t = da / denom
     ok = (da * db < 0) & (t > 0) & (t < 1)
@@ -392,9 +420,18 @@ def _second_order(scene, edges, pairs, sources, receiver, bands, air, c, refl0, 
     s = sources[src_i]
     r = np.broadcast_to(receiver, s.shape)
     a2 = 0.5 * (edges.start[e2] + edges.end[e2])
+    a1, z1, z2 = np.empty_like(a2), np.empty(len(a2)), np.empty(len(a2))
+    live = np.arange(len(a2))
     for _ in range(_APEX_ITERATIONS):
-        a1, z1 = _apex(edges, e1, s, a2)
-        a2, z2 = _apex(edges, e2, a1, r)
+        # A path whose second apex did not move is at its fixed point: later rounds would
+        # give it the same apexes, so it leaves the iteration (parallel edges: after one).
+        b1, y1 = _apex(edges, e1[live], s[live], a2[live])
+        b2, y2 = _apex(edges, e2[live], b1, r[live])
+        moved = np.any(b2 != a2[live], axis=1)
+        a1[live], z1[live], a2[live], z2[live] = b1, y1, b2, y2
+        live = live[moved]
+        if not live.size:
+            break
     _, th_in1, _ = _cylindrical(edges, e1, s)
     _, th_out1, _ = _cylindrical(edges, e1, a2)
     _, th_in2, _ = _cylindrical(edges, e2, a1)

@@ -37,8 +37,6 @@ T = TypeVar("T")
 
 __all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_regions"]
 
-# (candidate images × regions) signed distances computed per step of the image-tree growth.
-_CANDIDATE_CHUNK = 4_000_000
 _NO_REACH = np.zeros((2, 0, 0), dtype=bool)
 # Regions above this count skip the P×P "can one region be reached from another" table.
 _MAX_REGIONS_FOR_REACH_TABLE = 3000
@@ -364,52 +362,41 @@ def image_sources(
         )
     src = source[0]
     n_rcv = len(receivers)
-    box_lo, box_hi = receivers.min(axis=0), receivers.max(axis=0)
     tol = scene.eps_m
     reach = None
     if max_order >= 2:
         reach = regions.memoized(("reach", tol), lambda: _reach_tables(scene, regions, tol))
     normals = regions.normals
-    candidates = _CandidateTest(normals, regions.plane_d, tol, reach)
+    counts = None if reach is None else regions.memoized(
+        ("reach_counts", tol), lambda: reach.sum(axis=2))
+    candidates = _CandidateTest(normals, regions.plane_d, tol, reach, counts)
 
     per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
-    # The image tree, one order at a time: chain[i, j] is the image after j+1 reflections,
-    # planes[i, j] the region of reflection j+1, side[i] the side (0 front, 1 back) of the last
-    # plane on which the pre-image lies (where the reflected sound goes).
-    chain = np.zeros((1, 0, 3))
-    planes = np.zeros((1, 0), dtype=np.int64)
-    iso = IDENTITY[None].copy()  # [M | b]: the source's image is M @ source + b
+    # The image tree, one order at a time: levels[k] holds the images after k+1 reflections
+    # (their parent's row in levels[k-1], their position, the region of reflection k+1);
+    # side[i] is the side (0 front, 1 back) of the last plane on which the pre-image lies
+    # (where the reflected sound goes). Whole chains are built only for the images whose
+    # paths are backtracked (:func:`_chains`).
+    levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    iso = IDENTITY[None].copy()  # [M | b] of the current level: image = M @ source + b
     side = np.zeros(1, dtype=np.int64)
     last_pos = src[None, :]
     completed = 0
     for order in range(1, max_order + 1):
-        # Candidates (parent image, region), in row chunks so (M × P) never gets large.
-        n_regions = regions.n_regions
-        rows = max(1, _CANDIDATE_CHUNK // max(1, n_regions))
-        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        count = 0
-        last_plane = planes[:, -1] if order > 1 else None
-        if _provably_too_many(candidates, last_pos, last_plane, side, receivers,
-                              max_path_length_m, max_candidates):
-            count = max_candidates + 1  # decided without building the images
-        for r0 in range(0, len(last_pos) if count <= max_candidates else 0, rows):
-            sl = slice(r0, r0 + rows)
-            dist, ok = candidates(last_pos[sl], None if last_plane is None else last_plane[sl],
-                                  side[sl])
-            par, pln = np.nonzero(ok)
-            d = dist[par, pln]
-            pos = last_pos[sl][par] - 2.0 * d[:, None] * normals[pln]
-            if max_path_length_m is not None:
-                # The distance to the receivers' bounding box bounds the nearest receiver's
-                # from below: a safe prune, O(candidates) however many receivers there are.
-                outside = np.maximum(box_lo[None, :] - pos, 0.0) + np.maximum(
-                    pos - box_hi[None, :], 0.0)
-                keep = np.einsum("ij,ij->i", outside, outside) <= max_path_length_m**2
-                par, pln, d, pos = par[keep], pln[keep], d[keep], pos[keep]
-            parts.append((par + r0, pln, pos, (d < 0).astype(np.int64)))
-            count += len(par)
-            if count > max_candidates:
-                break
+        # Candidates (parent image, region), compiled: at most min(pairs, limit) rows.
+        last_plane = levels[-1][2] if order > 1 else None
+        count = max_candidates + 1  # decided without building the images
+        if not _provably_too_many(candidates, last_pos, last_plane, side, receivers,
+                                  max_path_length_m, max_candidates):
+            rows = min(_pair_bound(candidates, last_pos, last_plane, side), max_candidates)
+            parent, plane = np.empty(rows, np.int64), np.empty(rows, np.int64)
+            new_pos, new_side = np.empty((rows, 3)), np.empty(rows, np.int64)
+            count = KI.next_order(
+                np.ascontiguousarray(last_pos, dtype=np.float64),
+                _own_planes(last_pos, last_plane), side.astype(np.int64), normals,
+                regions.plane_d, tol, reach if reach is not None else _NO_REACH, receivers,
+                -1.0 if max_path_length_m is None else float(max_path_length_m),
+                max_candidates, parent, plane, new_pos, new_side)
         if count > max_candidates:
             warnings.warn(
                 f"image sources: order {order} needs more than {max_candidates} candidates; "
@@ -419,12 +406,9 @@ def image_sources(
                 stacklevel=2,
             )
             break
-        parent = np.concatenate([q[0] for q in parts])
-        plane = np.concatenate([q[1] for q in parts])
-        new_pos = np.concatenate([q[2] for q in parts]).reshape(-1, 3)
-        new_side = np.concatenate([q[3] for q in parts])
-        chain = np.concatenate([chain[parent], new_pos[:, None, :]], axis=1)
-        planes = np.concatenate([planes[parent], plane[:, None]], axis=1)
+        parent, plane, new_pos, new_side = (x[:count] for x in (parent, plane, new_pos,
+                                                                 new_side))
+        levels.append((parent, new_pos, plane))
         iso = _mirrored(iso[parent], normals[plane], regions.plane_d[plane])
         side, last_pos = new_side, new_pos
         completed = order
@@ -435,8 +419,7 @@ def image_sources(
             regions,
             src,
             receivers,
-            chain,
-            planes,
+            levels,
             side,
             iso,
             air,
@@ -465,25 +448,29 @@ def _mirrored(iso: np.ndarray, normal: np.ndarray, plane_d: np.ndarray) -> np.nd
 @dataclass(frozen=True, eq=False)
 class _CandidateTest:
     """Which (parent image, region) pairs make candidate images: the region planes, the
-    off-plane tolerance and the reach table (None: every region is reachable)."""
+    off-plane tolerance, the reach table (None: every region is reachable) and its row sums
+    ``reach_counts[side, q]``, the regions reachable from each side of ``q``."""
 
     normals: np.ndarray
     plane_d: np.ndarray
     tol: float
     reach: np.ndarray | None
+    reach_counts: np.ndarray | None
 
-    def __call__(self, last_pos: np.ndarray, last_plane: np.ndarray | None, side: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distances ``(M, P)`` of the parent images to every region plane, and which
-        pairs make candidates: off the plane, not the parent's own last region, and reachable
-        from its side."""
-        dist = last_pos @ self.normals.T - self.plane_d[None, :]
-        ok = np.abs(dist) > self.tol
-        if last_plane is not None:
-            ok &= np.arange(len(self.plane_d))[None, :] != last_plane[:, None]
-            if self.reach is not None:
-                ok &= self.reach[side, last_plane]
-        return dist, ok
+
+def _own_planes(last_pos: np.ndarray, last_plane: np.ndarray | None) -> np.ndarray:
+    """Each parent's last region (-1 for the source itself), as the kernels take it."""
+    if last_plane is None:
+        return np.full(len(last_pos), -1, dtype=np.int64)
+    return last_plane.astype(np.int64)
+
+
+def _pair_bound(candidates: _CandidateTest, last_pos: np.ndarray,
+                last_plane: np.ndarray | None, side: np.ndarray) -> int:
+    """How many (parent, region) pairs the reach table allows: a bound on the candidates."""
+    if last_plane is not None and candidates.reach is not None:
+        return int(candidates.reach_counts[side, last_plane].sum())
+    return len(last_pos) * len(candidates.plane_d)
 
 
 def _provably_too_many(
@@ -502,24 +489,29 @@ def _provably_too_many(
     limit only those it provably keeps count (``|image − r| <= |parent − r| + 2|d|``), so
     True is always right; False leaves the decision to the exact count.
     """
-    n_regions = len(candidates.plane_d)
-    if last_plane is not None and candidates.reach is not None:
-        bound = int(candidates.reach.sum(axis=2)[side, last_plane].sum())
-    else:
-        bound = len(last_pos) * n_regions
-    if bound <= limit:
+    if _pair_bound(candidates, last_pos, last_plane, side) <= limit:
         return False
-    nearest = np.zeros(len(last_pos))
-    if max_path_length_m is not None:
-        nearest = np.min(np.linalg.norm(last_pos[:, None, :] - receivers[None, :, :], axis=2),
-                         axis=1)
-    own = (np.full(len(last_pos), -1, dtype=np.int64) if last_plane is None
-           else last_plane.astype(np.int64))
     reach = candidates.reach if candidates.reach is not None else _NO_REACH
     return bool(KI.more_candidates_than(
-        np.ascontiguousarray(last_pos, dtype=np.float64), own, side.astype(np.int64),
-        candidates.normals, candidates.plane_d, candidates.tol, reach, nearest,
-        -1.0 if max_path_length_m is None else float(max_path_length_m), limit))
+        np.ascontiguousarray(last_pos, dtype=np.float64), _own_planes(last_pos, last_plane),
+        side.astype(np.int64), candidates.normals, candidates.plane_d, candidates.tol, reach,
+        receivers, -1.0 if max_path_length_m is None else float(max_path_length_m), limit))
+
+
+def _chains(levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]], rows: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The images ``chain (n, order, 3)`` after each reflection and the regions ``planes (n,
+    order)`` reflected in, of the images ``rows`` of the last level, followed back through
+    their parents."""
+    order = len(levels)
+    chain = np.empty((len(rows), order, 3))
+    planes = np.empty((len(rows), order), dtype=np.int64)
+    for j in range(order - 1, -1, -1):
+        parent, pos, plane = levels[j]
+        chain[:, j] = pos[rows]
+        planes[:, j] = plane[rows]
+        rows = parent[rows]
+    return chain, planes
 
 
 def _validate_order(
@@ -527,8 +519,7 @@ def _validate_order(
     regions: PlanarRegions,
     src: np.ndarray,
     receivers: np.ndarray,
-    chain: np.ndarray,
-    planes: np.ndarray,
+    levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     side: np.ndarray,
     iso: np.ndarray,
     air: np.ndarray,
@@ -536,20 +527,27 @@ def _validate_order(
     max_path_length_m: float | None,
     per_receiver: list[list[Arrivals]],
 ) -> None:
-    """Backtrack every (image, receiver) pair of one order; append the valid arrivals."""
-    n_img, order = planes.shape
+    """Backtrack every (image, receiver) pair of one order (the last of ``levels``); append
+    the valid arrivals."""
+    _, last_pos, last_plane = levels[-1]
+    n_img = len(last_pos)
     normals, plane_d = regions.normals, regions.plane_d
     # A compiled prefilter drops most pairs (a superset of the valid ones is kept); the exact
     # tests below then decide on the rest, as they would on all of them.
     keep = np.empty(n_img * len(receivers), dtype=bool)
     KI.last_reflection_prefilter(
-        receivers, np.ascontiguousarray(chain[:, -1]), np.ascontiguousarray(planes[:, -1]),
+        receivers, np.ascontiguousarray(last_pos), np.ascontiguousarray(last_plane),
         side.astype(np.int64), normals, plane_d, scene.eps_m,
         -1.0 if max_path_length_m is None else float(max_path_length_m),
         _region_boxes(scene, regions), regions.region_start, regions.region_faces,
         scene.faces, scene.vertices, _MAX_TRIANGLES_FOR_BARYCENTRIC, keep)
     pairs = np.flatnonzero(keep)
     img, rcv = pairs // len(receivers), pairs % len(receivers)
+    # From here on, images are rows of the chains of those the prefilter kept.
+    kept, img = np.unique(img, return_inverse=True)
+    chain, planes = _chains(levels, kept)
+    side, iso = side[kept], iso[kept]
+    order = len(levels)
     # The receiver must be on the side the last reflection sends sound to.
     dist_r = (
         np.einsum("ij,ij->i", receivers[rcv], normals[planes[img, -1]]) - plane_d[planes[img, -1]]

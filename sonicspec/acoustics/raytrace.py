@@ -586,6 +586,7 @@ def _trace_batch(
     last_diffuse = np.zeros(n, dtype=bool)
     no_offsets = np.zeros(0, dtype=np.int64)
     walks: list[_RainQueue] = []  # blocked shadow rays waiting to be walked through walls
+    n_walks = 0  # how many
     escaped = 0
     interactions = 0
     while n:
@@ -612,9 +613,10 @@ def _trace_batch(
         escaped += esc
         interactions += hits
         if n_req:
-            _settle_rain(scene, req.head(n_req), rain_rng, acc, st.directions, walks)
-            if sum(len(w.length) for w in walks) >= _WALK_BATCH:
+            n_walks += _settle_rain(scene, req.head(n_req), rain_rng, acc, st.directions, walks)
+            if n_walks >= _WALK_BATCH:
                 _walk_rain(scene, rcv, walks, acc, st.directions)
+                n_walks = 0
         if n_kids:  # children join the live rays: diffusely reflected once
             pos, dirs, energy, length, n_refl, departure, ref = (
                 np.concatenate([a[:n], b[:n_kids]]) for a, b in (
@@ -724,7 +726,7 @@ class _RainQueue:
 
 
 def _settle_rain(scene: AcousticScene, req: _RainQueue, rng: np.random.Generator,
-                 acc: _Histograms, directions: bool, walks: list[_RainQueue]) -> None:
+                 acc: _Histograms, directions: bool, walks: list[_RainQueue]) -> int:
     """Traces the queued shadow rays and adds those that reach their receiver.
 
     A blocked shadow ray through transmitting surfaces is walked through them with
@@ -732,17 +734,21 @@ def _settle_rain(scene: AcousticScene, req: _RainQueue, rng: np.random.Generator
     and ``Π τ / q <= 1`` since it crosses at least one surface; the rest stop here. Most
     blocked rays would come out tens of dB down, and walking them was most of the cost. The
     chosen ones are appended to ``walks`` and walked together by :func:`_walk_rain` (a walk
-    takes one Embree call per surface crossed, whatever the number of rays).
+    takes one Embree call per surface crossed, whatever the number of rays). Returns how many
+    it appended.
     """
     blocked = scene.occluded_along(req.origin, req.direction, req.length)
     q = min(1.0, scene.max_transmission)
+    n_walked = 0
     if q > 0 and blocked.any():
         walked = np.flatnonzero(blocked)
         walked = walked[rng.random(walked.size) < q]
         if walked.size:
             walks.append(req.take(walked))
+            n_walked = walked.size
     K.deposit(req.receiver, req.bin, req.direction, req.energy, req.departure, blocked,
               _NO_TRANSMISSION, directions, acc.energy, acc.directions)
+    return n_walked
 
 
 def _walk_rain(scene: AcousticScene, rcv: _Receivers, walks: list[_RainQueue],
@@ -836,9 +842,16 @@ def _visible_air(scene: AcousticScene, receivers: np.ndarray, cap: np.ndarray,
     dirs, solid = _cube_cells(n_cells)
     depth = _hit_distances(scene, receivers, dirs)
     volume = np.empty((len(receivers), n_radii))
-    for k in range(len(receivers)):  # per receiver: (radii × cells) stays small
-        reach = np.minimum(depth[k][None, :], np.linspace(0.0, cap[k], n_radii)[:, None])
-        volume[k] = (reach**3 @ solid) / 3.0
+    for k in range(len(receivers)):
+        # Cells sorted by depth: within r, the nearer ones count their whole cone (running
+        # sums of ΔΩ·d³) and the rest a cone cut at r (r³ × the rest of their ΔΩ).
+        order = np.argsort(depth[k], kind="stable")
+        d, w = depth[k][order], solid[order]
+        near = np.concatenate([[0.0], np.cumsum(w * np.where(np.isfinite(d), d, 0.0) ** 3)])
+        seen = np.concatenate([[0.0], np.cumsum(w)])
+        radii = np.linspace(0.0, cap[k], n_radii)
+        j = np.searchsorted(d, radii, side="left")  # cells nearer than each radius
+        volume[k] = (near[j] + radii**3 * (seen[-1] - seen[j])) / 3.0
     return depth, volume
 
 

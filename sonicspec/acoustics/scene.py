@@ -19,12 +19,14 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from sonicspec.acoustics._trace_kernels import embree_rays
 from sonicspec.errors import AcousticsError
 
 T = TypeVar("T")
 
 __all__ = ["AcousticScene"]
 
+_NO_LENGTHS = np.zeros(0)
 # Embree returns this distance for rays that hit nothing (query="DISTANCE").
 _EMBREE_MISS = 1e36
 
@@ -133,6 +135,8 @@ class AcousticScene:
         #: Largest transmission coefficient of any face and band.
         self.max_transmission = float(self.transmission.max())
         self.has_transmission = self.max_transmission > 0
+        #: Faces that transmit nothing in any band (a walk through surfaces stops there).
+        self._opaque = ~np.any(self.transmission > 0, axis=1)
         self._memo: dict[str, object] = {}
 
         self._embree = rtcore_scene.EmbreeScene()
@@ -238,10 +242,23 @@ class AcousticScene:
         callers that refine the distance themselves (the compiled tracer)."""
         if len(origins) == 0:
             return np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.float32)
-        out = self._embree.run(
-            self._to_f32(origins), np.ascontiguousarray(directions, dtype=np.float32), output=1
-        )
+        o32, d32, _ = self._rays(origins, directions, 0.0)
+        out = self._embree.run(o32, d32, output=1)
         return out["primID"], out["tfar"]
+
+    def _rays(self, origins: np.ndarray, directions: np.ndarray, offset: float,
+              lengths: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Float32 origins (moved ``offset`` along their direction, in Embree's frame),
+        directions and, for segments, lengths less ``2·offset`` (compiled: one pass)."""
+        n = len(origins)
+        o32, d32 = np.empty((n, 3), dtype=np.float32), np.empty((n, 3), dtype=np.float32)
+        t32 = np.empty(n if lengths is not None else 0, dtype=np.float32)
+        embree_rays(np.ascontiguousarray(origins, dtype=np.float64),
+                    np.ascontiguousarray(directions, dtype=np.float64), self._shift,
+                    float(offset), _NO_LENGTHS if lengths is None else
+                    np.ascontiguousarray(lengths, dtype=np.float64), o32, d32, t32)
+        return o32, d32, t32
 
     def occluded(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Whether any surface lies strictly between each origin and its target.
@@ -271,21 +288,20 @@ class AcousticScene:
         """:meth:`occluded` for segments given as origin, unit direction and length (m)."""
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
-        tfar = lengths_m - 2.0 * self.eps_m
-        res = self._embree.run(
-            self._to_f32(origins + directions * self.eps_m),
-            np.ascontiguousarray(directions, dtype=np.float32),
-            dists=np.ascontiguousarray(np.maximum(tfar, 0.0), dtype=np.float32),
-            query="OCCLUDED",
-        )
-        return (res != -1) & (tfar > 0)
+        o32, d32, t32 = self._rays(origins, directions, self.eps_m, lengths_m)
+        res = self._embree.run(o32, d32, dists=t32, query="OCCLUDED")
+        return (res != -1) & (lengths_m - 2.0 * self.eps_m > 0)
 
     def crossings(
-        self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64
+        self, origins: np.ndarray, targets: np.ndarray, max_crossings: int = 64,
+        stop_at_opaque: bool = False,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Every surface crossed strictly between origins and targets.
 
         Repeated first-hit queries, each restarting ``eps_m`` beyond the previous hit.
+        ``stop_at_opaque``: a segment's walk ends at the first surface that transmits nothing
+        in any band (its crossings up to there are returned: enough for a product of ``τ``,
+        which that surface makes 0).
 
         Returns
         -------
@@ -318,9 +334,13 @@ class AcousticScene:
             crossed = (face >= 0) & (dist < _EMBREE_MISS)
             crossed &= travelled[live] + dist < length[live] - self.eps_m
             live = live[crossed]
+            hit = face[crossed].astype(np.int64)
             seg_out.append(live)
-            face_out.append(face[crossed].astype(np.int64))
+            face_out.append(hit)
             travelled[live] += dist[crossed] + self.eps_m
+            if stop_at_opaque:
+                go_on = ~self._opaque[hit]
+                live = live[go_on]
         else:
             if live.size:
                 raise AcousticsError(
@@ -354,7 +374,7 @@ class AcousticScene:
     def crossed_transmission(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """``Π τ`` per band over the surfaces each segment crosses, walked surface by surface
         (no occlusion screen: for segments already known to be blocked), ``(n, n_bands)``."""
-        seg, face = self.crossings(origins, targets)
+        seg, face = self.crossings(origins, targets, stop_at_opaque=True)
         # log-sum keeps the product order-independent and exact zeros exact.
         with np.errstate(divide="ignore"):
             log_tau = np.log(self.transmission[face])
