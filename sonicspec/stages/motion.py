@@ -75,13 +75,17 @@ class Timeline:
     def at(self, values: np.ndarray, index: np.ndarray | None = None) -> np.ndarray:
         """``values`` (one row per point) read at fractional ``index`` (default: every
         sample), linear between points."""
-        index = self.index if index is None else index
-        at = np.arange(len(values), dtype=np.float64)
-        values = np.asarray(values, dtype=np.float64)
-        if values.ndim == 1:
-            return np.interp(index, at, values)
-        return np.stack([np.interp(index, at, values[:, i]) for i in range(values.shape[1])],
-                        axis=1)
+        return read_at(values, self.index if index is None else index)
+
+
+def read_at(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Rows of ``values`` read at fractional row ``index``, linear between rows."""
+    at = np.arange(len(values), dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim == 1:
+        return np.interp(index, at, values)
+    return np.stack([np.interp(index, at, values[:, i]) for i in range(values.shape[1])],
+                    axis=1)
 
 
 def mic_walk_index(placement: GroupPlacement, walk: Walk, speech: Sequence[Segment],
@@ -132,15 +136,13 @@ def timeline(source: SourcePlacement, segments: Sequence[Segment], placement: Gr
     at = np.unique(np.concatenate([[0, clip_samples - 1], _breaks(s_index), _breaks(m_index)]))
     at = at[(at >= 0) & (at < clip_samples)]
     mic_points = np.asarray(placement.mic_path_m, dtype=np.float64)
-    on = Timeline(np.arange(clip_samples, dtype=np.float64), points, points, np.zeros(0), 0.0,
-                  True)
-    source_m = on.at(points, s_index[at])
-    mic_m = on.at(mic_points, m_index[at])
+    source_m = read_at(points, s_index[at])
+    mic_m = read_at(mic_points, m_index[at])
     # Two pairs at one place (both stand between them) are both kept, so the index keeps
     # time; the rir step traces each place once.
     yaw = np.full(len(at), float(mic.yaw_deg))
     if mic.trajectory.facing == "walk":
-        yaw += on.at(headings_deg(mic_points), m_index[at])
+        yaw += read_at(headings_deg(mic_points), m_index[at])
     index = (np.interp(np.arange(clip_samples), at, np.arange(len(at), dtype=np.float64))
              if len(at) > 1 else np.zeros(clip_samples))
     return Timeline(index, source_m, mic_m, yaw, float(mic.pitch_deg), True)

@@ -164,8 +164,8 @@ def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
 MIN_MOVING_GAP_M = 0.1
 
 
-def _traces(placement: GroupPlacement, sources: list[tuple[str, np.ndarray]],
-            lines: list[Timeline | None], mic_m, yaw_deg: float
+def _traces(sources: list[tuple[str, np.ndarray]], lines: list[Timeline | None], mic_m,
+            yaw_deg: float
             ) -> tuple[list[tuple[np.ndarray, float, list[np.ndarray]]],
                        list[list[tuple[int, int]]]]:
     """Which traces a group needs: one per place and heading of the microphone, with the
@@ -245,8 +245,7 @@ def run(ctx) -> None:
                         f"{gap.min():.2f} m of the moving microphone (at {at:.2f} s); expected "
                         f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
                         "microphone's path (microphone.trajectory) or the sources' rules")
-        traces, refs = _traces(placement, sources, lines, placement.mic_m,
-                               params.microphone.yaw_deg)
+        traces, refs = _traces(sources, lines, placement.mic_m, params.microphone.yaw_deg)
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
