@@ -192,6 +192,22 @@ def test_plan_summary_of_the_demo() -> None:
     assert [s["name"] for s in summary["splits"]] == ["train", "val", "test"]
 
 
+def test_plan_summary_says_the_microphone_moves(tmp_path: Path) -> None:
+    # A 1.5 m walk at 0.25 m spacing: 7 microphone points added to each source's estimate.
+    text = (ROOT / "specs" / "demo.yaml").read_text().replace(
+        "  kind: mono\n  height_m: 1.5",
+        "  kind: mono\n  height_m: 1.5\n  trajectory: {kind: line, start_m: [3.5, 2.0, 1.5], "
+        "end_m: [5.0, 2.0, 1.5], facing: fixed}")
+    spec = write(tmp_path, "demo.yaml", text)
+    still = run_cli("plan", "--summary", str(ROOT / "specs" / "demo.yaml")).stdout
+    result = run_cli("plan", "--summary", str(spec))
+    assert result.returncode == 0, result.stderr
+    assert "mono microphone moving (line, 1.5 m, facing fixed)" in result.stdout
+    assert "(estimate; pairs with the microphone)" in result.stdout
+    per_source = [int(out.split("about ")[1].split()[0]) for out in (still, result.stdout)]
+    assert per_source[1] == per_source[0] + 7
+
+
 def test_full_plan_of_the_demo(tmp_path: Path) -> None:
     spec = write(tmp_path, "demo.yaml", (ROOT / "specs" / "demo.yaml").read_text())
     result = run_cli("plan", str(spec))

@@ -10,6 +10,7 @@ and scene (``groups: each_speaker_per_scene``), which the spec alone does not fi
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -55,6 +56,8 @@ class SpecSummary:
     channels: int
     microphone: str
     trajectory: str
+    microphone_motion: str | None
+    """How a moving microphone walks (None: it stays put)."""
     splits: tuple[SplitSummary, ...]
     rir_points_per_source_estimate: int
     mixtures_per_group: int
@@ -107,6 +110,18 @@ def summarize(spec: DatasetSpec, layouts: Mapping[str, Layout] | None = None) ->
         travel = sum(spec.placement.source_travel_distance_m) / 2
         per_source = math.ceil(travel / traj.rir_spacing_m) + 1
     static_points = int(spec.corpora.noise is not None) + int(spec.corpora.music is not None)
+    mic_traj = spec.microphone.trajectory
+    mic_motion = None
+    if not isinstance(mic_traj, StaticTrajectorySpec):
+        # RIRs at pairs: about the source's points plus the microphone's, for every source
+        # (a static one too).
+        ends = ([mic_traj.start_m, mic_traj.end_m] if mic_traj.kind == "line"
+                else mic_traj.points_m)
+        walk = sum(math.dist(a, b) for a, b in itertools.pairwise(ends))
+        mic_points = math.ceil(walk / mic_traj.rir_spacing_m) + 1
+        per_source += mic_points
+        static_points *= 1 + mic_points
+        mic_motion = f"{mic_traj.kind}, {walk:.1f} m, facing {mic_traj.facing}"
     duration_h = spec.mixture.duration_s / 3600.0
     splits = []
     for name, split in spec.splits.items():
@@ -136,6 +151,7 @@ def summarize(spec: DatasetSpec, layouts: Mapping[str, Layout] | None = None) ->
         channels=channel_count(spec.microphone),
         microphone=spec.microphone.kind,
         trajectory=traj.kind,
+        microphone_motion=mic_motion,
         splits=tuple(splits),
         rir_points_per_source_estimate=per_source,
         mixtures_per_group=_mixtures_per_group(spec),
@@ -158,9 +174,11 @@ def format_summary(s: SpecSummary) -> str:
             else "groups counted per speaker and scene (the corpus is needed)")
     lines = [
         f"dataset {s.name}: {head} at {s.sample_rate_hz} Hz, {s.channels}-channel "
-        f"{s.microphone} microphone",
+        f"{s.microphone} microphone" + (f" moving ({s.microphone_motion})"
+                                        if s.microphone_motion else ""),
         f"sources move: {s.trajectory}; about {s.rir_points_per_source_estimate} RIR points "
-        f"per moving source (estimate); {s.mixtures_per_group} mixtures per group",
+        f"per moving source (estimate{'; pairs with the microphone' * bool(s.microphone_motion)}"
+        f"); {s.mixtures_per_group} mixtures per group",
         f"{'split':<10} {'scenes':>6} {'speakers':>8} {'groups':>8} {'tracks':>8} "
         f"{'hours':>8} {'track h':>8} {'RIRs (est.)':>12}  scenes from",
     ]
