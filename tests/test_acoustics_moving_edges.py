@@ -46,7 +46,7 @@ def test_a_source_walking_out_of_sight_is_rendered_as_the_dense_walk() -> None:
     taken over by the path round it, reflections come and go, 58 edge paths bend round the
     door. From RIR points 0.25 m apart with points added where the paths change, the early
     part matches the same renderer on points 5 mm apart (the converged walk); without the
-    added points the paths fade over 0.25 m where the geometry switches them (13.6 dB)."""
+    added points the paths fade over 0.25 m where the geometry switches them (13.7 dB)."""
     n = int(np.linalg.norm(ENDS[1] - ENDS[0]) / SPEED * FS) + FS // 4
     dry = np.random.default_rng(1).standard_normal(n)
     dense, dense_paths = walk_render(0.005, False, dry)
