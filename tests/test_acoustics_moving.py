@@ -139,24 +139,31 @@ MIC = np.array([3.0, 2.0, 1.2])
 ENDS = np.array([[1.0, 1.1, 1.45], [4.0, 3.5, 1.6]])
 
 
-def engine_walk(microphone=None):
-    """The engine's paths of a walk at 1.5 m/s through RIR points every 0.25 m in a shoebox
-    whose walls reflect 0.8 of the pressure (image sources to order 2), and the fractional
-    point index of each sample as the render stage reads it: ``(points, paths, index,
-    bank)``."""
+def reflecting_shoebox(size=SIZE):
+    """A shoebox whose walls reflect 0.8 of the pressure, and settings for its early paths
+    (image sources to order 2, no air, no diffraction): ``(scene, settings)``."""
     import sonicspec as ss
-    from sonicspec.acoustics.bands import OctaveFilterBank
-    from sonicspec.acoustics.engine import acoustic_scene, simulate_rirs
-    from sonicspec.acoustics.moving import PathSet
-    from sonicspec.geometry.navigation import resample_polyline
+    from sonicspec.acoustics.engine import acoustic_scene
 
-    points = resample_polyline(ENDS, 0.25)
-    room = ss.Scene.shoebox(SIZE, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
+    room = ss.Scene.shoebox(size, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
                             custom_materials={"r08": {"absorption": 0.36, "scattering": 0.0}})
     settings = ss.RirSettings(rays=200, image_source_order=2, air_absorption=False,
                               max_rir_length_s=0.3, speed_of_sound_m_s=C, sample_rate_hz=FS,
                               diffraction=False).simulation_settings()
-    scene = acoustic_scene(room.mesh, room.library, settings)
+    return acoustic_scene(room.mesh, room.library, settings), settings
+
+
+def engine_walk(microphone=None):
+    """The engine's paths of a walk at 1.5 m/s through RIR points every 0.25 m in
+    :func:`reflecting_shoebox`, and the fractional point index of each sample as the render
+    stage reads it: ``(points, paths, index, bank)``."""
+    from sonicspec.acoustics.bands import OctaveFilterBank
+    from sonicspec.acoustics.engine import simulate_rirs
+    from sonicspec.acoustics.moving import PathSet
+    from sonicspec.geometry.navigation import resample_polyline
+
+    points = resample_polyline(ENDS, 0.25)
+    scene, settings = reflecting_shoebox()
     _, facts = simulate_rirs(scene, MIC, points, settings, np.random.default_rng(0),
                              microphone=microphone, keep_arrivals=True)
     paths = PathSet.identify(points, [f["early_arrivals"] for f in facts],

@@ -6,27 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_acoustics_moving import FS, SIZE, C, figures, pink, reflecting_shoebox
 
 from sonicspec.acoustics.theory import (
     moving_arrival_times,
     moving_point_source,
     shoebox_moving_images,
 )
-from sonicspec.audio.fidelity import dip_figures, snr_db, spectral_deviation_db
+from sonicspec.audio.fidelity import snr_db
 
-FS = 16000
-C = 343.0
-SIZE = [6.0, 5.0, 3.0]
 STEP_S = 0.1  # pairs every 0.1 s: neither end moves more than 0.15 m between them
-
-
-def pink(n: int, seed: int = 7) -> np.ndarray:
-    spec = np.fft.rfft(np.random.default_rng(seed).standard_normal(n))
-    f = np.fft.rfftfreq(n, 1 / FS)
-    spec[1:] /= np.sqrt(f[1:] / 100.0)
-    spec[f > 0.8 * FS / 2] = 0
-    x = np.fft.irfft(spec, n)
-    return x / np.max(np.abs(x))
 
 
 def line(a, b, speed: float, t: np.ndarray) -> np.ndarray:
@@ -35,27 +24,15 @@ def line(a, b, speed: float, t: np.ndarray) -> np.ndarray:
     return a + d[:, None] * (b - a) / np.linalg.norm(b - a)
 
 
-def figures(ref: np.ndarray, est: np.ndarray, n: int) -> tuple[float, dict[str, float]]:
-    core = slice(int(0.1 * FS), n - int(0.1 * FS))
-    dev, _, _ = spectral_deviation_db(ref, est, FS, active=(core.start, core.stop))
-    return snr_db(ref[core], est[core]), dip_figures(dev)
-
-
 def engine_pairs(source_track, mic_track, n: int, microphone=None, yaw_deg=None):
     """The engine's early paths at pairs every ``STEP_S`` (the source and the microphone
     where they are then), followed by :meth:`PathSet.identify_moving`; the pair index of
     every sample."""
-    import sonicspec as ss
     from sonicspec.acoustics.bands import OctaveFilterBank
-    from sonicspec.acoustics.engine import acoustic_scene, simulate_rirs
+    from sonicspec.acoustics.engine import simulate_rirs
     from sonicspec.acoustics.moving import PathSet
 
-    room = ss.Scene.shoebox(SIZE, {"walls": "r08", "floor": "r08", "ceiling": "r08"},
-                            custom_materials={"r08": {"absorption": 0.36, "scattering": 0.0}})
-    settings = ss.RirSettings(rays=200, image_source_order=2, air_absorption=False,
-                              max_rir_length_s=0.3, speed_of_sound_m_s=C, sample_rate_hz=FS,
-                              diffraction=False).simulation_settings()
-    scene = acoustic_scene(room.mesh, room.library, settings)
+    scene, settings = reflecting_shoebox(SIZE)
     at = np.arange(0, n, int(STEP_S * FS))
     points, mics = source_track[at], mic_track[at]
     arrivals = []
