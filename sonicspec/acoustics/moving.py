@@ -424,33 +424,41 @@ def path_keys(arrivals: Arrivals, point_m, moving: bool, tolerance_m: float = 1e
 
 
 def heard_paths(arrivals: Arrivals, point_m, moving: bool, tolerance_m: float = 1e-4
-                ) -> dict[tuple, np.ndarray]:
-    """The paths heard at a point, by key (:func:`path_keys`), with their band factors
-    (spreading taken out, as :class:`PathSet` keeps them)."""
+                ) -> dict[tuple, tuple[np.ndarray, float]]:
+    """The paths heard at a point, by key (:func:`path_keys`): their band factors
+    (spreading taken out, as :class:`PathSet` keeps them) and their level (the largest band
+    amplitude, spreading included)."""
     factor = arrivals.amplitudes * (4 * np.pi * arrivals.path_length_m[:, None])
-    out: dict[tuple, np.ndarray] = {}
+    level = arrivals.amplitudes.max(axis=1) if len(arrivals) else np.zeros(0)
+    out: dict[tuple, tuple[np.ndarray, float]] = {}
     for i, key in enumerate(path_keys(arrivals, point_m, moving, tolerance_m)):
         if key is not None and np.any(factor[i] > 0):
-            out[key] = out.get(key, 0.0) + factor[i]
+            f, lv = out.get(key, (0.0, 0.0))
+            out[key] = (f + factor[i], lv + float(level[i]))
     return out
 
 
-def paths_differ(a: dict[tuple, np.ndarray], b: dict[tuple, np.ndarray],
-                 tolerance_db: float = 1.0, floor_db: float = 40.0) -> bool:
-    """Whether the paths heard at two points differ: one is heard at one only, or a path's
-    band factor changes by more than ``tolerance_db`` (paths ``floor_db`` below the
-    strongest ignored) — the renderer's linear reading between them would be off."""
-    if a.keys() != b.keys():
-        return True
-    if not a:
+def paths_differ(a: dict[tuple, tuple[np.ndarray, float]],
+                 b: dict[tuple, tuple[np.ndarray, float]], tolerance_db: float = 1.0,
+                 floor_db: float = 40.0) -> bool:
+    """Whether the paths heard at two points (:func:`heard_paths`) differ where it matters:
+    a path heard at one only, or whose band factor changes by more than ``tolerance_db``,
+    among the paths within ``floor_db`` of the loudest at either point (a path that much
+    weaker changes the sum by less than the renderer's own error) — the renderer's linear
+    reading between the two would be off."""
+    if not a and not b:
         return False
-    strongest = max(max(np.max(v) for v in a.values()), max(np.max(v) for v in b.values()))
-    floor = strongest * 10 ** (-floor_db / 20)
-    for key, va in a.items():
-        vb = b[key]
-        big = (va > floor) | (vb > floor)
-        if np.any(np.abs(20 * np.log10(np.maximum(va[big], 1e-300)
-                                       / np.maximum(vb[big], 1e-300))) > tolerance_db):
+    loudest = max(lv for _, lv in (*a.values(), *b.values()))
+    floor = loudest * 10 ** (-floor_db / 20)
+    for key in a.keys() | b.keys():
+        fa, la = a.get(key, (None, 0.0))
+        fb, lb = b.get(key, (None, 0.0))
+        if max(la, lb) <= floor:
+            continue
+        if fa is None or fb is None:
+            return True
+        if np.any(np.abs(20 * np.log10(np.maximum(fa, 1e-300) / np.maximum(fb, 1e-300)))
+                  > tolerance_db):
             return True
     return False
 
