@@ -781,8 +781,9 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
     band factor changes by more than ``tolerance_db`` (a diffracted path near its shadow
     boundary) — among the paths within 40 dB of the loudest
     (:func:`~sonicspec.acoustics.moving.paths_differ`) — the interval is halved
-    (:func:`early_arrivals` at its middle, no ray trace) until neither end moves more than ``resolution_m`` across it: the renderer then switches
-    and shapes the path there, as the geometry does, instead of fading it over the spacing.
+    (:func:`early_arrivals` at its middle, no ray trace) until neither end moves more than
+    ``resolution_m`` across it: the renderer then switches and shapes the path there, as the
+    geometry does, instead of fading it over the spacing.
 
     ``sources_m``, ``mics_m``: ``(N, 3)`` the source and the microphone at each RIR point;
     ``from_mic``, ``at_mic``: their early arrivals (:class:`EarlyArrivals`).
