@@ -105,8 +105,7 @@ def render_length_path(dry, length_m, sample_rate_hz: float, *,
     length = np.broadcast_to(np.asarray(length_m, dtype=np.float64), s.shape)
     if np.any(~(length > 0)):
         raise AcousticsError("length_m: expected path lengths > 0 at every emission")
-    extra = 0.0 if extra_delay_s is None else np.asarray(extra_delay_s, dtype=np.float64)
-    tau = np.arange(s.size) + (length / float(speed_of_sound_m_s) + extra) * sample_rate_hz
+    tau, _ = _length_arrivals(length, sample_rate_hz, speed_of_sound_m_s, extra_delay_s)
     return _delay_line(s, tau, length, gain, n_out, half_width, beta)
 
 
@@ -180,18 +179,24 @@ def _render_into(x: np.ndarray, source_m, image_m: np.ndarray, fs: float,
         accumulate_channels(x, tau, density, amp, phase, slope, out)
 
 
+def _length_arrivals(length: np.ndarray, fs: float, speed_of_sound_m_s: float,
+                     extra_delay_s) -> tuple[np.ndarray, np.ndarray]:
+    """Arrival (output samples) of each emission of a path ``length`` metres long (per
+    emission), ``extra_delay_s`` added, and ``4π · length`` (the spreading divisor)."""
+    extra = 0.0 if extra_delay_s is None else np.asarray(extra_delay_s, dtype=np.float64)
+    tau = np.arange(length.size) + (length / float(speed_of_sound_m_s) + extra) * fs
+    return np.ascontiguousarray(tau), np.ascontiguousarray(4 * np.pi * length)
+
+
 def _render_length_into(x: np.ndarray, length_m: np.ndarray, fs: float,
                         speed_of_sound_m_s: float, gains, out: np.ndarray, *,
                         extra_delay_s=None) -> None:
     """:func:`render_length_path` added to ``out`` in place (as :func:`_render_into`): a
     path bent round an edge, its length given at each emission."""
-    length = np.ascontiguousarray(np.broadcast_to(np.asarray(length_m, dtype=np.float64),
-                                                  x.shape))
-    extra = 0.0 if extra_delay_s is None else np.asarray(extra_delay_s, dtype=np.float64)
-    tau = np.ascontiguousarray(np.arange(x.size) + (length / speed_of_sound_m_s + extra) * fs)
+    tau, r = _length_arrivals(np.broadcast_to(np.asarray(length_m, dtype=np.float64), x.shape),
+                              fs, speed_of_sound_m_s, extra_delay_s)
     density = np.empty(x.size)
     gradient_inverse(tau, density)
-    r = 4 * np.pi * length
     phase, slope = _sinc_table(HALF_WIDTH, KAISER_BETA)
     if out.ndim == 1:
         accumulate_path(x, tau, density, np.ascontiguousarray(
@@ -200,6 +205,17 @@ def _render_length_into(x: np.ndarray, length_m: np.ndarray, fs: float,
     else:
         amp = np.ascontiguousarray(np.broadcast_to(gains, (x.size, out.shape[0])) / r[:, None])
         accumulate_channels(x, tau, density, amp, phase, slope, out)
+
+
+def read_at(values, index) -> np.ndarray:
+    """Rows of ``values`` (one per point) read at fractional point ``index``, linear between
+    points: a path's factors, a walk's positions, a microphone's heading."""
+    values = np.asarray(values, dtype=np.float64)
+    at = np.arange(len(values), dtype=np.float64)
+    if values.ndim == 1:
+        return np.interp(index, at, values)
+    return np.stack([np.interp(index, at, values[:, i]) for i in range(values.shape[1])],
+                    axis=1)
 
 
 @functools.lru_cache(maxsize=8)
@@ -268,13 +284,7 @@ class PathSet:
     def on_points(self, values: np.ndarray) -> np.ndarray:
         """Per-RIR-point ``values`` (rows) read at the paths' own points."""
         values = np.asarray(values, dtype=np.float64)
-        if self.at_index is None:
-            return values
-        at = np.arange(len(values), dtype=np.float64)
-        if values.ndim == 1:
-            return np.interp(self.at_index, at, values)
-        return np.stack([np.interp(self.at_index, at, values[:, i])
-                         for i in range(values.shape[1])], axis=1)
+        return values if self.at_index is None else read_at(values, self.at_index)
 
     def on_index(self, index: np.ndarray) -> np.ndarray:
         """A fractional RIR-point index read as an index into the paths' own points."""
@@ -500,14 +510,6 @@ def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-
     return np.asarray(pairs_i, dtype=np.int64), np.asarray(pairs_m, dtype=np.int64)
 
 
-def subset(arrivals: Arrivals, keep: np.ndarray) -> Arrivals:
-    """The arrivals at indices ``keep``."""
-    return Arrivals(arrivals.times_s[keep], arrivals.amplitudes[keep],
-                    arrivals.directions[keep], arrivals.order[keep], arrivals.kind[keep],
-                    arrivals.path_length_m[keep], arrivals.isometry[keep],
-                    arrivals.path_id[keep])
-
-
 def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
                  speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                  receiver: Receiver | None = None) -> np.ndarray:
@@ -579,8 +581,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     hrir_buffers: dict[int, np.ndarray] = {}  # per measured direction, before its HRIRs
     if len(paths) == 0 or not np.any(s):
         return out
-    at = np.arange(len(points), dtype=np.float64)
-    track = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
+    track = read_at(points, index)
     static = len(points) == 1 or np.ptp(index) == 0
     band_dry = bank.split(s)
     lo, hi = np.floor(index).astype(np.int64), np.ceil(index).astype(np.int64)
@@ -845,15 +846,10 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         raise AcousticsError(f"receiver.mic_track_m: expected one position per point "
                              f"({len(points)}), got {len(mic_points)}")
     fs = bank.sample_rate_hz
-    at = np.arange(len(points), dtype=np.float64)
-
-    def track(values: np.ndarray) -> np.ndarray:
-        return np.stack([np.interp(index, at, values[:, i]) for i in range(3)], axis=1)
-
-    source, mic = track(points), track(mic_points)
-    yaw = np.interp(index, at, np.broadcast_to(
+    source, mic = read_at(points, index), read_at(mic_points, index)
+    yaw = read_at(np.broadcast_to(
         np.asarray(receiver.yaw_deg if receiver.yaw_deg is not None else 0.0, dtype=np.float64),
-        (len(points),)))
+        (len(points),)), index)
     out = np.zeros((receiver.channels, n_out))
     shaded = np.zeros_like(out)
     hrir_buffers: dict[int, np.ndarray] = {}

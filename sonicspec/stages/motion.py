@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sonicspec.acoustics.moving import read_at
 from sonicspec.audio.arrange import Segment, speech_span, walk_window
 from sonicspec.audio.render import walk_index
 from sonicspec.geometry.navigation import cumulative_length
@@ -76,16 +77,6 @@ class Timeline:
         """``values`` (one row per point) read at fractional ``index`` (default: every
         sample), linear between points."""
         return read_at(values, self.index if index is None else index)
-
-
-def read_at(values: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """Rows of ``values`` read at fractional row ``index``, linear between rows."""
-    at = np.arange(len(values), dtype=np.float64)
-    values = np.asarray(values, dtype=np.float64)
-    if values.ndim == 1:
-        return np.interp(index, at, values)
-    return np.stack([np.interp(index, at, values[:, i]) for i in range(values.shape[1])],
-                    axis=1)
 
 
 def mic_walk_index(placement: GroupPlacement, walk: Walk, speech: Sequence[Segment],
