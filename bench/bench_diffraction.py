@@ -27,7 +27,6 @@ import math
 import sys
 import time
 import warnings
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -151,8 +150,7 @@ def method_cost() -> dict:
 
 
 def apartment() -> dict:
-    import yaml
-    from bench_rlr import MIC_M, SOURCE_M, apartment_mesh
+    from bench_rlr import MIC_M, SOURCE_M, apartment_mesh, preset_acoustics
 
     from sonicspec.acoustics.edge_paths import close_pairs
     from sonicspec.acoustics.engine import (
@@ -163,11 +161,8 @@ def apartment() -> dict:
     )
     from sonicspec.acoustics.image_sources import planar_regions
     from sonicspec.geometry.materials import load_library
-    from sonicspec.spec.acoustics import AcousticsSpec
 
-    text = resources.files("sonicspec.spec").joinpath("templates/sonicset.yaml").read_text()
-    acoustics = AcousticsSpec(**yaml.safe_load(text)["acoustics"]).model_dump(mode="json")
-    settings = SimulationSettings.from_spec(acoustics, 16_000, C)
+    settings = SimulationSettings.from_spec(preset_acoustics(), 16_000, C)
     mesh = apartment_mesh(100_000)
     scene = acoustic_scene(mesh, load_library("sonicset"), settings)
     regions = planar_regions(scene)

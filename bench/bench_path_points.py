@@ -18,7 +18,6 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -80,8 +79,7 @@ def accuracy() -> None:
 
 
 def cost() -> None:
-    import yaml
-    from bench_rlr import MIC_M, SOURCE_M, apartment_mesh
+    from bench_rlr import MIC_M, SOURCE_M, apartment_mesh, preset_acoustics
 
     from sonicspec.acoustics.engine import (
         SimulationSettings,
@@ -93,10 +91,7 @@ def cost() -> None:
     from sonicspec.acoustics.moving import PathSet
     from sonicspec.geometry.materials import load_library
     from sonicspec.geometry.navigation import resample_polyline
-    from sonicspec.spec.acoustics import AcousticsSpec
 
-    text = resources.files("sonicspec.spec").joinpath("templates/sonicset.yaml").read_text()
-    base = AcousticsSpec(**yaml.safe_load(text)["acoustics"]).model_dump(mode="json")
     mesh = apartment_mesh(100_000)
     points = resample_polyline(np.array([SOURCE_M, SOURCE_M + np.array([-2.0, -1.5, 0.0])]),
                                0.25)
@@ -105,7 +100,7 @@ def cost() -> None:
     print(f"{'order':>6} {'RIR points':>11} {'trace s':>8} {'added points s':>15} "
           f"{'path points':>12} {'paths':>6} {'diffracted':>11}")
     for order in (1, 3):
-        settings = SimulationSettings.from_spec({**base, "image_source_order": order},
+        settings = SimulationSettings.from_spec(preset_acoustics(image_source_order=order),
                                                 16_000, 343.0)
         scene = acoustic_scene(mesh, load_library("sonicset"), settings)
         regions = planar_regions(scene)

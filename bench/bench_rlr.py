@@ -155,6 +155,16 @@ def apartment_mesh(triangles: int) -> SceneMesh:
     return best.with_materials(load_library("sonicset").material_for_label)
 
 
+def preset_acoustics(**changes) -> dict:
+    """The ``sonicset`` preset's ``acoustics`` section (its template) as spec data, with
+    ``changes``."""
+    import yaml
+
+    text = resources.files("sonicspec.spec").joinpath("templates/sonicset.yaml").read_text()
+    return {**AcousticsSpec(**yaml.safe_load(text)["acoustics"]).model_dump(mode="json"),
+            **changes}
+
+
 def rlr_material_json(mesh: SceneMesh, path: Path) -> None:
     """SonicSet's entries for the mesh's materials, each relabelled with a unique label."""
     text = resources.files("sonicspec").joinpath(
