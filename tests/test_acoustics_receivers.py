@@ -164,3 +164,22 @@ def test_local_directions_are_in_the_microphone_frame() -> None:
     up30 = [[np.cos(np.radians(30)), 0, np.sin(np.radians(30))]]
     az, el, _ = local_directions(np.array(up30), 0, 30)
     np.testing.assert_allclose([az[0], el[0]], [0, 0], atol=1e-9)
+
+
+def test_an_ambisonic_microphone_hears_in_its_own_frame() -> None:
+    """Ambisonic channels are in the microphone's frame: turned by 90° (yaw), a plane wave
+    from the scene's +y arrives from its front (+x); at yaw 0 the channels are the scene
+    frame's to the last bit (the default gives what it gave before the frame was honoured)."""
+    from sonicspec.acoustics.receivers import ambisonic_early
+
+    bank = OctaveFilterBank(16000)
+    side, front = plane_wave((0.0, 1.0, 0.0)), plane_wave((1.0, 0.0, 0.0))
+    turned = ambisonic_early(side, 1, bank, 2048, yaw_deg=90.0)
+    np.testing.assert_allclose(turned, ambisonic_early(front, 1, bank, 2048), atol=1e-12)
+    from sonicspec.acoustics.synthesis import synthesize_early
+
+    gains = sh_sn3d(1, side.directions)[0]  # the scene frame's channels, as before
+    before = np.stack([synthesize_early(Arrivals(side.times_s, side.amplitudes * g, side.directions,
+                                                 side.order, side.kind, side.path_length_m),
+                                        bank, 2048) for g in gains])
+    assert np.array_equal(ambisonic_early(side, 1, bank, 2048), before)
