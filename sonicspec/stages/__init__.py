@@ -13,7 +13,7 @@ import traceback
 
 from sonicspec.errors import SonicspecError, StageError
 from sonicspec.plan.model import Plan
-from sonicspec.stages.context import JobContext, progress_path
+from sonicspec.stages.context import JobContext, mark_finished, progress_path
 from sonicspec.store import ArtifactStore
 
 STAGES: dict[str, str] = {
@@ -55,6 +55,7 @@ def run_job(plan: Plan, key: str) -> bool:
     store = ArtifactStore(plan.store_dir)
     if store.exists(job.step, key):
         log.info("%s: already in the store", job.label)
+        mark_finished(plan.store_dir, key)
         return False
     for k in job.inputs:
         if not store.exists(jobs[k].step, k):
@@ -77,5 +78,6 @@ def run_job(plan: Plan, key: str) -> bool:
         progress_path(plan.store_dir, key).unlink(missing_ok=True)
     if not store.exists(job.step, key):
         raise StageError(f"{job.label}: the stage finished without writing its artifact", key)
+    mark_finished(plan.store_dir, key)
     log.info("%s: done in %.2f s", job.label, time.perf_counter() - start)
     return True

@@ -1,11 +1,13 @@
 """What the last build found sound, so the next one re-reads only what changed since.
 
 Verifying an artifact means reading and digesting all its arrays; checking a dataset file means
-hashing it. Both are worth doing once, not at every build: this cache keeps, per artifact, the
-fingerprint (file names, sizes, modification times) it had when it was last verified, and per
-dataset file its size, modification time and checksum. A build stats everything (cheap) and
-re-verifies only what moved. Damage that keeps a file's size and time (a disk's bit rot) is for
-``sonicspec verify``, which reads everything.
+hashing it; knowing which dataset files an ``export`` or ``dataset`` artifact wrote means reading
+its JSON (megabytes per group). All are worth doing once, not at every build: this cache keeps, per
+artifact, the fingerprint (file names, sizes, modification times) it had when it was last verified;
+per ``export``/``dataset`` artifact the list of files it records (path, bytes, SHA-256), valid
+while the artifact keeps that fingerprint; and per dataset file its size, modification time and
+checksum. A build stats everything (cheap) and reads only what moved. Damage that keeps a file's
+size and time (a disk's bit rot) is for ``sonicspec verify``, which reads everything.
 
 Only the process holding the store's build lock writes the cache (atomically).
 """
@@ -14,7 +16,9 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from sonicspec.atomic import write_text
 
@@ -28,8 +32,10 @@ class CheckCache:
             data = json.loads(path.read_text())
             self._artifacts: dict[str, str] = dict(data["artifacts"])
             self._files: dict[str, list] = dict(data["files"])
+            self._written: dict[str, list] = dict(data.get("written", {}))
         except (OSError, ValueError, KeyError, TypeError):
-            self._artifacts, self._files = {}, {}
+            self._artifacts, self._files, self._written = {}, {}, {}
+        self._dirty = False
 
     @classmethod
     def of_store(cls, store_dir: str | Path) -> CheckCache:
@@ -39,7 +45,27 @@ class CheckCache:
         return self._artifacts.get(key) == fingerprint
 
     def mark_artifact(self, key: str, fingerprint: str) -> None:
-        self._artifacts[key] = fingerprint
+        if self._artifacts.get(key) != fingerprint:
+            self._artifacts[key] = fingerprint
+            self._dirty = True
+
+    def written(self, key: str, fingerprint: str) -> list[dict[str, Any]] | None:
+        """The dataset files artifact ``key`` records (``path``, ``bytes``, ``sha256``), if
+        they were read from it while it had ``fingerprint``; else None (read them again)."""
+        entry = self._written.get(key)
+        if not entry or entry[0] != fingerprint:
+            return None
+        return [{"path": p, "bytes": b, "sha256": h} for p, b, h in entry[1]]
+
+    def mark_written(self, key: str, fingerprint: str,
+                     records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+        """Remember the files artifact ``key`` (with ``fingerprint``) records; returns those
+        that carry a checksum (the others are not checked)."""
+        kept = [r for r in records if "sha256" in r]
+        self._written[key] = [fingerprint, [[r["path"], r.get("bytes"), r["sha256"]]
+                                            for r in kept]]
+        self._dirty = True
+        return kept
 
     @staticmethod
     def _file_token(st: os.stat_result, sha256: str) -> list:
@@ -49,11 +75,21 @@ class CheckCache:
         return self._files.get(str(path)) == self._file_token(st, sha256)
 
     def mark_file(self, path: Path, st: os.stat_result, sha256: str) -> None:
-        self._files[str(path)] = self._file_token(st, sha256)
+        token = self._file_token(st, sha256)
+        if self._files.get(str(path)) != token:
+            self._files[str(path)] = token
+            self._dirty = True
 
     def forget_file(self, path: Path) -> None:
-        self._files.pop(str(path), None)
+        if self._files.pop(str(path), None) is not None:
+            self._dirty = True
 
     def save(self) -> None:
-        write_text(self.path, json.dumps({"artifacts": self._artifacts, "files": self._files},
+        """Write the cache if anything changed since it was read (a no-op build writes
+        nothing)."""
+        if not self._dirty and self.path.is_file():
+            return
+        write_text(self.path, json.dumps({"artifacts": self._artifacts, "files": self._files,
+                                          "written": self._written},
                                          sort_keys=True, separators=(",", ":")))
+        self._dirty = False

@@ -91,3 +91,21 @@ class JobContext:
 def progress_path(store_dir: str | Path, key: str) -> Path:
     """Where a running job says how far it is (see :meth:`JobContext.progress`)."""
     return Path(store_dir) / "logs" / "progress" / f"{key}.txt"
+
+
+def finished_dir(store_dir: str | Path) -> Path:
+    """Where each job that finished leaves a marker for the build's head (see
+    :func:`mark_finished`)."""
+    return Path(store_dir) / "logs" / "finished"
+
+
+def mark_finished(store_dir: str | Path, key: str) -> None:
+    """Tell the build's head that job ``key`` finished (its artifact is in the store).
+
+    One empty file per finished job, in one folder that the head lists and empties as it
+    counts: its progress costs O(jobs finished since it last looked), not O(jobs waiting),
+    on any executor (local, SLURM, grouped jobs). The head clears leftovers before a build.
+    """
+    folder = finished_dir(store_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{key}.done").touch()

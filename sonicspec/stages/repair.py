@@ -1,13 +1,14 @@
 """Before a build runs: find what is damaged or missing, and clear the way to remake it.
 
-A build trusts nothing it has not checked. For every job of the plan whose artifact is in the
-store it checks the artifact (digest of its arrays, re-read only when its files moved since the
-last check, see :mod:`sonicspec.stages.checked`), and for the ``export`` and ``dataset`` jobs
-every file they wrote into the dataset folder (SHA-256 recorded when written; re-hashed only when
-its size or time moved). A damaged artifact, a missing or changed dataset file, or a deleted
-artifact whose consumers are still there, sends that job and every job downstream of it back to
-the queue: their artifacts are removed, so Snakemake (which reruns exactly the jobs whose
-output is missing) makes them again, with the same bytes.
+A build trusts nothing it has not checked. For every job of the plan whose artifact is in the store
+it checks the artifact (digest of its arrays, re-read only when its files moved since the last
+check, see :mod:`sonicspec.stages.checked`), and for the ``export`` and ``dataset`` jobs every file
+they wrote into the dataset folder (SHA-256 recorded when written; re-hashed only when its size or
+time moved; the list of those files is read from the artifact only when the artifact moved, see
+:class:`~sonicspec.stages.checked.CheckCache`). A damaged artifact, a missing or changed dataset
+file, or a deleted artifact whose consumers are still there, sends that job and every job
+downstream of it back to the queue: their artifacts are removed, so Snakemake (which reruns exactly
+the jobs whose output is missing) makes them again, with the same bytes.
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ class CheckReport:
     artifacts_verified: int = 0
     files_checked: int = 0
     files_hashed: int = 0
+    records_read: int = 0
+    """``export``/``dataset`` artifacts whose JSON was read for the files they record (the
+    others' lists came from the check cache)."""
 
 
 def present_keys(plan: Plan, store: ArtifactStore) -> set[str]:
@@ -83,7 +87,8 @@ def _file_problem(out: Path, record: dict[str, Any], cache: CheckCache,
     if cache.file_ok(path, st, record["sha256"]):
         return None
     report.files_hashed += 1
-    if st.st_size != record.get("bytes", st.st_size) or file_sha256(path) != record["sha256"]:
+    if (record.get("bytes") not in (None, st.st_size)
+            or file_sha256(path) != record["sha256"]):
         cache.forget_file(path)
         return f"dataset file {record['path']} differs from what the build wrote"
     cache.mark_file(path, st, record["sha256"])
@@ -112,7 +117,15 @@ def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repai
                 continue
             cache.mark_artifact(job.key, fingerprint)
         if job.step in FILE_STEPS:
-            for record in written_files(job.step, store.read_data(job.step, job.key)):
+            # The files it wrote, from the cache while the artifact is unchanged: reading its
+            # JSON costs megabytes per group.
+            records = cache.written(job.key, fingerprint)
+            if records is None:
+                report.records_read += 1
+                records = cache.mark_written(
+                    job.key, fingerprint,
+                    written_files(job.step, store.read_data(job.step, job.key)))
+            for record in records:
                 problem = _file_problem(out, record, cache, report)
                 if problem is not None:
                     bad[job.key] = problem
@@ -154,9 +167,12 @@ def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
     for job in plan.jobs:
         if job.key not in keys or not store.exists(job.step, job.key):
             continue
-        cache.mark_artifact(job.key, store.fingerprint(job.step, job.key))
+        fingerprint = store.fingerprint(job.step, job.key)
+        cache.mark_artifact(job.key, fingerprint)
         if job.step in FILE_STEPS:
-            for record in written_files(job.step, store.read_data(job.step, job.key)):
+            records = list(written_files(job.step, store.read_data(job.step, job.key)))
+            cache.mark_written(job.key, fingerprint, records)
+            for record in records:
                 path = out / record["path"]
                 if not path.is_file():
                     missing.append(record["path"])

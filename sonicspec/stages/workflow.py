@@ -14,7 +14,7 @@ import shlex
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -30,7 +30,7 @@ from sonicspec.export.checksums import (
 from sonicspec.plan.model import STEPS, Job, Plan, Step
 from sonicspec.plan.params import read_params
 from sonicspec.stages.checked import CheckCache
-from sonicspec.stages.context import progress_path
+from sonicspec.stages.context import finished_dir, progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
 from sonicspec.store import ArtifactStore
 from sonicspec.store.lock import StoreLock
@@ -245,10 +245,26 @@ def job_warnings(plan: Plan, keys: set[str]) -> list[str]:
     return out
 
 
-def _job_progress(plan: Plan, waiting: list[Job]) -> str:
-    """What the running jobs say of themselves (``JobContext.progress``), briefly."""
+def _job_progress(plan: Plan, waiting: Mapping[str, Job] | Iterable[Job]) -> str:
+    """What the running jobs say of themselves (``JobContext.progress``), briefly.
+
+    Lists the progress folder, which holds a file only while its job runs, and opens at most
+    two of the files: O(running jobs), however many wait.
+    """
+    if not isinstance(waiting, Mapping):
+        waiting = {j.key: j for j in waiting}
+    folder = progress_path(plan.store_dir, "0" * 64).parent
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return ""
+    running = sorted((waiting[n[:-4]] for n in names
+                      if n.endswith(".txt") and n[:-4] in waiting),
+                     key=lambda j: (j.label, j.key))
     parts = []
-    for job in waiting:
+    for job in running:
+        if len(parts) == 2:
+            break
         try:
             text = progress_path(plan.store_dir, job.key).read_text().strip()
         except OSError:
@@ -256,8 +272,8 @@ def _job_progress(plan: Plan, waiting: list[Job]) -> str:
         parts.append(f"{job.label}: {text}")
     if not parts:
         return ""
-    more = f" (+{len(parts) - 2} more)" if len(parts) > 2 else ""
-    return " | " + "; ".join(parts[:2]) + more
+    more = len(running) - len(parts) if len(parts) == 2 else 0
+    return " | " + "; ".join(parts) + (f" (+{more} more)" if more > 0 else "")
 
 
 def _hours(plan: Plan) -> tuple[int, float]:
@@ -352,10 +368,16 @@ def build(
                   "and the jobs that follow from them)", file=stream)
         cache.save()
         present = present_keys(plan, store)
-        code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
-                                        dry_run=dry_run, stream=stream, poll_s=poll_s,
-                                        on_start=on_start, snakemake_args=snakemake_args,
-                                        start=start)
+        if not dry_run and len(present) == len(plan.jobs):
+            # Nothing to make: Snakemake would spend its DAG (seconds per 10^4 jobs) to say so.
+            code, log_text = 0, ""
+            print(format_progress(progress(plan, store), time.monotonic() - start,
+                                  len(present)), file=stream)
+        else:
+            code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
+                                            dry_run=dry_run, stream=stream, poll_s=poll_s,
+                                            on_start=on_start,
+                                            snakemake_args=snakemake_args, start=start)
         ran_keys = executed_keys(log_text) & {j.key for j in plan.jobs}
         jobs = plan.by_key()
         ran = {s.name: 0 for s in STEPS}
@@ -382,6 +404,24 @@ def run_build(plan: Plan, **kwargs: Any) -> int:
     return build(plan, **kwargs).code
 
 
+def take_finished(folder: Path) -> list[str]:
+    """Keys of the jobs that finished since the last call (their markers in ``folder``,
+    deleted as they are read): O(new markers)."""
+    keys = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return keys
+    for entry in entries:
+        if entry.name.endswith(".done"):
+            keys.append(entry.name[: -len(".done")])
+        try:
+            os.unlink(entry.path)
+        except OSError:
+            pass
+    return keys
+
+
 def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores: int,
                    profile: Path | None, dry_run: bool, stream: TextIO, poll_s: float,
                    on_start: Callable[[subprocess.Popen], None] | None,
@@ -395,7 +435,18 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
     env = dict(os.environ)
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     start_done = len(present)
-    waiting = [j for j in plan.jobs if j.key not in present]
+    # Progress from events: each job that finishes leaves a marker (``mark_finished``); the
+    # head counts and deletes the new ones. Every job still to run started without its
+    # artifact (the check removed the ones to remake), so the counts only ever grow.
+    done: dict[str, int] = {}
+    totals: dict[str, int] = {}
+    for step, jobs in plan.by_step().items():
+        if jobs:
+            totals[step] = len(jobs)
+            done[step] = sum(j.key in present for j in jobs)
+    waiting = {j.key: j for j in plan.jobs if j.key not in present}
+    finished = finished_dir(plan.store_dir)
+    take_finished(finished)  # markers left by an earlier, interrupted build
     with open(log_path, "w") as log:
         log.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
         log.flush()
@@ -408,10 +459,11 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
         while proc.poll() is None:
             time.sleep(poll_s)
             if not dry_run:
-                # Every job still to run started without its artifact (the check removed the
-                # ones to remake), so these counts only ever grow.
-                waiting = [j for j in waiting if not store.exists(j.step, j.key)]
-                steps = progress(plan, store)
+                for key in take_finished(finished):
+                    job = waiting.pop(key, None)
+                    if job is not None:
+                        done[job.step] += 1
+                steps = [StepProgress(step, done[step], totals[step]) for step in totals]
                 line = format_progress(steps, time.monotonic() - start, start_done)
                 line += _job_progress(plan, waiting)
                 if line.split("] ", 1)[-1] != last:

@@ -1,0 +1,241 @@
+"""Benchmark (issue 27, items 3 and 4): what a build's head costs on a big store.
+
+- ``noop``: a synthetic store laid out like a built plan (per shard of 16 groups a placement,
+  rir, render, mix and export artifact, one dataset artifact; 8 dataset files per group; each
+  export artifact's JSON carries ``--payload-kb`` of per-group tracks, as the real metadata
+  does), at 10^3 and 10^4 groups. Measures a no-op rebuild's check
+  (``check_existing`` + ``present_keys`` + the check cache's load and save, what
+  ``sonicspec build`` does before it would start Snakemake) in a child process: the first
+  check (cold cache: every artifact verified, every file hashed) and the second (nothing
+  changed), wall and CPU seconds, and how many artifact records it read.
+- ``head``: the build head's progress loop while ``--waiting`` jobs wait (Snakemake replaced
+  by a process that sleeps, two jobs writing progress): the head's CPU seconds per second of
+  polling (``poll_s`` 0.1 s, scaled to the default 1 s poll).
+
+``--code DIR`` runs the measured child processes with another source tree first on the path
+(e.g. ``/work/main``) for a before/after figure.
+
+Reproduce:
+    python bench/bench_head.py noop --groups 1000 10000
+    python bench/bench_head.py head --waiting 1000
+    python bench/bench_head.py noop --groups 1000 --code /work/main   # before
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PER_SHARD = 16
+FILES_PER_GROUP = 8
+
+CHECK = """
+import json, resource, sys, time
+from pathlib import Path
+t0 = time.perf_counter(); r0 = resource.getrusage(resource.RUSAGE_SELF)
+from sonicspec.plan.model import Plan
+from sonicspec.stages.checked import CheckCache
+from sonicspec.stages.repair import check_existing, present_keys
+from sonicspec.store import ArtifactStore
+plan = Plan.read(Path(sys.argv[1]))
+t1 = time.perf_counter(); r1 = resource.getrusage(resource.RUSAGE_SELF)
+store = ArtifactStore(plan.store_dir)
+cache = CheckCache.of_store(plan.store_dir)
+report = check_existing(plan, store, cache)
+cache.save()
+present = present_keys(plan, store)
+t2 = time.perf_counter(); r2 = resource.getrusage(resource.RUSAGE_SELF)
+cpu = lambda a, b: b.ru_utime + b.ru_stime - a.ru_utime - a.ru_stime
+print(json.dumps({"wall": t2 - t1, "cpu": cpu(r1, r2), "read_plan": t1 - t0,
+                  "present": len(present), "findings": len(report.findings),
+                  "verified": report.artifacts_verified, "hashed": report.files_hashed,
+                  "records_read": getattr(report, "records_read", None),
+                  "rss_mb": r2.ru_maxrss / 1024}))
+"""
+
+HEAD = """
+import io, json, resource, sys, time
+from pathlib import Path
+import sonicspec.stages.workflow as wf
+from sonicspec.plan.model import Plan
+from sonicspec.store import ArtifactStore
+plan = Plan.read(Path(sys.argv[1]))
+seconds = float(sys.argv[2])
+wf.snakemake_command = lambda *a, **k: [sys.executable, "-c",
+                                        f"import time; time.sleep({seconds})"]
+store = ArtifactStore(plan.store_dir)
+from sonicspec.stages.repair import present_keys
+present = present_keys(plan, store)
+stream = io.StringIO()
+r0 = resource.getrusage(resource.RUSAGE_SELF); t0 = time.perf_counter()
+wf._run_snakemake(plan, store, present, cores=1, profile=None, dry_run=False, stream=stream,
+                  poll_s=0.1, on_start=None, snakemake_args=None, start=time.monotonic())
+r1 = resource.getrusage(resource.RUSAGE_SELF); t1 = time.perf_counter()
+cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+lines = [x for x in stream.getvalue().splitlines() if x.startswith("[")]
+print(json.dumps({"wall": t1 - t0, "cpu": cpu, "polls": round(seconds / 0.1),
+                  "last_line": lines[-2] if len(lines) > 1 else ""}))
+"""
+
+
+def _child(code: Path, script: str, *args: str) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    # cwd: ``python -c`` puts the working folder first on the path
+    done = subprocess.run([sys.executable, "-c", script, *args], env=env, cwd=code,
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"child failed: {done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def synthetic_plan(folder: Path, groups: int, waiting: int = 0):
+    """A plan shaped like a built one (see the module docstring); ``waiting`` extra rir jobs
+    that are not built."""
+    from sonicspec.plan.model import Job, Plan
+
+    jobs = []
+    exports = []
+    for n, first in enumerate(range(0, groups, PER_SHARD)):
+        ids = [f"train/{g}" for g in range(first, min(first + PER_SHARD, groups))]
+        placement = Job("placement", {"groups": ids, "shard": n}, (), f"placement {n}")
+        rir = Job("rir", {"shard": n}, (placement.key,), f"rir train/{n}")
+        render = Job("render", {"shard": n}, (rir.key,), f"render train/{n}")
+        mix = Job("mix", {"shard": n}, (render.key,), f"mix train/{n}")
+        export = Job("export", {"groups": ids, "shard": n}, (mix.key,), f"export train/{n}")
+        jobs += [placement, rir, render, mix, export]
+        exports.append(export)
+    dataset = Job("dataset", {"name": "bench"}, tuple(e.key for e in exports), "dataset")
+    jobs.append(dataset)
+    first_placement = jobs[0]
+    extra = [Job("rir", {"waiting": w}, (first_placement.key,), f"rir waiting/{w}")
+             for w in range(waiting)]
+    jobs[1:1] = extra
+    return Plan("bench", 1, str(folder / "store"), str(folder / "out"), "0" * 64,
+                tuple(jobs)), set(j.key for j in extra)
+
+
+def write_store(folder: Path, groups: int, payload_kb: int, waiting: int = 0) -> Path:
+    """Build the synthetic store and dataset folder; returns the plan's path."""
+    sys.path.insert(0, str(ROOT))
+    from sonicspec.store import ArtifactStore
+
+    plan, unbuilt = synthetic_plan(folder, groups, waiting)
+    store = ArtifactStore(plan.store_dir)
+    out = Path(plan.output_dir)
+    rng = np.random.default_rng(1)
+    arrays = {
+        "placement": {"mic": rng.random((PER_SHARD, 3))},
+        "rir": {"rirs": rng.random((PER_SHARD, 4, 2000), dtype=np.float32),
+                "points": rng.random((PER_SHARD, 4, 3)), "index": np.arange(PER_SHARD)},
+        "render": {"tracks": rng.random((PER_SHARD, 5, 4000), dtype=np.float32),
+                   "gains": rng.random(PER_SHARD)},
+        "mix": {"mixtures": rng.random((PER_SHARD, 3, 4000), dtype=np.float32),
+                "levels": rng.random(PER_SHARD)},
+        "export": {"peaks": rng.random(PER_SHARD)},
+        "dataset": {"count": np.arange(1)},
+    }
+    floats = max(1, payload_kb * 1024 // 20)
+    track = [round(float(x), 15) for x in rng.random(floats)]
+    manifests = []
+    for job in plan.jobs:
+        if job.key in unbuilt:
+            continue
+        data: dict = {}
+        if job.step == "export":
+            data["groups"] = []
+            for gid in job.params["groups"]:
+                files = []
+                for f in range(FILES_PER_GROUP):
+                    rel = f"{gid}/file{f}.bin"
+                    body = rng.bytes(512)
+                    path = out / rel
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    path.write_bytes(body)
+                    files.append({"path": rel, "bytes": len(body),
+                                  "sha256": hashlib.sha256(body).hexdigest()})
+                data["groups"].append({"id": gid, "files": files, "tracks": track})
+        if job.step == "dataset":
+            body = b"manifest\n" * 100
+            for name in ("dataset.json", "train.jsonl"):
+                (out / name).write_bytes(body)
+                manifests.append({"path": name, "bytes": len(body),
+                                  "sha256": hashlib.sha256(body).hexdigest()})
+            data["files"] = manifests
+        store.write(job.step, job.key, arrays[job.step], data=data, params=job.params,
+                    input_keys=job.inputs)
+    return plan.write(folder / "plan.json")
+
+
+def _du_gb(path: Path) -> float:
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) / 1e9
+
+
+def noop(groups: list[int], payload_kb: int, code: Path) -> None:
+    print(f"| groups | jobs | store GB | check | wall s | CPU s | artifacts verified | files "
+          f"hashed | export records read | peak RSS MB |  (code: {code})")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for n in groups:
+        with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+            t = time.perf_counter()
+            plan_path = write_store(Path(tmp), n, payload_kb)
+            made = time.perf_counter() - t
+            jobs = sum(1 for line in plan_path.read_text().splitlines() if '"key": ' in line)
+            size = _du_gb(Path(tmp) / "store")
+            for what in ("first (cold cache)", "no-op (warm cache)", "no-op again"):
+                r = _child(code, CHECK, str(plan_path))
+                print(f"| {n:,} | {jobs:,} | {size:.2f} | {what} | {r['wall']:.2f} | "
+                      f"{r['cpu']:.2f} | {r['verified']} | {r['hashed']} | "
+                      f"{r['records_read']} | {r['rss_mb']:.0f} |", flush=True)
+            print(f"(store written in {made:.0f} s)", file=sys.stderr)
+
+
+def head(waiting: int, groups: int, seconds: float, code: Path) -> None:
+    with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+        plan_path = write_store(Path(tmp), groups, 1, waiting=waiting)
+        sys.path.insert(0, str(ROOT))
+        from sonicspec.plan.model import Plan
+        from sonicspec.stages.context import progress_path
+
+        plan = Plan.read(plan_path)
+        running = [j for j in plan.jobs if j.label.startswith("rir waiting/")][:2]
+        for job in running:
+            path = progress_path(plan.store_dir, job.key)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text("group 1/16: 15 points, 8,192/600 rays")
+        r = _child(code, HEAD, str(plan_path), str(seconds))
+        per_poll = r["cpu"] / r["polls"]
+        print(f"| {waiting:,} waiting, {groups:,} groups built | {r['polls']} polls in "
+              f"{r['wall']:.1f} s | head CPU {r['cpu']:.2f} s | {per_poll * 1000:.2f} ms per "
+              f"poll = {per_poll:.4f} CPU-s per second at poll_s 1 |  (code: {code})")
+        print(f"last progress line: {r['last_line']}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("what", choices=["noop", "head"])
+    parser.add_argument("--groups", type=int, nargs="+", default=[1000, 10000])
+    parser.add_argument("--payload-kb", type=int, default=100,
+                        help="JSON of per-group tracks in each export artifact (real: MBs)")
+    parser.add_argument("--waiting", type=int, default=1000)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--code", type=Path, default=ROOT)
+    args = parser.parse_args()
+    if args.what == "noop":
+        noop(args.groups, args.payload_kb, args.code.resolve())
+    else:
+        head(args.waiting, args.groups[0], args.seconds, args.code.resolve())
+    print(f"\ncommand: python bench/{Path(__file__).name} {' '.join(sys.argv[1:])}")
+
+
+if __name__ == "__main__":
+    main()
