@@ -12,6 +12,10 @@
   by a process that sleeps, two jobs writing progress): the head's CPU seconds per second of
   polling (``poll_s`` 0.1 s, scaled to the default 1 s poll).
 
+- ``dag``: Snakemake's DAG for a synthetic plan of ``--groups`` (the ``noop`` layout, nothing
+  built): ``snakemake --dry-run`` as ``sonicspec build --dry-run`` runs it, wall seconds and
+  peak RSS of the Snakemake process (it reads the plan, builds the DAG, checks every output).
+
 ``--code DIR`` runs the measured child processes with another source tree first on the path
 (e.g. ``/work/main``) for a before/after figure.
 
@@ -19,6 +23,7 @@ Reproduce:
     python bench/bench_head.py noop --groups 1000 10000
     python bench/bench_head.py head --waiting 1000
     python bench/bench_head.py noop --groups 1000 --code /work/main   # before
+    python bench/bench_head.py dag --groups 100000 1000000
 """
 
 from __future__ import annotations
@@ -220,9 +225,38 @@ def head(waiting: int, groups: int, seconds: float, code: Path) -> None:
         print(f"last progress line: {r['last_line']}")
 
 
+def dag(groups: list[int], code: Path) -> None:
+    sys.path.insert(0, str(ROOT))
+    import resource
+
+    from sonicspec.stages.workflow import snakemake_command
+
+    print(f"| groups | jobs | plan file MB | Snakemake dry run wall s | peak RSS MB |  "
+          f"(code: {code})")
+    print("|---|---|---|---|---|")
+    for n in groups:
+        with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+            plan, _ = synthetic_plan(Path(tmp), n)
+            Path(plan.store_dir).mkdir(parents=True)
+            path = plan.write(Path(tmp) / "plan.json")
+            cmd = snakemake_command(path, plan, cores=1, profile=None, dry_run=True)
+            env = {**os.environ, "PYTHONPATH": str(code)}
+            before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+            t = time.perf_counter()
+            done = subprocess.run(cmd, cwd=plan.store_dir, env=env, capture_output=True,
+                                  text=True, check=False)
+            wall = time.perf_counter() - t
+            rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+            if done.returncode != 0:
+                raise SystemExit(f"snakemake failed: {done.stdout[-2000:]}{done.stderr[-2000:]}")
+            note = "" if rss > before else " (not above an earlier child's)"
+            print(f"| {n:,} | {len(plan.jobs):,} | {path.stat().st_size / 1e6:.0f} | "
+                  f"{wall:.1f} | {rss / 1024:.0f}{note} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=["noop", "head"])
+    parser.add_argument("what", choices=["noop", "head", "dag"])
     parser.add_argument("--groups", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--payload-kb", type=int, default=100,
                         help="JSON of per-group tracks in each export artifact (real: MBs)")
@@ -232,6 +266,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.what == "noop":
         noop(args.groups, args.payload_kb, args.code.resolve())
+    elif args.what == "dag":
+        dag(args.groups, args.code.resolve())
     else:
         head(args.waiting, args.groups[0], args.seconds, args.code.resolve())
     print(f"\ncommand: python bench/{Path(__file__).name} {' '.join(sys.argv[1:])}")
