@@ -74,3 +74,28 @@ def test_slurm_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
         pytest.skip(str(exc))
     assert code == 0
     assert build_digest(plan) == expected
+    # The profile groups jobs (several per SLURM job): the bytes are those of ungrouped jobs.
+    log = max((Path(plan.store_dir) / "logs").glob("snakemake-*.log")).read_text()
+    assert "group job" in log, log[-3000:]
+
+
+def test_a_cold_numba_cache_elsewhere_builds_the_same_bytes(reference, tmp_path: Path,
+                                                            monkeypatch) -> None:
+    """The kernels' cache goes where SONICSPEC_NUMBA_CACHE_DIR says, is compiled there once
+    before the jobs (the warm stamp), and the bytes do not change."""
+    import sonicspec
+    from sonicspec.stages.warm import _stamp
+
+    cache = tmp_path / "numba"
+    monkeypatch.setenv("SONICSPEC_NUMBA_CACHE_DIR", str(cache))
+    assert sonicspec.numba_cache_dir() == str(cache)
+    source = Path(sonicspec.__file__).parent
+    before = {p: p.stat().st_mtime_ns for p in source.rglob("*.nbi")}
+    folder = tmp_path / "cold"
+    folder.mkdir()
+    plan = plan_for(write_spec(folder))
+    assert run_build(plan, cores=2) == 0
+    assert build_digest(plan) == reference[1]
+    assert _stamp().is_file() and _stamp().parent == cache
+    assert list(cache.rglob("*.nbi")), "nothing compiled into the redirected cache"
+    assert {p: p.stat().st_mtime_ns for p in source.rglob("*.nbi")} == before

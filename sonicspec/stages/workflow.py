@@ -32,6 +32,7 @@ from sonicspec.plan.params import read_params
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import finished_dir, progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
+from sonicspec.stages.warm import STEPS_THAT_COMPILE, warm_once
 from sonicspec.store import ArtifactStore
 from sonicspec.store.lock import StoreLock
 
@@ -374,6 +375,9 @@ def build(
             print(format_progress(progress(plan, store), time.monotonic() - start,
                                   len(present)), file=stream)
         else:
+            if not dry_run and any(j.step in STEPS_THAT_COMPILE and j.key not in present
+                                   for j in plan.jobs):
+                warm_once(stream)  # before the first wave, not in every job of it
             code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
                                             dry_run=dry_run, stream=stream, poll_s=poll_s,
                                             on_start=on_start,
