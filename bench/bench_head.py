@@ -16,6 +16,11 @@
   built): ``snakemake --dry-run`` as ``sonicspec build --dry-run`` runs it, wall seconds and
   peak RSS of the Snakemake process (it reads the plan, builds the DAG, checks every output).
 
+- ``warm``: what compiling the kernels once saves a job. Builds the tests' cut-down demo
+  (``tests/build_cases.py``) up to ``render``, then reruns one rir and one render job
+  (``sonicspec job``, its artifact removed first) with numba's cache (a) empty, (b) warmed by
+  ``sonicspec.stages.warm.warm`` only, (c) warm from a real job: wall seconds of each job.
+
 ``--code DIR`` runs the measured child processes with another source tree first on the path
 (e.g. ``/work/main``) for a before/after figure.
 
@@ -24,12 +29,14 @@ Reproduce:
     python bench/bench_head.py head --waiting 1000
     python bench/bench_head.py noop --groups 1000 --code /work/main   # before
     python bench/bench_head.py dag --groups 100000 1000000
+    python bench/bench_head.py warm
 """
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+import io
 import json
 import os
 import subprocess
@@ -254,9 +261,55 @@ def dag(groups: list[int], code: Path) -> None:
                   f"{wall:.1f} | {rss / 1024:.0f}{note} |", flush=True)
 
 
+def warm_saving(code: Path) -> None:
+    sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "tests"))
+    import shutil
+
+    from build_cases import plan_for, write_spec
+
+    from sonicspec.stages.workflow import build
+    from sonicspec.store import ArtifactStore
+
+    with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+        folder = Path(tmp)
+        plan = plan_for(write_spec(folder)).until("render")
+        result = build(plan, cores=2, stream=io.StringIO())
+        if result.code != 0:
+            raise SystemExit("the demo build failed")
+        plan_path = plan.write(folder / "plan.json")
+        store = ArtifactStore(plan.store_dir)
+        env = {**os.environ, "PYTHONPATH": str(code)}
+        print(f"| job | empty cache s | cache warmed by stages.warm s | warm from a job s |  "
+              f"(code: {code})")
+        print("|---|---|---|---|")
+        for step in ("rir", "render"):
+            job = plan.by_step()[step][0]
+            times = []
+            for case in ("empty", "warmed", "job"):
+                cache = folder / f"numba-{step}-{case if case != 'job' else 'warmed'}"
+                if case == "empty":
+                    shutil.rmtree(cache, ignore_errors=True)
+                if case == "warmed":
+                    shutil.rmtree(cache, ignore_errors=True)
+                    subprocess.run([sys.executable, "-c",
+                                    "from sonicspec.stages.warm import warm; warm()"],
+                                   env={**env, "SONICSPEC_NUMBA_CACHE_DIR": str(cache)},
+                                   cwd=code, check=True, capture_output=True)
+                store.remove(step, job.key)
+                t = time.perf_counter()
+                subprocess.run([sys.executable, "-m", "sonicspec.cli", "job", "--plan",
+                                str(plan_path), job.key],
+                               env={**env, "SONICSPEC_NUMBA_CACHE_DIR": str(cache)}, cwd=code,
+                               check=True, capture_output=True)
+                times.append(time.perf_counter() - t)
+            print(f"| {job.label} | {times[0]:.1f} | {times[1]:.1f} | {times[2]:.1f} |",
+                  flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=["noop", "head", "dag"])
+    parser.add_argument("what", choices=["noop", "head", "dag", "warm"])
     parser.add_argument("--groups", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--payload-kb", type=int, default=100,
                         help="JSON of per-group tracks in each export artifact (real: MBs)")
@@ -266,6 +319,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.what == "noop":
         noop(args.groups, args.payload_kb, args.code.resolve())
+    elif args.what == "warm":
+        warm_saving(args.code.resolve())
     elif args.what == "dag":
         dag(args.groups, args.code.resolve())
     else:
