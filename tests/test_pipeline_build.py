@@ -76,7 +76,9 @@ def test_slurm_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
     assert build_digest(plan) == expected
     # The profile groups jobs (several per SLURM job): the bytes are those of ungrouped jobs.
     log = max((Path(plan.store_dir) / "logs").glob("snakemake-*.log")).read_text()
-    assert "group job" in log, log[-3000:]
+    assert "Group job rir" in log and "Group job shard" in log, log[-3000:]
+    submitted = log.count("submitted with SLURM jobid")
+    assert 0 < submitted < len(plan.jobs), submitted
 
 
 def test_a_cold_numba_cache_elsewhere_builds_the_same_bytes(reference, tmp_path: Path,
