@@ -85,6 +85,12 @@ plan = Plan.read(Path(sys.argv[1]))
 seconds = float(sys.argv[2])
 wf.snakemake_command = lambda *a, **k: [sys.executable, "-c",
                                         f"import time; time.sleep({seconds})"]
+polls = [0]
+sleep = time.sleep
+def counted(s):
+    polls[0] += 1
+    sleep(s)
+wf.time.sleep = counted
 store = ArtifactStore(plan.store_dir)
 from sonicspec.stages.repair import present_keys
 present = present_keys(plan, store)
@@ -95,7 +101,7 @@ wf._run_snakemake(plan, store, present, cores=1, profile=None, dry_run=False, st
 r1 = resource.getrusage(resource.RUSAGE_SELF); t1 = time.perf_counter()
 cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
 lines = [x for x in stream.getvalue().splitlines() if x.startswith("[")]
-print(json.dumps({"wall": t1 - t0, "cpu": cpu, "polls": round(seconds / 0.1),
+print(json.dumps({"wall": t1 - t0, "cpu": cpu, "polls": polls[0],
                   "last_line": lines[-2] if len(lines) > 1 else ""}))
 """
 
@@ -197,7 +203,7 @@ def noop(groups: list[int], payload_kb: int, code: Path) -> None:
           f"hashed | export records read | peak RSS MB |  (code: {code})")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in groups:
-        with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+        with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
             t = time.perf_counter()
             plan_path = write_store(Path(tmp), n, payload_kb)
             made = time.perf_counter() - t
@@ -212,7 +218,7 @@ def noop(groups: list[int], payload_kb: int, code: Path) -> None:
 
 
 def head(waiting: int, groups: int, seconds: float, code: Path) -> None:
-    with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
         plan_path = write_store(Path(tmp), groups, 1, waiting=waiting)
         sys.path.insert(0, str(ROOT))
         from sonicspec.plan.model import Plan
@@ -242,7 +248,7 @@ def dag(groups: list[int], code: Path) -> None:
           f"(code: {code})")
     print("|---|---|---|---|---|")
     for n in groups:
-        with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+        with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
             plan, _ = synthetic_plan(Path(tmp), n)
             Path(plan.store_dir).mkdir(parents=True)
             path = plan.write(Path(tmp) / "plan.json")
@@ -271,7 +277,7 @@ def warm_saving(code: Path) -> None:
     from sonicspec.stages.workflow import build
     from sonicspec.store import ArtifactStore
 
-    with tempfile.TemporaryDirectory(prefix="bench-head-", dir=ROOT.parent) as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
         folder = Path(tmp)
         plan = plan_for(write_spec(folder)).until("render")
         result = build(plan, cores=2, stream=io.StringIO())
