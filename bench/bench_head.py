@@ -116,15 +116,15 @@ def _child(code: Path, script: str, *args: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def synthetic_plan(folder: Path, groups: int, waiting: int = 0):
+def synthetic_plan(folder: Path, groups: int, waiting: int = 0, per_shard: int = PER_SHARD):
     """A plan shaped like a built one (see the module docstring); ``waiting`` extra rir jobs
     that are not built."""
     from sonicspec.plan.model import Job, Plan
 
     jobs = []
     exports = []
-    for n, first in enumerate(range(0, groups, PER_SHARD)):
-        ids = [f"train/{g}" for g in range(first, min(first + PER_SHARD, groups))]
+    for n, first in enumerate(range(0, groups, per_shard)):
+        ids = [f"train/{g}" for g in range(first, min(first + per_shard, groups))]
         placement = Job("placement", {"groups": ids, "shard": n}, (), f"placement {n}")
         rir = Job("rir", {"shard": n}, (placement.key,), f"rir train/{n}")
         render = Job("render", {"shard": n}, (rir.key,), f"render train/{n}")
@@ -238,18 +238,18 @@ def head(waiting: int, groups: int, seconds: float, code: Path) -> None:
         print(f"last progress line: {r['last_line']}")
 
 
-def dag(groups: list[int], code: Path) -> None:
+def dag(groups: list[int], code: Path, per_shard: int) -> None:
     sys.path.insert(0, str(ROOT))
     import resource
 
     from sonicspec.stages.workflow import snakemake_command
 
-    print(f"| groups | jobs | plan file MB | Snakemake dry run wall s | peak RSS MB |  "
-          f"(code: {code})")
-    print("|---|---|---|---|---|")
+    print(f"| groups | groups per shard | jobs | plan file MB | Snakemake dry run wall s | "
+          f"peak RSS MB |  (code: {code})")
+    print("|---|---|---|---|---|---|")
     for n in groups:
         with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
-            plan, _ = synthetic_plan(Path(tmp), n)
+            plan, _ = synthetic_plan(Path(tmp), n, per_shard=per_shard)
             Path(plan.store_dir).mkdir(parents=True)
             path = plan.write(Path(tmp) / "plan.json")
             cmd = snakemake_command(path, plan, cores=1, profile=None, dry_run=True)
@@ -263,7 +263,7 @@ def dag(groups: list[int], code: Path) -> None:
             if done.returncode != 0:
                 raise SystemExit(f"snakemake failed: {done.stdout[-2000:]}{done.stderr[-2000:]}")
             note = "" if rss > before else " (not above an earlier child's)"
-            print(f"| {n:,} | {len(plan.jobs):,} | {path.stat().st_size / 1e6:.0f} | "
+            print(f"| {n:,} | {per_shard} | {len(plan.jobs):,} | {path.stat().st_size / 1e6:.0f} | "
                   f"{wall:.1f} | {rss / 1024:.0f}{note} |", flush=True)
 
 
@@ -320,6 +320,8 @@ def main() -> None:
     parser.add_argument("--payload-kb", type=int, default=100,
                         help="JSON of per-group tracks in each export artifact (real: MBs)")
     parser.add_argument("--waiting", type=int, default=1000)
+    parser.add_argument("--per-shard", type=int, default=PER_SHARD,
+                        help="groups per shard of the dag section's plan")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--code", type=Path, default=ROOT)
     args = parser.parse_args()
@@ -328,7 +330,7 @@ def main() -> None:
     elif args.what == "warm":
         warm_saving(args.code.resolve())
     elif args.what == "dag":
-        dag(args.groups, args.code.resolve())
+        dag(args.groups, args.code.resolve(), args.per_shard)
     else:
         head(args.waiting, args.groups[0], args.seconds, args.code.resolve())
     print(f"\ncommand: python bench/{Path(__file__).name} {' '.join(sys.argv[1:])}")
