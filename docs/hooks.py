@@ -4,6 +4,8 @@
   (:func:`sonicspec.spec.reference.spec_reference`, from the spec models);
 * ``<!-- generated: cli -->`` becomes the command-line reference, walked from the argparse
   parser the ``sonicspec`` command itself uses (``sonicspec.cli.build_parser``);
+* ``<!-- generated: steps -->`` becomes the table of the pipeline's steps
+  (``sonicspec.plan.model.STEPS``);
 * the benchmark figures (``bench/figures/*.png``) are served as ``figures/<name>.png``
   without copying them into ``docs/``, so ``bench/RESULTS.md`` (included in the benchmarks
   page) and the science pages show the files the bench scripts write.
@@ -140,6 +142,20 @@ def cli_reference(parser: argparse.ArgumentParser | None = None) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+# ---------------------------------------------------------------- the pipeline's steps
+
+
+def steps_table() -> str:
+    """The pipeline's steps in order, with their output versions and resource requests."""
+    from sonicspec.plan.model import STEPS
+
+    lines = ["| step | what a job does | stage version | threads | memory (MB) | runtime (min) |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    lines += [f"| `{s.name}` | {s.description} | {s.version} | {s.threads} | {s.mem_mb} | "
+              f"{s.runtime_min} |" for s in STEPS]
+    return "\n".join(lines) + "\n"
+
+
 # ---------------------------------------------------------------- the hooks
 
 
@@ -151,7 +167,10 @@ def generated(name: str) -> str:
         return spec_reference()
     if name == "cli":
         return cli_reference()
-    raise ValueError(f"docs: unknown generated block {name!r}; expected 'spec' or 'cli'")
+    if name == "steps":
+        return steps_table()
+    raise ValueError(f"docs: unknown generated block {name!r}; expected 'spec', 'cli' or "
+                     "'steps'")
 
 
 def expand(markdown: str) -> str:

@@ -106,8 +106,8 @@ def type_text(p: dict[str, Any]) -> str:
     if "oneOf" in p:
         kinds = p.get("discriminator", {}).get("mapping", {})
         if kinds:
-            return "one of " + ", ".join(
-                f"{_link(_ref_name(ref))} (`kind: {kind}`)" for kind, ref in kinds.items())
+            return "one of, by `kind`: " + ", ".join(
+                f"[{kind}](#{anchor(_ref_name(ref))})" for kind, ref in kinds.items())
         return " or ".join(type_text(x) for x in p["oneOf"])
     if "anyOf" in p:
         return " or ".join(type_text(x) for x in p["anyOf"])
@@ -142,10 +142,15 @@ def constraint_text(p: dict[str, Any]) -> str:
         parts.append(f"matches `{p['pattern']}`")
     if "minItems" in p or "maxItems" in p:
         lo, hi = p.get("minItems", 0), p.get("maxItems")
-        parts.append(f"{lo} items" if lo == hi else
-                     f"at least {lo} items" if hi is None else f"{lo}–{hi} items")
+        if lo == hi:
+            parts.append(f"{lo} items")
+        elif hi is None:
+            parts.append(f"at least {lo} item{'s' if lo != 1 else ''}")
+        else:
+            parts.append(f"{lo}–{hi} items")
     if "minProperties" in p:
-        parts.append(f"at least {p['minProperties']} entries")
+        n = p["minProperties"]
+        parts.append(f"at least {n} entr{'ies' if n != 1 else 'y'}")
     if isinstance(p.get("propertyNames"), dict):
         names = constraint_text(p["propertyNames"])
         if names:
@@ -245,13 +250,16 @@ def model_section(name: str, node: dict[str, Any], model: type[BaseModel] | None
     if node.get("description"):
         lines += [" ".join(node["description"].split()), ""]
     required = set(node.get("required", []))
-    lines += ["| field | type | unit | default | range / constraints | description |",
-              "| --- | --- | --- | --- | --- | --- |"]
+    lines += ["| field | type | unit | default | description and range |",
+              "| --- | --- | --- | --- | --- |"]
     for field, p in node.get("properties", {}).items():
+        text = " ".join(p.get("description", "").split())
+        limits = constraint_text(p)
+        if limits:
+            text = f"{text} *Range:* {limits}." if text else f"*Range:* {limits}."
         lines.append("| " + " | ".join([
             f"`{field}`", _cell(type_text(p)), unit_of(field),
-            _cell(_default_text(model, field, p, field in required)),
-            _cell(constraint_text(p)), _cell(p.get("description", "")),
+            _cell(_default_text(model, field, p, field in required)), _cell(text),
         ]) + " |")
     return [*lines, ""]
 
