@@ -199,6 +199,45 @@ def test_python_block_runs(file: str, line: int, code: str, reason: str | None,
     exec(compile(code, f"{file}:{line}", "exec"), {"__name__": "__docs__"})
 
 
+# --- the YAML examples --------------------------------------------------------------------
+
+
+def _yaml_blocks() -> list[tuple[str, int, str]]:
+    out = []
+    for path in PAGES:
+        text = path.read_text(encoding="utf-8")
+        for found in re.finditer(r"^```yaml\n(.*?)^```", text, re.S | re.M):
+            line = text[:found.start()].count("\n") + 1
+            out.append((str(path.relative_to(ROOT)), line, found.group(1)))
+    return out
+
+
+YAML_BLOCKS = _yaml_blocks()
+
+
+@pytest.mark.parametrize(("file", "line", "text"), YAML_BLOCKS,
+                         ids=[f"{f}:{n}" for f, n, _ in YAML_BLOCKS])
+def test_yaml_example_validates(file: str, line: int, text: str) -> None:
+    """A whole spec validates as it is; a fragment (some top-level sections) validates in
+    place of the demo spec's own sections."""
+    import yaml
+
+    from sonicspec.spec import validate_text
+
+    fragment = yaml.safe_load(text)
+    assert isinstance(fragment, dict), f"{file}:{line}: not a mapping"
+    if "sonicspec" in fragment:
+        spec = fragment
+    else:
+        spec = yaml.safe_load((ROOT / "specs" / "demo.yaml").read_text(encoding="utf-8"))
+        unknown = set(fragment) - set(DatasetSpec.model_fields)
+        assert not unknown, f"{file}:{line}: not spec sections: {sorted(unknown)}"
+        spec.update(fragment)
+    loaded, problems = validate_text(yaml.safe_dump(spec), str(ROOT / "specs" / "x.yaml"))
+    errors = [p for p in problems if p.severity == "error"]
+    assert loaded is not None and not errors, f"{file}:{line}: {errors}"
+
+
 # --- names the pages give -------------------------------------------------------------------
 
 
