@@ -293,6 +293,9 @@ def test_the_readme_is_short_and_says_where_everything_is() -> None:
         assert needle in text, needle
     for link in re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", text):
         assert (ROOT / link).exists(), f"README.md: broken link {link}"
+    bib = re.search(r"^```bibtex\n(.*?)^```", text, re.S | re.M)
+    assert bib and bib.group(1) == (DOCS / "citation.bib").read_text(encoding="utf-8")
+    assert '--8<-- "docs/citation.bib"' in (DOCS / "index.md").read_text(encoding="utf-8")
 
 
 def test_mkdocs_builds_in_strict_mode(tmp_path: Path) -> None:
