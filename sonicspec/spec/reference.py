@@ -250,7 +250,9 @@ def model_section(name: str, node: dict[str, Any], model: type[BaseModel] | None
     if node.get("description"):
         lines += [" ".join(node["description"].split()), ""]
     required = set(node.get("required", []))
-    lines += ["| field | type | unit | default | description and range |",
+    # The site's stylesheet lays out tables inside a ``field-table`` block (md_in_html).
+    lines += ['<div class="field-table" markdown>', "",
+              "| field | type | unit | default | description and range |",
               "| --- | --- | --- | --- | --- |"]
     for field, p in node.get("properties", {}).items():
         text = " ".join(p.get("description", "").split())
@@ -261,7 +263,7 @@ def model_section(name: str, node: dict[str, Any], model: type[BaseModel] | None
             f"`{field}`", _cell(type_text(p)), unit_of(field),
             _cell(_default_text(model, field, p, field in required)), _cell(text),
         ]) + " |")
-    return [*lines, ""]
+    return [*lines, "", "</div>", ""]
 
 
 def scene_file_schema() -> dict[str, Any]:
