@@ -287,6 +287,8 @@ def test_the_readme_is_short_and_says_where_everything_is() -> None:
     assert len(commands) == 2
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").strip().splitlines()[-1]
     assert commands[1] == ci  # the README's test command is exactly what CI runs
+    started = (DOCS / "getting-started.md").read_text(encoding="utf-8").splitlines()
+    assert [line for line in started if line.startswith("apt-get")] == commands
     assert "mkdocs build --strict && python -m pytest" in ci
     for needle in ("docs/reference/spec.md", "docs/getting-started.md", "## Citing",
                    "@inproceedings{li2025sonicsim", "docs/report.png"):
