@@ -34,7 +34,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sonicspec.acoustics.diffraction import band_nodes_hz, first_order_band_amplitudes
+from sonicspec.acoustics.paths.diffraction import band_nodes_hz, first_order_band_amplitudes
 from sonicspec.acoustics.theory import Wedge, wedge_diffraction_ir, wedge_geometric_field
 
 C = 343.0
@@ -152,14 +152,14 @@ def method_cost() -> dict:
 def apartment() -> dict:
     from bench_rlr import MIC_M, SOURCE_M, apartment_mesh, preset_acoustics
 
-    from sonicspec.acoustics.edge_paths import close_pairs
     from sonicspec.acoustics.engine import (
         SimulationSettings,
         acoustic_scene,
         scene_edges,
         simulate_rirs,
     )
-    from sonicspec.acoustics.image_sources import planar_regions
+    from sonicspec.acoustics.paths.edge_paths import close_pairs
+    from sonicspec.acoustics.paths.image_sources import planar_regions
     from sonicspec.geometry.materials import load_library
 
     settings = SimulationSettings.from_spec(preset_acoustics(), 16_000, C)

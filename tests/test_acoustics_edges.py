@@ -1,4 +1,4 @@
-"""Diffracting edges of synthetic meshes (``acoustics.edges``): a screen, a box, a door."""
+"""Diffracting edges of synthetic meshes (``acoustics.paths.edges``): a screen, a box, a door."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sonicspec.acoustics.edges import diffracting_edges
+from sonicspec.acoustics.paths.edges import diffracting_edges
 from sonicspec.acoustics.theory import Wedge
 from sonicspec.errors import AcousticsError
 from sonicspec.geometry.mesh import SceneMesh

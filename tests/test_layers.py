@@ -144,6 +144,46 @@ def test_nothing_in_the_package_imports_testing() -> None:
             and "sonicspec.testing" in p.read_text(encoding="utf-8", errors="replace")] == []
 
 
+# The acoustics library's own floors, as sonicspec/acoustics/__init__.py draws the pipeline of
+# one RIR: the shared basics at its top (bands, air, arrivals, directions, metrics and the
+# references in theory), the room on Embree, the exact paths, the stochastic late field, the
+# receivers, the moving paths, and the engine, which runs them all.
+ACOUSTICS = {
+    "basics": {"basics"},
+    "room": {"basics", "room"},
+    "paths": {"basics", "room", "paths"},
+    "late": {"basics", "room", "paths", "late"},
+    "receivers": {"basics", "receivers"},
+    "moving": {"basics", "receivers", "moving"},
+    "engine": {"basics", "room", "paths", "late", "receivers", "moving", "engine"},
+}
+
+
+def acoustics_floor(module: str) -> str:
+    """``engine``, an acoustics subpackage's name, or ``basics`` (the modules at its top)."""
+    parts = module.split(".")
+    if len(parts) >= 3 and (PACKAGE / "acoustics" / parts[2]).is_dir():
+        return parts[2]
+    return "engine" if parts[2:] == ["engine"] else "basics"
+
+
+def test_acoustics_imports_go_down_its_pipeline() -> None:
+    inside = [m for m in modules() if floor(m) == "acoustics"]
+    assert {acoustics_floor(m) for m in inside} == set(ACOUSTICS)
+    assert acoustics_floor("sonicspec.acoustics.theory") == "basics"
+    assert acoustics_floor("sonicspec.acoustics.late._trace_kernels") == "late"
+    offences = [f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+                if floor(a) == floor(b) == "acoustics"
+                and acoustics_floor(b) not in ACOUSTICS[acoustics_floor(a)]]
+    assert offences == []
+    # The package docstring draws every subpackage and names the references.
+    drawing = ast.get_docstring(tree("sonicspec.acoustics")) or ""
+    subpackages = sorted(p.name for p in (PACKAGE / "acoustics").iterdir()
+                         if (p / "__init__.py").is_file())
+    assert [s for s in subpackages if f"{s}/" not in drawing] == []
+    assert "sonicspec.acoustics.theory" in drawing
+
+
 def _cycles() -> list[set[str]]:
     """Strongly connected components of more than one module (Tarjan)."""
     graph: dict[str, set[str]] = {m: set() for m in modules()}

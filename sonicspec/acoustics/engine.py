@@ -4,11 +4,11 @@ For one microphone and many source positions (a trajectory), the ray tracer runs
 the microphone, with every position as a receiver (reciprocity: the RIR from A to B equals the
 RIR from B to A for omnidirectional ends). Direct sound and image sources are exact and cheap,
 so they are computed per position. Each position's RIR is then synthesised
-(:mod:`sonicspec.acoustics.synthesis`).
+(:mod:`sonicspec.acoustics.receivers.synthesis`).
 
 Receivers: mono, linear/circular/custom arrays and ambisonics
-(:mod:`sonicspec.acoustics.receivers`), and binaural through the rigid-sphere head or a
-measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.hrtf`). A receiver is
+(:mod:`sonicspec.acoustics.receivers.arrays`), and binaural through the rigid-sphere head or a
+measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.receivers.hrtf`). A receiver is
 described by a mapping with the spec's microphone fields (``{"kind": "ambisonics", "order":
 1, ...}``, what ``MicrophoneSpec.model_dump()`` gives).
 
@@ -33,24 +33,24 @@ import numpy as np
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.edge_paths import close_pairs, diffracted_sound
-from sonicspec.acoustics.edges import DiffractingEdges, diffracting_edges
-from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.late.tails import TailReport, cut_warning, shape_tail
 from sonicspec.acoustics.metrics import (
     RoomAcousticFigures,
     figures_from_energy,
     room_acoustic_figures,
 )
-from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
-from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.simplify import simplify_flat_areas
-from sonicspec.acoustics.synthesis import synthesize_early, synthesize_rir
-from sonicspec.acoustics.tails import TailReport, cut_warning, shape_tail
+from sonicspec.acoustics.paths.direct import direct_sound
+from sonicspec.acoustics.paths.edge_paths import close_pairs, diffracted_sound
+from sonicspec.acoustics.paths.edges import DiffractingEdges, diffracting_edges
+from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.receivers.synthesis import synthesize_early, synthesize_rir
+from sonicspec.acoustics.room.scene import AcousticScene
+from sonicspec.acoustics.room.simplify import simplify_flat_areas
 from sonicspec.errors import AcousticsError, SonicspecWarning
 
 if TYPE_CHECKING:
-    from sonicspec.acoustics.hrtf import HrirSet
+    from sonicspec.acoustics.receivers.hrtf import HrirSet
     from sonicspec.geometry.materials import MaterialLibrary
     from sonicspec.geometry.mesh import SceneMesh
 
@@ -90,7 +90,7 @@ class SimulationSettings:
     tests and benches use to measure the tracer alone.
 
     ``max_rir_length_s`` is a number of seconds or ``"auto"``: either way a RIR ends where
-    every band's late decay is 60 dB below its early level (:mod:`~sonicspec.acoustics.tails`),
+    every band's late decay is 60 dB below its early level (:mod:`~sonicspec.acoustics.late.tails`),
     at most that number or, with ``"auto"``, ``max_rir_cap_s``.
     """
 
@@ -256,8 +256,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     rng : numpy.random.Generator
         The only randomness used (rays and the late noise's draw).
     regions
-        The scene's planar regions (:func:`~sonicspec.acoustics.image_sources.planar_regions`),
-        when the caller reuses them over many calls.
+        The scene's planar regions
+        (:func:`~sonicspec.acoustics.paths.image_sources.planar_regions`), when the caller
+        reuses them over many calls.
     microphone : mapping, optional
         The receiver, with the spec's microphone fields (default: mono). For directional
         receivers the early arrivals are traced from each source to the microphone, so their
@@ -279,7 +280,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         the microphone (``"early_arrivals"``, directions at the source point: where each
         path's image of the microphone is) and towards it (``"early_arrivals_at_mic"``,
         directions of arrival at the microphone, as rendered into the RIR). A moving source's
-        paths are rendered from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late
+        paths are rendered from them (:class:`~sonicspec.acoustics.moving.delays.PathSet`), its late
         part is the RIR less :func:`early_part` of the latter. Edge-diffracted paths are in
         both lists (directions at the microphone), identified by their ``path_id``.
         Receivers of :data:`PATH_RECEIVERS`.
@@ -294,7 +295,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         out of sight and heard round edges, or ``"blocked"``), ``diffracted_paths`` (with
         diffraction on), ``image_source_order`` (completed), ``escaped_ray_fraction``,
         ``tail`` (how the length was chosen:
-        :meth:`~sonicspec.acoustics.tails.TailReport.to_dict`).
+        :meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`).
 
     Warns
     -----
@@ -408,7 +409,7 @@ def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.
                          settings: SimulationSettings, regions=None) -> list[Arrivals]:
     """Edge-diffracted arrivals from every source position at the microphone (empty ones
     when ``settings.diffraction`` is off): over one edge, two edges, and one edge with a
-    reflection (:mod:`~sonicspec.acoustics.edge_paths`), directions of arrival at the
+    reflection (:mod:`~sonicspec.acoustics.paths.edge_paths`), directions of arrival at the
     microphone."""
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     if not settings.diffraction:
@@ -428,7 +429,7 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
     its ``arrivals`` (directions of arrival at the microphone) synthesised as the receiver's
     renderer does. The RIR less this is its late, ray-traced part. Receivers of
     :data:`PATH_RECEIVERS` (a SOFA HRTF with its ``hrirs``)."""
-    from sonicspec.acoustics.receivers import ambisonic_early, array_early
+    from sonicspec.acoustics.receivers.arrays import ambisonic_early, array_early
 
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
     kind = microphone["kind"]
@@ -438,14 +439,14 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
         return ambisonic_early(arrivals, microphone["order"], bank, n_samples,
                                yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sofa":
-        from sonicspec.acoustics.hrtf import hrir_binaural_early
+        from sonicspec.acoustics.receivers.hrtf import hrir_binaural_early
 
         check_receiver(microphone, hrirs)
         return hrir_binaural_early(arrivals, hrirs.resampled(settings.sample_rate_hz), bank,
                                    n_samples, yaw_deg=microphone["yaw_deg"],
                                    pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sphere":
-        from sonicspec.acoustics.hrtf import sphere_binaural_early
+        from sonicspec.acoustics.receivers.hrtf import sphere_binaural_early
 
         return sphere_binaural_early(arrivals, sphere_head(microphone), bank, n_samples,
                                      yaw_deg=microphone["yaw_deg"],
@@ -465,7 +466,7 @@ def late_envelope(histogram: EnergyHistogram, settings: SimulationSettings
     """The late envelope one RIR is synthesised from: the tracer's histogram smoothed
     (:data:`LATE_ENVELOPE_RELATIVE_WIDTH`), each band's decay continued by the fit to its
     last 20 dB where the rays ran out, ending where every band is 60 dB below its early
-    level or at the longest RIR allowed (:func:`~sonicspec.acoustics.tails.shape_tail`)."""
+    level or at the longest RIR allowed (:func:`~sonicspec.acoustics.late.tails.shape_tail`)."""
     late = histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
     rule = "auto" if settings.max_rir_length_s == "auto" else "fixed"
     return shape_tail(late, settings.bands_hz, rule, settings.rir_limit_s,
@@ -517,7 +518,8 @@ class RirResult:
     traced_faces : int
         Triangles traced (after flat areas were merged).
     tail : dict
-        How the RIR's length was chosen (:meth:`~sonicspec.acoustics.tails.TailReport.to_dict`):
+        How the RIR's length was chosen
+        (:meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`):
         the rule (``auto`` or ``fixed``), the longest RIR allowed, per band when the decay
         is 60 dB down, where a fitted continuation starts (the rays ran out before), and the
         level a cut band reached at the limit.
@@ -624,7 +626,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
                       hrirs: HrirSet | None = None) -> Renderer:
     """A function ``(arrivals, late histogram, rng) -> (channels, samples)`` for the
     receiver kind of ``microphone`` (the spec's microphone fields)."""
-    from sonicspec.acoustics.receivers import (
+    from sonicspec.acoustics.receivers.arrays import (
         synthesize_ambisonic_rir,
         synthesize_array_rir,
     )
@@ -639,7 +641,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
             a, h, microphone["order"], fs, rng, yaw_deg=microphone["yaw_deg"],
             pitch_deg=microphone["pitch_deg"], **common)
     if kind == "binaural":
-        from sonicspec.acoustics.hrtf import (
+        from sonicspec.acoustics.receivers.hrtf import (
             synthesize_hrir_binaural_rir,
             synthesize_sphere_binaural_rir,
         )
@@ -661,7 +663,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
 def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
     """Where an array microphone's capsules are, ``(M, 3)`` offsets from its centre in the
     scene's frame, metres."""
-    from sonicspec.acoustics.receivers import capsule_offsets
+    from sonicspec.acoustics.receivers.arrays import capsule_offsets
 
     return capsule_offsets(
         microphone["kind"], n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
@@ -676,9 +678,9 @@ every kind (binaural with the sphere head or a SOFA HRTF set)."""
 
 
 def sphere_head(microphone: Mapping[str, Any]):
-    """The :class:`~sonicspec.acoustics.hrtf.SphereHead` of a binaural microphone with the
+    """The :class:`~sonicspec.acoustics.receivers.hrtf.SphereHead` of a binaural microphone with the
     sphere-head model."""
-    from sonicspec.acoustics.hrtf import SphereHead
+    from sonicspec.acoustics.receivers.hrtf import SphereHead
 
     hrtf = microphone["hrtf"]
     return SphereHead(head_radius_m=hrtf["head_radius_m"], ear_angle_deg=hrtf["ear_angle_deg"])
@@ -697,7 +699,7 @@ def load_hrirs(path: str | Path) -> HrirSet:
         ``sofar`` is not installed, the file is missing or unreadable, or it holds no
         usable HRIR set; the message names the file.
     """
-    from sonicspec.acoustics.hrtf import hrir_set_from_sofa
+    from sonicspec.acoustics.receivers.hrtf import hrir_set_from_sofa
 
     try:
         import sofar
@@ -780,7 +782,7 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
     edge comes between the source and the microphone, a reflection leaves its wall) or its
     band factor changes by more than ``tolerance_db`` (a diffracted path near its shadow
     boundary) — among the paths within 40 dB of the loudest
-    (:func:`~sonicspec.acoustics.moving.paths_differ`) — the interval is halved
+    (:func:`~sonicspec.acoustics.moving.delays.paths_differ`) — the interval is halved
     (:func:`early_arrivals` at its middle, no ray trace) until neither end moves more than
     ``resolution_m`` across it: the renderer then switches and shapes the path there, as the
     geometry does, instead of fading it over the spacing.
@@ -788,7 +790,7 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
     ``sources_m``, ``mics_m``: ``(N, 3)`` the source and the microphone at each RIR point;
     ``from_mic``, ``at_mic``: their early arrivals (:class:`EarlyArrivals`).
     """
-    from sonicspec.acoustics.moving import heard_paths, paths_differ
+    from sonicspec.acoustics.moving.delays import heard_paths, paths_differ
 
     src = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     mic = np.asarray(mics_m, dtype=np.float64).reshape(-1, 3)

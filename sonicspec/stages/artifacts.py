@@ -37,7 +37,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from sonicspec.acoustics.moving import PathSet
+from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.corpora import CorpusIndex
 from sonicspec.errors import StageError
@@ -226,13 +226,13 @@ class RirSource(_Data):
     escaped_ray_fraction: float
     tail: dict[str, Any]
     """How the RIR's length was chosen (first point;
-    :meth:`sonicspec.acoustics.tails.TailReport.to_dict`)."""
+    :meth:`sonicspec.acoustics.late.tails.TailReport.to_dict`)."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
     microphone, ``_lengths`` for paths bent round edges and ``_at_index`` where points were
     added between the RIR points: a
-    :class:`~sonicspec.acoustics.moving.PathSet`) and late RIRs (``<paths>_late``, shaped
+    :class:`~sonicspec.acoustics.moving.delays.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
 
 
@@ -311,7 +311,7 @@ class MixData(_Data):
 
 
 def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
-    """A source's :class:`~sonicspec.acoustics.moving.PathSet` as arrays ``<prefix>_images``,
+    """A source's :class:`~sonicspec.acoustics.moving.delays.PathSet` as arrays ``<prefix>_images``,
     ``_weights``, ``_order`` and, for directional receivers, ``_directions``."""
     out = {f"{prefix}_images": paths.images_m, f"{prefix}_weights": paths.weights,
            f"{prefix}_order": paths.order}
@@ -327,7 +327,7 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
 
 
 def read_path_set(arrays, prefix: str) -> PathSet:
-    """The :class:`~sonicspec.acoustics.moving.PathSet` :func:`path_set_arrays` stored."""
+    """The :class:`~sonicspec.acoustics.moving.delays.PathSet` :func:`path_set_arrays` stored."""
     directions = arrays.get(f"{prefix}_directions")
     isometries = arrays.get(f"{prefix}_isometries")
     lengths = arrays.get(f"{prefix}_lengths")

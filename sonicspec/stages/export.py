@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from sonicspec.acoustics.receivers import local_directions
+from sonicspec.acoustics.receivers.arrays import local_directions
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry

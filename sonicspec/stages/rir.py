@@ -25,8 +25,8 @@ from sonicspec.acoustics.engine import (
     rir_results,
     simulate_rirs,
 )
-from sonicspec.acoustics.image_sources import planar_regions
-from sonicspec.acoustics.moving import PathSet
+from sonicspec.acoustics.moving.delays import PathSet
+from sonicspec.acoustics.paths.image_sources import planar_regions
 from sonicspec.errors import SonicspecWarning, StageError
 from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams

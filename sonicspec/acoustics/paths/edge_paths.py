@@ -2,13 +2,13 @@
 (a door frame in a thick wall), and over one edge with one specular reflection before or
 after it (the floor's reflection of a source round a corner), on the largest planar regions.
 
-For every diffracting edge of the traced mesh (:mod:`~sonicspec.acoustics.edges`) the path
+For every diffracting edge of the traced mesh (:mod:`~sonicspec.acoustics.paths.edges`) the path
 over the edge is the one Keller's law makes stationary: its apex on the edge's line divides
 the unfolded path in the ratio of the source's and receiver's distances from the line (for two
 edges, the two apexes are found alternately, each the apex of its neighbours). A path exists
 when both ends see their edge from the air side, the apex lies on the finite edge and every
 leg is clear. Its amplitude is the
-UTD band amplitude (:mod:`~sonicspec.acoustics.diffraction`) with the faces' specular
+UTD band amplitude (:mod:`~sonicspec.acoustics.paths.diffraction`) with the faces' specular
 reflection factors, times the air's ``exp(−m L / 2)``; its direction of arrival points from
 the receiver to the last apex, so directional receivers weight it like any other arrival.
 
@@ -25,13 +25,13 @@ import math
 import numpy as np
 
 from sonicspec.acoustics.arrivals import KIND_DIFFRACTED, Arrivals
-from sonicspec.acoustics.diffraction import (
+from sonicspec.acoustics.paths.diffraction import (
     first_order_band_amplitudes,
     second_order_band_amplitudes,
 )
-from sonicspec.acoustics.edges import DiffractingEdges
-from sonicspec.acoustics.image_sources import PlanarRegions, planar_regions
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.paths.edges import DiffractingEdges
+from sonicspec.acoustics.paths.image_sources import PlanarRegions, planar_regions
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
 
@@ -150,7 +150,7 @@ def diffracted_sound(
     scene : AcousticScene
         The traced scene (visibility, materials).
     edges : DiffractingEdges
-        Its diffracting edges (:func:`~sonicspec.acoustics.edges.diffracting_edges`).
+        Its diffracting edges (:func:`~sonicspec.acoustics.paths.edges.diffracting_edges`).
     sources : (N, 3) float
         Source positions, metres.
     receiver : (3,) float
@@ -177,7 +177,7 @@ def diffracted_sound(
         One per source, kind ``KIND_DIFFRACTED``, order the edges plus reflections, amplitudes
         for a unit point source (free field ``1/(4πr)``).
     """
-    from sonicspec.acoustics.direct import check_air, check_points
+    from sonicspec.acoustics.paths.direct import check_air, check_points
 
     sources = check_points("sources", sources)
     receiver = check_points("receiver", receiver)

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sonicspec.acoustics._simplify_kernels import simplify
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.room._simplify_kernels import simplify
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 
 __all__ = ["MAX_TURN_DEG", "simplified_scene", "simplify_flat_areas"]

@@ -26,10 +26,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from sonicspec.acoustics import _image_source_kernels as KI
 from sonicspec.acoustics.arrivals import IDENTITY, KIND_SPECULAR, Arrivals
-from sonicspec.acoustics.direct import check_air, check_points
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.paths import _image_source_kernels as KI
+from sonicspec.acoustics.paths.direct import check_air, check_points
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
 from sonicspec.units import SPEED_OF_SOUND_M_S
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.synthesis import (
+from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
     rir_length_samples,
     synthesize_early,

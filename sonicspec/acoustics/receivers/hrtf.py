@@ -50,8 +50,8 @@ from scipy.spatial import QhullError, SphericalVoronoi, cKDTree
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.directions import fibonacci_sphere
-from sonicspec.acoustics.receivers import mix_per_frequency, rotation
-from sonicspec.acoustics.synthesis import (
+from sonicspec.acoustics.receivers.arrays import mix_per_frequency, rotation
+from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
     _filter_bands,
     _fractional_taps,
@@ -529,7 +529,7 @@ def diffuse_binaural_tails(tails: np.ndarray, model: SphereHead | HrirSet,
     ``b = √((1 − Γ)/2)`` and ``Γ`` the model's :func:`binaural_diffuse_coherence`: for inputs
     of equal power spectrum ``S``, ``E[y_L y_R*] = (a² − b²) S = Γ S`` and
     ``E|y|² = (a² + b²) S = S``, so each ear keeps the tail's energy. This is the two-channel
-    closed form of :func:`~sonicspec.acoustics.receivers.diffuse_coherence`'s ``C = √Λ Vᵀ``,
+    closed form of :func:`~sonicspec.acoustics.receivers.arrays.diffuse_coherence`'s ``C = √Λ Vᵀ``,
     smooth where ``Γ`` crosses zero (an eigen-solver swaps the eigenvalues there), so the
     zero-phase filters stay a few interaural delays long.
     """

@@ -19,7 +19,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from sonicspec.acoustics._trace_kernels import embree_rays
+from sonicspec.acoustics.room._scene_kernels import embree_rays
 from sonicspec.errors import AcousticsError
 
 T = TypeVar("T")

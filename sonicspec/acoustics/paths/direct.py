@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sonicspec.acoustics.arrivals import IDENTITY, KIND_DIRECT, Arrivals
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
 
@@ -68,7 +68,7 @@ def direct_sound(
         transmission coefficient of each surface crossed, so ``√τ`` in pressure). A path
         through an opaque surface (``τ = 0`` in every band) yields no arrival; the sound
         bent round the occluder's edges is
-        :func:`~sonicspec.acoustics.edge_paths.diffracted_sound`'s.
+        :func:`~sonicspec.acoustics.paths.edge_paths.diffracted_sound`'s.
     """
     source = check_points("source", source)
     if len(source) != 1:

@@ -28,7 +28,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sonicspec.acoustics._moving_kernels import (
+from sonicspec.acoustics.arrivals import KIND_DIFFRACTED, Arrivals
+from sonicspec.acoustics.moving._delay_kernels import (
     TABLE_STEPS,
     accumulate_channels,
     accumulate_path,
@@ -37,7 +38,6 @@ from sonicspec.acoustics._moving_kernels import (
     image_directions,
     weighted_bands,
 )
-from sonicspec.acoustics.arrivals import KIND_DIFFRACTED, Arrivals
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
@@ -112,7 +112,7 @@ def render_length_path(dry, length_m, sample_rate_hz: float, *,
 def _delay_line(s: np.ndarray, tau: np.ndarray, r: np.ndarray, gain, n_out: int | None,
                 half_width: int, beta: float) -> np.ndarray:
     """``s`` emitted at samples ``k`` arriving at ``tau[k]`` (increasing) over ``r[k]``
-    metres with gain ``gain[k]``: the compiled loop (:mod:`._moving_kernels`)."""
+    metres with gain ``gain[k]``: the compiled loop (:mod:`._delay_kernels`)."""
     if n_out is None:
         n_out = int(np.ceil(tau[-1])) + half_width + 1
     amp = np.broadcast_to(np.asarray(gain, dtype=np.float64), s.shape) / (4 * np.pi * r)
@@ -631,7 +631,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             d = _directions_at(paths.directions[k], lo[part], hi[part], frac[part], static)
         if receiver.kind in ("hrir", "ambisonics") and (receiver.yaw_deg is not None
                                                         or receiver.pitch_deg):
-            from sonicspec.acoustics.receivers import rotation
+            from sonicspec.acoustics.receivers.arrays import rotation
 
             # into the microphone's frame (einsum, not BLAS: its threads fight other jobs)
             d = np.einsum("ij,jk->ik", d, rotation(float(receiver.yaw_deg or 0.0),
@@ -641,7 +641,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             path(heard[start:])
             _hrir_accumulate(hrir_buffers, heard, d, receiver, offset=start)
         elif receiver.kind == "ambisonics":
-            from sonicspec.acoustics.receivers import sh_sn3d
+            from sonicspec.acoustics.receivers.arrays import sh_sn3d
 
             # No direction is known where the path is silent at the points either side (a
             # zero row): gains 0 there, not the spherical harmonics of 0 / 0.
@@ -649,7 +649,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             gains = sh_sn3d(receiver.order, np.where(known, d, 1.0)) * known
             path(out[:, start:], gains)
         elif receiver.kind == "sphere_head":
-            from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
+            from sonicspec.acoustics.receivers.hrtf import shadow_alpha, woodworth_delays_s
 
             for ear, axis in enumerate(receiver.ear_axes):
                 cos_t = np.einsum("ij,j->i", d, axis)  # not BLAS, whose threads fight other jobs
@@ -670,7 +670,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
 
-        from sonicspec.acoustics.hrtf import shadow_filters
+        from sonicspec.acoustics.receivers.hrtf import shadow_filters
 
         (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(receiver.head, bank.sample_rate_hz,
                                                     speed_of_sound_m_s)
@@ -689,10 +689,10 @@ _HRIR_STEP = 32
 def _hrir_accumulate(buffers: dict[int, np.ndarray], y: np.ndarray, local: np.ndarray,
                      receiver: Receiver, offset: int = 0) -> None:
     """Add one path heard at the head's centre (``y``) to the buffer of each measured
-    direction, weighted by :func:`~sonicspec.acoustics.hrtf.hrir_weights` of its direction
+    direction, weighted by :func:`~sonicspec.acoustics.receivers.hrtf.hrir_weights` of its direction
     in the head's frame (``local``: one, or one per sample from sample ``offset`` on, read
     at the output sample; held beyond)."""
-    from sonicspec.acoustics.hrtf import hrir_weights
+    from sonicspec.acoustics.receivers.hrtf import hrir_weights
 
     n = y.size
     if len(local) == 1:
@@ -784,10 +784,10 @@ class Receiver:
     between the points and capsules take the plane-wave lead ``d · p / c``."""
 
     hrirs: object | None = None
-    """``kind="hrir"``: the measured :class:`~sonicspec.acoustics.hrtf.HrirSet` (at the
+    """``kind="hrir"``: the measured :class:`~sonicspec.acoustics.receivers.hrtf.HrirSet` (at the
     rendering rate); each path is heard at the head's centre and filtered by the HRIRs of
     its direction, blended over ``hrir_radius_rad``
-    (:func:`~sonicspec.acoustics.hrtf.hrir_weights`)."""
+    (:func:`~sonicspec.acoustics.receivers.hrtf.hrir_weights`)."""
     hrir_radius_rad: float = 0.0
     mic_track_m: np.ndarray | None = None
     """A moving microphone: its centre at each point, ``(N, 3)`` (read at the same
@@ -836,7 +836,7 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
     microphone's frame ``R(t)`` (yaw, pitch); array capsules at ``m(t) + R(t) o`` each hear
     their own image; ears turn with the head.
     """
-    from sonicspec.acoustics.receivers import rotation
+    from sonicspec.acoustics.receivers.arrays import rotation
 
     if paths.isometries is None:
         raise AcousticsError("paths: a moving microphone needs each path's isometry "
@@ -897,14 +897,14 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         if receiver.kind == "hrir":
             _hrir_accumulate(hrir_buffers, heard(mic), local, receiver)
         elif receiver.kind == "ambisonics":
-            from sonicspec.acoustics.receivers import sh_sn3d
+            from sonicspec.acoustics.receivers.arrays import sh_sn3d
 
             known = np.any(local != 0, axis=1, keepdims=True)  # zero: silent there (edges)
             gains = sh_sn3d(receiver.order, np.where(known, local, 1.0)) * known
             for ch in range(receiver.channels):
                 out[ch] += heard(mic, gain=gains[:, ch])
         elif receiver.kind == "sphere_head":
-            from sonicspec.acoustics.hrtf import shadow_alpha, woodworth_delays_s
+            from sonicspec.acoustics.receivers.hrtf import shadow_alpha, woodworth_delays_s
 
             for ear, axis in enumerate(receiver.ear_axes):
                 cos_t = local @ axis
@@ -922,7 +922,7 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
     if receiver.kind == "sphere_head":
         from scipy import signal
 
-        from sonicspec.acoustics.hrtf import shadow_filters
+        from sonicspec.acoustics.receivers.hrtf import shadow_filters
 
         (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(receiver.head, fs, c)
         out = signal.lfilter(b_lp, a_lp, out, axis=1) + signal.lfilter(b_hp, a_hp, shaded,

@@ -101,7 +101,7 @@ Model (every approximation is listed here)
   in batch order, so the bytes of the result depend only on the inputs and the generator's
   state, never on the thread count.
 * **Not modelled**: diffraction in the traced late field (the engine adds the early
-  edge-diffracted paths, :mod:`sonicspec.acoustics.edge_paths`), angle-dependent
+  edge-diffracted paths, :mod:`sonicspec.acoustics.paths.edge_paths`), angle-dependent
   absorption, diffuse (scattered) transmission, phase/interference (energy only; the image
   sources carry the coherent early part), and surfaces thinner than ``AcousticScene.eps_m``.
 """
@@ -115,11 +115,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from sonicspec.acoustics import _trace_kernels as K
 from sonicspec.acoustics.arrivals import EnergyHistogram, TraceResult
-from sonicspec.acoustics.direct import check_air, check_points
 from sonicspec.acoustics.directions import fibonacci_sphere
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.late import _trace_kernels as K
+from sonicspec.acoustics.paths.direct import check_air, check_points
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.units import SPEED_OF_SOUND_M_S
 

@@ -1,4 +1,4 @@
-"""Compiled loops of the time-varying delay (:func:`sonicspec.acoustics.moving.render_path`).
+"""Compiled loops of the time-varying delay (:func:`sonicspec.acoustics.moving.delays.render_path`).
 
 The same sums as the vectorised form it replaced (issue 18: ~20x slower than a crossfade),
 in one pass over the output: for each output sample ``j``, the emission index ``u(j)`` heard
