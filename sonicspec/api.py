@@ -240,9 +240,9 @@ class Scene:
         """
         import glob
 
+        from sonicspec.artifacts.scenes import build_scene_mesh
         from sonicspec.hashing import rng_for
         from sonicspec.plan.params import MeshParams
-        from sonicspec.stages.scenes import build_scene_mesh
 
         materials = materials or MaterialsSpec()
         base = Path(base_dir)

@@ -255,11 +255,11 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     """The rir stage and the API call the same engine: the same scene, settings, receiver
     and generator give the same bytes for every point of a group's trajectories; and
     ``sonicspec rir SPEC`` is compute_rir with its own seed."""
+    from sonicspec.artifacts import decode, read_mesh
     from sonicspec.hashing import rng_for
     from sonicspec.plan.compile import compile_spec
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
-    from sonicspec.stages.artifacts import decode, read_mesh
     from sonicspec.stages.rir import _source_points, rir_from_spec
     from sonicspec.store import ArtifactStore
 
@@ -330,10 +330,10 @@ def test_a_spec_scene_from_an_obj_with_one_object_gets_its_materials(tmp_path) -
     """Issue 17: an obj whose single object lost its name (trimesh drops a lone object's
     name) made every face the default material in a build, silently. The plan now reads obj
     scenes as the API does; only obj scenes' mesh keys carry the flag."""
+    from sonicspec.artifacts.scenes import build_scene_mesh
     from sonicspec.plan.compile import compile_spec
     from sonicspec.plan.params import read_params
     from sonicspec.spec import validate_text
-    from sonicspec.stages.scenes import build_scene_mesh
 
     write_obj(tmp_path / "lone.obj", {"room": ["floor", "walls", "ceiling"]})
     text = (ROOT / "specs" / "demo.yaml").read_text().replace(

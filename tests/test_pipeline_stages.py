@@ -303,8 +303,8 @@ def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -
     """Issue 20's bug: with a small corpus a noise clip repeats in its track and its last use
     is cut at the clip's end; the render kept only the cut copy and the full use failed
     ("segment 'n0': needs 48000 samples ... the clip has ...")."""
+    from sonicspec.artifacts import ArrangedTrack
     from sonicspec.audio.arrange import Clip, arrange_background, assemble
-    from sonicspec.stages.artifacts import ArrangedTrack
     from sonicspec.stages.render import _AudioCache, track_audio
 
     fs = 16000

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
 from sonicspec.hashing import rng_for
@@ -21,7 +22,6 @@ from sonicspec.spec.load import LoadedSpec, did_you_mean
 from sonicspec.stages.navigation import settings_from as nav_settings
 from sonicspec.stages.placement import place_group
 from sonicspec.stages.placement import settings_from as placement_settings
-from sonicspec.stages.scenes import build_scene_mesh
 
 
 def scene_ids(loaded: LoadedSpec) -> list[str]:

@@ -26,23 +26,23 @@ from pathlib import Path
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.engine import array_offsets, load_hrirs, sphere_head
 from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
 from sonicspec.acoustics.receivers.hrtf import ear_axes
+from sonicspec.artifacts import (
+    ArrangedTrack,
+    RenderData,
+    RenderedTrack,
+    RenderGroup,
+)
 from sonicspec.audio.arrange import Segment, assemble
 from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
 from sonicspec.spec.microphone import SofaHrtfSpec
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import (
-    ArrangedTrack,
-    RenderData,
-    RenderedTrack,
-    RenderGroup,
-)
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
@@ -27,19 +28,18 @@ from sonicspec.acoustics.engine import (
 )
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.image_sources import planar_regions
-from sonicspec.errors import SonicspecWarning, StageError
-from sonicspec.geometry.materials import material_library
-from sonicspec.plan.params import MaterialTable, RirParams
-from sonicspec.spec.materials import MaterialsSpec
-from sonicspec.spec.microphone import SofaHrtfSpec
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import (
+from sonicspec.artifacts import (
     GroupPlacement,
     RirData,
     RirGroup,
     RirSource,
     speech_track_name,
 )
+from sonicspec.errors import SonicspecWarning, StageError
+from sonicspec.geometry.materials import material_library
+from sonicspec.plan.params import MaterialTable, RirParams
+from sonicspec.spec.materials import MaterialsSpec
+from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")

@@ -1,6 +1,7 @@
 """Scenes as a spec declares them, built: procedural rooms with obstacles, or mesh files with
 their label map, repaired and leak-tested (the mesh stage, ``scene inspect``, ``validate
---check-files`` and :meth:`sonicspec.Scene.from_spec` all build scenes here)."""
+--check-files`` and :meth:`sonicspec.Scene.from_spec` all build scenes here, below the
+stages, so the Python API needs none of them)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,13 @@
 """What stages hand each other: one model per artifact's data, read and written here only.
 
+A floor below both the stages and the export (docs/architecture.md): the steps encode and
+decode through it, the report decodes through it and the Python API builds scenes with it
+(:mod:`.scenes`: a spec's scene built into the mesh a mesh job stores), so nothing outside
+the stages and the command line imports :mod:`sonicspec.stages`.
+
 An artifact in the store (:mod:`sonicspec.store`) is a set of arrays plus JSON data. The data
 of the shard steps is described below, field by field; a stage writes it through
-:func:`write` and reads another stage's through :func:`read`, both validating against the
+:func:`encode` and reads another stage's through :func:`read`, both validating against the
 model, so a stage never decodes another stage's JSON by hand and a change to an encoding is a
 change here (with the producing step's version bumped).
 
