@@ -239,6 +239,10 @@ class RirSource(_Data):
 class RirGroup(_Data):
     group: str
     sources: list[RirSource]
+    diffraction_edges: dict[str, Any] | None = None
+    """With ``acoustics.diffraction``: how the group's diffracting edges were chosen, one set
+    for all of its RIRs (:meth:`sonicspec.acoustics.edges.DiffractingEdges.choice`: found,
+    kept, the rule, the seam edges left out)."""
 
     def source(self, track: str) -> RirSource:
         for s in self.sources:

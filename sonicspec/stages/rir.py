@@ -23,7 +23,9 @@ from sonicspec.acoustics.engine import (
     load_hrirs,
     refined_early_paths,
     rir_results,
+    scene_edges,
     simulate_rirs,
+    with_diffraction_focus,
 )
 from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.moving import PathSet
@@ -246,6 +248,18 @@ def run(ctx) -> None:
                         f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
                         "microphone's path (microphone.trajectory) or the sources' rules")
         traces, refs = _traces(sources, lines, placement.mic_m, params.microphone.yaw_deg)
+        # one set of diffracting edges for the group: the most important for all of its
+        # source and microphone positions
+        group_settings, choice = settings, None
+        if settings.diffraction:
+            group_settings = with_diffraction_focus(
+                settings, *[np.asarray(m) for m, _, _ in traces],
+                *[np.asarray(p) for _, _, p in traces])
+            choice = scene_edges(scene, settings.diffraction_max_edges,
+                                 group_settings.diffraction_focus_m).choice()
+            log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges left out)",
+                     placement.group, choice["kept"], choice["found"], choice["rule"],
+                     choice["seams_left_out"])
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
@@ -260,7 +274,7 @@ def run(ctx) -> None:
                                  f"{done:,}/{total:,} rays")
 
                 results.append(simulate_rirs(
-                    scene, mic_m, np.asarray(points), settings, rng, regions,
+                    scene, mic_m, np.asarray(points), group_settings, rng, regions,
                     {**microphone, "yaw_deg": yaw}, hrirs, progress=progress,
                     where=scene_name, keep_arrivals=params.early_paths))
         for w in caught:
@@ -290,7 +304,7 @@ def run(ctx) -> None:
                          if line is None else line.mic_m)
                 # where a path appears or disappears between two points, points are added
                 fine = refined_early_paths(
-                    scene, settings, src_m, mic_m, from_mic, at_mic, regions=regions,
+                    scene, group_settings, src_m, mic_m, from_mic, at_mic, regions=regions,
                     directional=directional,
                     image_source_order=facts[0]["image_source_order"])
                 if line is None:
@@ -314,7 +328,8 @@ def run(ctx) -> None:
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
                 direct=facts[0]["direct"], tail=facts[0]["tail"],
                 escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths))
-        groups.append(RirGroup(group=placement.group, sources=entries))
+        groups.append(RirGroup(group=placement.group, sources=entries,
+                               diffraction_edges=choice))
     ctx.write(arrays, artifacts.encode("rir", RirData(
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
 
