@@ -268,7 +268,10 @@ class RepairReport:
         out["before"] = dict(self.before.__dict__, watertight=self.before.watertight)
         out["after"] = dict(self.after.__dict__, watertight=self.after.watertight)
         out["watertight"] = self.watertight
-        out["leak"] = None if self.leak is None else self.leak.to_dict()
+        out["leak"] = None
+        if self.leak is not None:
+            leak = self.leak.to_dict()
+            out["leak"] = {"leak_fraction": leak.pop("fraction"), **leak}
         return out
 
 
@@ -1277,15 +1280,13 @@ def _navigable_origins(mesh: SceneMesh, intersector, rng, n_rays: int
     normals, areas = mesh.face_normals, mesh.face_areas
     upward = np.flatnonzero((normals[:, 2] >= _UPWARD_NZ) & (areas > 0))
     air_test = _AirTest(vertices, faces)
-    if len(upward) == 0:
-        return _origins_in_air(mesh, air_test, rng, n_rays), "enclosed"
-    weights = areas[upward] / areas[upward].sum()
+    weights = areas[upward] / max(areas[upward].sum(), 1e-300)
     lo_h, hi_h = NAVIGABLE_HEIGHTS_M
     eps = 1e-6 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     enclosed: list[np.ndarray] = []
     navigable: list[np.ndarray] = []
     n_enclosed = 0
-    for _ in range(6):  # resample until enough candidates pass (a handful of rounds)
+    for _ in range(6 if len(upward) else 0):  # resample until enough pass (a few rounds)
         n = max(2 * (n_rays - n_enclosed), 64)
         face = upward[rng.choice(len(upward), size=n, p=weights)]
         u, v = rng.uniform(size=(2, n))
@@ -1309,15 +1310,20 @@ def _navigable_origins(mesh: SceneMesh, intersector, rng, n_rays: int
         n_enclosed += len(inside)
         if n_enclosed >= n_rays:
             break
-    kept = np.concatenate(enclosed)
-    all_navigable = np.concatenate(navigable)
-    # parity finds enclosed air for most navigable points of a closed model; where it finds
-    # none (an open model, a roofless room), the navigable points are the air
+    kept = np.concatenate(enclosed) if enclosed else np.zeros((0, 3))
+    all_navigable = np.concatenate(navigable) if navigable else np.zeros((0, 3))
+    # parity finds enclosed air for most navigable points of a closed model; where it does
+    # not, the surfaces facing up may face out of the air (an inverted model: then the air
+    # is where parity puts it), or the model is open (a roofless room: then no point is
+    # enclosed, and the navigable points are the air)
     if len(kept) and len(kept) >= 0.1 * len(all_navigable):
         return kept[np.arange(n_rays) % len(kept)], "navigable"
-    if len(all_navigable):
-        return all_navigable[np.arange(n_rays) % len(all_navigable)], "navigable, not enclosed"
-    return _origins_in_air(mesh, air_test, rng, n_rays), "enclosed"
+    try:
+        return _origins_in_air(mesh, air_test, rng, n_rays), "enclosed"
+    except GeometryError:
+        if not len(all_navigable):
+            raise
+    return all_navigable[np.arange(n_rays) % len(all_navigable)], "navigable, not enclosed"
 
 
 def _leak_places(mesh, origins, directions, first, escaped, backface
