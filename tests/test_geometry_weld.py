@@ -303,3 +303,42 @@ def test_weld_distance_is_checked(obj_files) -> None:
     with pytest.raises(GeometryError, match="weld_distance_m: expected a finite distance"):
         ss.Scene.from_file(obj_files["split"], materials=_materials(), up_axis="z",
                            weld_distance_m=float("nan"))
+
+
+def test_scene_inspect_reports_the_weld_the_leak_test_and_the_edges(obj_files, capsys) -> None:
+    import json
+
+    from sonicspec.cli import main
+
+    folder = obj_files["split"].parent
+    labels = ", ".join(f"{k}: {v}" for k, v in _materials().items())
+    spec = folder / "s.yaml"
+    base = (
+        "sonicspec: 1\nname: exported\n"
+        "scenes: [{kind: mesh, id: room, path: room.obj, up_axis: z, "
+        f"label_materials: {{{labels}}}WELD}}]\n"
+        "acoustics: {diffraction: true, diffraction_max_edges: 16}\n"
+        "mixture: {speakers: 1, duration_s: 10, utterances_per_speaker: [1, 1], tasks: []}\n"
+        "placement: {source_start_distance_m: [1, 2], source_end_distance_m: [1, 2],"
+        " source_travel_distance_m: [0.5, 1.5]}\n"
+        "corpora: {speech: {kind: generated}}\nsplits: {train: {groups: 1, scenes: [room]}}\n")
+    spec.write_text(base.replace("WELD", ""))
+    assert main(["scene", "inspect", str(spec), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["weld"] == {"distance_m": 1e-4, "merged_vertices": 16,
+                             "t_junctions_stitched": 12, "collapsed_faces": 0,
+                             "open_edges_before": 44, "open_edges_after": 0}
+    assert facts["repair"]["after"]["watertight"] is True
+    assert facts["leak"]["fraction"] == 0.0 and facts["leak"]["origins"] == "navigable"
+    edges = facts["diffraction_edges"]
+    assert (edges["found"], edges["kept"], edges["seams_left_out"]) == (REAL_EDGES, 16, 0)
+    assert main(["scene", "inspect", str(spec)]) == 0
+    text = capsys.readouterr().out
+    assert "seams welded on load (weld_distance_m 0.0001 m): 16 vertices joined" in text
+    assert f"diffraction: 16 of {REAL_EDGES} edges kept" in text
+    # a tolerance of 0 keeps the file's seams for the repair to find
+    spec.write_text(base.replace("WELD", ", weld_distance_m: 0"))
+    assert main(["scene", "inspect", str(spec), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["weld"]["merged_vertices"] == 0 and facts["weld"]["open_edges_after"] == 44
+    assert facts["repair"]["merged_vertices"] > 0
