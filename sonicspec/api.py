@@ -40,8 +40,8 @@ from sonicspec.acoustics.engine import (
     rir_results,
 )
 from sonicspec.errors import GeometryError
-from sonicspec.geometry.materials import MaterialLibrary, assign_materials, material_library
 from sonicspec.geometry.io import WELD_DISTANCE_M
+from sonicspec.geometry.materials import MaterialLibrary, assign_materials, material_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.repair import WeldReport, weld_seams
 from sonicspec.spec.acoustics import AcousticsSpec
