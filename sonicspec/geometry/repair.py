@@ -327,6 +327,18 @@ def _face_components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarra
     return int(face_labels.max()) + 1 if n_faces else 0, face_labels
 
 
+def _n_open_edges(faces: np.ndarray, n_vertices: int) -> int:
+    """Edges used by one face."""
+    if len(faces) == 0:
+        return 0
+    keys = np.sort(_undirected(faces, n_vertices)[0])
+    single = np.ones(len(keys), bool)
+    same = keys[1:] == keys[:-1]
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    return int(np.count_nonzero(single))
+
+
 def _n_components(faces: np.ndarray, n_vertices: int) -> int:
     return _face_components(faces, n_vertices)[0]
 
@@ -1147,7 +1159,7 @@ def weld_seams(mesh: SceneMesh, distance_m: float = WELD_DISTANCE_M
         )
     faces = np.array(mesh.faces)
     n_vertices = len(mesh.vertices)
-    open_before = mesh_stats(faces, n_vertices).boundary_edges
+    open_before = _n_open_edges(faces, n_vertices)
     if distance_m == 0 or open_before == 0:
         return mesh, WeldReport(float(distance_m), 0, 0, 0, open_before, open_before)
     vertices, faces, merged = _merge_vertices(
@@ -1177,7 +1189,7 @@ def weld_seams(mesh: SceneMesh, distance_m: float = WELD_DISTANCE_M
         labels=mesh.labels,
         face_object=None if mesh.face_object is None else mesh.face_object[keep],
     )
-    open_after = mesh_stats(welded.faces, len(vertices)).boundary_edges
+    open_after = _n_open_edges(welded.faces, len(vertices))
     return welded, WeldReport(float(distance_m), merged, stitched, collapsed, open_before,
                               open_after)
 
