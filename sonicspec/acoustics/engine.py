@@ -345,6 +345,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
             "diffracted" if len(early.diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": early.image_source_order,
+                      "image_source_order_asked": settings.image_source_order,
+                      "image_source_order_stopped": early.image_source_stopped,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction,
                       "tail": report.to_dict()})
         if settings.diffraction:
@@ -374,6 +376,8 @@ class EarlyArrivals:
     diffracted: list[Arrivals]
     image_source_order: int
     """The image-source order completed (the candidate limit may stop it early)."""
+    image_source_stopped: str | None = None
+    """Why the completed order is lower than asked, None when it is not."""
 
 
 def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -405,7 +409,7 @@ def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarra
         towards = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
                                 max_path_length_m=c * settings.rir_limit_s)
         at_mic.append(Arrivals.concatenate([d, towards.arrivals[0], diffracted[k]]))
-    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order)
+    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order, ism.stopped)
 
 
 def with_diffraction_focus(settings: SimulationSettings, *points_m: np.ndarray
@@ -546,6 +550,11 @@ class RirResult:
         (out of sight, with ``acoustics.diffraction``), or absent.
     image_source_order : int
         The image-source order completed (lower than asked when a scene has too many).
+    image_source_order_asked : int
+        The order the settings asked.
+    image_source_order_stopped : str or None
+        Why the completed order is lower than asked (``"order 3 needs more than 2,000,000
+        candidates"``; the ray tracer covers the rest), None when it is not.
     escaped_ray_fraction : float
         Share of the traced energy that left the scene (a leaking mesh shows here).
     expected : dict
@@ -580,6 +589,8 @@ class RirResult:
     tail: dict[str, Any] = field(default_factory=dict)
     diffracted_paths: int = 0
     diffraction_edges: dict[str, Any] | None = None
+    image_source_order_asked: int | None = None
+    image_source_order_stopped: str | None = None
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -620,6 +631,8 @@ class RirResult:
         """The facts, JSON-ready (what ``sonicspec rir --json`` prints, without the RIR)."""
         return {"arrivals": self.arrivals, "direct": self.direct,
                 "image_source_order": self.image_source_order,
+                "image_source_order_asked": self.image_source_order_asked,
+                "image_source_order_stopped": self.image_source_order_stopped,
                 "escaped_ray_fraction": self.escaped_ray_fraction, "expected": self.expected,
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
@@ -657,7 +670,9 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
                       traced_faces=scene.n_faces, tail=f["tail"],
                       diffracted_paths=f.get("diffracted_paths", 0),
-                      diffraction_edges=f.get("diffraction_edges"))
+                      diffraction_edges=f.get("diffraction_edges"),
+                      image_source_order_asked=f["image_source_order_asked"],
+                      image_source_order_stopped=f["image_source_order_stopped"])
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 
