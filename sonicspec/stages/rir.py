@@ -284,7 +284,7 @@ def run(ctx) -> None:
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         _warn_lower_order(scene_name, placement.group, settings.image_source_order,
-                          [f for facts, _ in results for f in facts])
+                          [f for _, facts in results for f in facts])
         entries = []
         for s, ((name, _), line, ref) in enumerate(zip(sources, lines, refs, strict=True)):
             block = [results[t][0][i] for t, i in ref]
