@@ -86,6 +86,22 @@ class DiffractingEdges:
     def length_m(self) -> np.ndarray:
         return np.linalg.norm(self.end - self.start, axis=1)
 
+    def ranked(self, max_edges: int | None = None,
+               near_m: np.ndarray | None = None) -> DiffractingEdges:
+        """These edges in decreasing :func:`edge_importance` for sources and receivers at
+        ``near_m`` (ties by position), the first ``max_edges``; ``n_found`` and ``seams``
+        kept. Ranking all of a scene's edges once per group costs far less than finding
+        them."""
+        score = edge_importance(self.start, self.end, self.open_angle, near_m)
+        mid = 0.5 * (self.start + self.end)
+        keep = np.lexsort((mid[:, 2], mid[:, 1], mid[:, 0], -score))
+        if max_edges is not None:
+            keep = keep[:max_edges]
+        near_points = 0 if near_m is None else len(np.asarray(near_m).reshape(-1, 3))
+        return DiffractingEdges(self.start[keep], self.end[keep], self.direction[keep],
+                                self.face0[keep], self.open_angle[keep], self.faces[keep],
+                                self.n_found, score[keep], near_points, self.seams)
+
     def choice(self) -> dict:
         """How the edges were chosen, JSON-ready (the RIR facts' ``diffraction_edges``)."""
         kept = len(self)
@@ -255,20 +271,13 @@ def diffracting_edges(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarr
         out_faces.append(face_pair[m0])
     start, end = np.array(out_start), np.array(out_end)
     lengths = np.linalg.norm(end - start, axis=1)
-    open_angle = np.array(out_tw)
     keep = np.flatnonzero(lengths >= min_length_m)
-    score = edge_importance(start[keep], end[keep], open_angle[keep], near_m)
+    found = DiffractingEdges(start[keep], end[keep], np.array(out_e)[keep],
+                             np.array(out_t)[keep], np.array(out_tw)[keep],
+                             np.array(out_faces, np.int64)[keep], len(keep), None, 0, n_seams)
     # most important first; equal scores by position, so the choice depends on the geometry
     # only, not on how the mesh's vertices and faces happen to be numbered
-    mid = 0.5 * (start[keep] + end[keep])
-    order = np.lexsort((mid[:, 2], mid[:, 1], mid[:, 0], -score))
-    keep, score = keep[order], score[order]
-    n_found = len(keep)
-    if max_edges is not None:
-        keep, score = keep[:max_edges], score[:max_edges]
-    return DiffractingEdges(start[keep], end[keep], np.array(out_e)[keep], np.array(out_t)[keep],
-                            open_angle[keep], np.array(out_faces, np.int64)[keep], n_found,
-                            score, near_count, n_seams)
+    return found.ranked(max_edges, near_m)
 
 
 def _overlapped(a: np.ndarray, b: np.ndarray, tolerance_m: float) -> np.ndarray:

@@ -427,10 +427,10 @@ def scene_edges(scene: AcousticScene, max_edges: int,
     receivers at ``near_m`` (by length and exposure alone without them;
     :func:`~sonicspec.acoustics.edges.edge_importance`), memoized per scene and positions."""
     near = np.asarray(near_m, dtype=np.float64).reshape(-1, 3)
+    found = scene.memoized("diffracting_edges", lambda: diffracting_edges(
+        scene.vertices, scene.faces, scene.normals))  # found once, ranked per positions
     key = f"diffracting_edges:{max_edges}:{hash(near.tobytes())}:{len(near)}"
-    return scene.memoized(key, lambda: diffracting_edges(
-        scene.vertices, scene.faces, scene.normals, max_edges=max_edges,
-        near_m=near if len(near) else None))
+    return scene.memoized(key, lambda: found.ranked(max_edges, near if len(near) else None))
 
 
 def _diffraction_edges(scene: AcousticScene, settings: SimulationSettings, mic: np.ndarray,
