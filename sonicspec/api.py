@@ -43,7 +43,7 @@ from sonicspec.errors import GeometryError
 from sonicspec.geometry.io import WELD_DISTANCE_M
 from sonicspec.geometry.materials import MaterialLibrary, assign_materials, material_library
 from sonicspec.geometry.mesh import SceneMesh
-from sonicspec.geometry.repair import WeldReport, weld_seams
+from sonicspec.geometry.repair import LeakReport, WeldReport, weld_seams
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import did_you_mean
@@ -289,6 +289,19 @@ class Scene:
     def labels(self) -> tuple[str, ...]:
         """The face labels (empty when the mesh has none)."""
         return self.mesh.labels
+
+    def leak_test(self, rays: int = 10_000, *, points: Sequence[Sequence[float]] | None = None,
+                  seed: int | np.random.Generator = 0) -> LeakReport:
+        """Whether sound can leave the scene: rays from the air that sources and receivers
+        reach (points 0.3–2 m above floors and other upward-facing surfaces, never inside a
+        closed solid), or from ``points`` (e.g. your sources and microphones, metres); the
+        share that escapes or meets a face from behind, and where
+        (:func:`~sonicspec.geometry.repair.leak_test`; ``report.where()`` in words)."""
+        from sonicspec.geometry.repair import leak_test
+
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        interior = None if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return leak_test(self.mesh, rng, rays, interior_points=interior)
 
     def material_areas_m2(self) -> dict[str, float]:
         """Surface area per material, m², largest first."""

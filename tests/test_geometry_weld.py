@@ -182,10 +182,10 @@ def test_the_leak_test_samples_the_navigable_air(obj_files) -> None:
     report = leak_test(scene.mesh, np.random.default_rng(0), 10_000)
     assert report.origins == "navigable"
     assert report.leak_fraction == 0.0 and report.places == ()
-    # from the job's own positions
-    given = leak_test(scene.mesh, np.random.default_rng(0), 2000,
-                      interior_points=np.array([SOURCE, MIC]))
+    # from the job's own positions, through the API
+    given = scene.leak_test(2000, points=[SOURCE, MIC])
     assert given.origins == "given" and given.leak_fraction == 0.0
+    assert scene.leak_test(2000, seed=1).origins == "navigable"
 
 
 def test_a_leak_is_reported_where_it_is(obj_files) -> None:
@@ -262,6 +262,12 @@ def test_diffracted_paths_do_not_change_when_the_objects_are_merged(obj_files) -
     assert len(t_split) > 0
     np.testing.assert_allclose(t_split, t_merged, rtol=0, atol=1e-12)
     np.testing.assert_allclose(a_split, a_merged, rtol=1e-9, atol=1e-15)
+    # the edges are the geometry's, whatever the materials (flat areas are merged up to the
+    # material boundaries before the edges are found)
+    edges_materials, _, _ = _diffraction(
+        ss.Scene.from_file(obj_files["split"], materials=_materials(), up_axis="z"))
+    np.testing.assert_allclose(_sorted_segments(edges_materials),
+                               _sorted_segments(edges_merged), atol=1e-9)
     # and the RIR facts say how the edges were chosen
     result = ss.compute_rir(split, SOURCE, MIC, ss.RirSettings(
         rays=500, image_source_order=1, diffraction=True, diffraction_max_edges=20), seed=0)
