@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from sonicspec.errors import GeometryError, SonicspecWarning
-from sonicspec.geometry.mesh import UNLABELED, SceneMesh
+from sonicspec.geometry.mesh import UNLABELED, WELD_DISTANCE_M, SceneMesh
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
@@ -53,9 +53,7 @@ __all__ = [
 
 SUPPORTED_EXTENSIONS = (".glb", ".gltf", ".obj", ".ply")
 DEFAULT_MATERIAL = "default"
-#: Default distance within which loading joins the vertices of open edges, metres (0.1 mm:
-#: far below any feature of a room, far above the rounding of coordinates written as text).
-WELD_DISTANCE_M = 1e-4
+
 
 #: PLY face properties read as a semantic label (integers, kept as their decimal text) ...
 _PLY_LABEL_PROPERTIES = ("label", "category", "category_id", "semantic_label")

@@ -48,8 +48,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from sonicspec.errors import GeometryError, SonicspecWarning
-from sonicspec.geometry.io import WELD_DISTANCE_M
-from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.mesh import WELD_DISTANCE_M, SceneMesh
 from sonicspec.geometry.procedural import triangulate_polygon
 
 __all__ = [
