@@ -182,6 +182,11 @@ def test_the_leak_test_samples_the_navigable_air(obj_files) -> None:
     report = leak_test(scene.mesh, np.random.default_rng(0), 10_000)
     assert report.origins == "navigable"
     assert report.leak_fraction == 0.0 and report.places == ()
+    # unwelded, ray parity cannot tell the air from the radiators (the room is five open
+    # pieces): random points of the bounding box counted 1.5 % of rays as leaking there; the
+    # navigable air does not
+    raw = load_mesh(obj_files["split"], up_axis="z", obj_labels=True, weld_distance_m=0.0)
+    assert leak_test(raw, np.random.default_rng(0), 10_000).leak_fraction == 0.0
     # from the job's own positions, through the API
     given = scene.leak_test(2000, points=[SOURCE, MIC])
     assert given.origins == "given" and given.leak_fraction == 0.0
