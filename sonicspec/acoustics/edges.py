@@ -28,8 +28,8 @@ import numpy as np
 
 from sonicspec.errors import AcousticsError
 
-__all__ = ["MIN_TURN_DEG", "NEAR_SCALE_M", "DiffractingEdges", "diffracting_edges",
-           "edge_importance"]
+__all__ = ["HIDDEN_WEIGHT", "MIN_TURN_DEG", "NEAR_SCALE_M", "DiffractingEdges",
+           "diffracting_edges", "edge_importance"]
 
 #: Smallest turn of the surface (θ_w − π, degrees) that counts as a diffracting edge.
 MIN_TURN_DEG = 15.0
@@ -38,6 +38,9 @@ _PARALLEL_COS = math.cos(math.radians(0.5))
 #: receiver count about as much as one at this distance (a path's level does not grow without
 #: bound as its edge comes near).
 NEAR_SCALE_M = 1.0
+#: Weight of an edge that no source or receiver position sees (heard only after a
+#: reflection) against one that every position sees, in :func:`edge_importance`.
+HIDDEN_WEIGHT = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +69,8 @@ class DiffractingEdges:
         length and exposure alone).
     seams : int
         Open edges left out because another open edge overlaps them (unjoined seams).
+    by_sight : bool
+        Whether the importance counted which positions see each edge.
     """
 
     start: np.ndarray
@@ -78,6 +83,7 @@ class DiffractingEdges:
     importance: np.ndarray | None = None
     near_points: int = 0
     seams: int = 0
+    by_sight: bool = False
 
     def __len__(self) -> int:
         return len(self.open_angle)
@@ -86,13 +92,23 @@ class DiffractingEdges:
     def length_m(self) -> np.ndarray:
         return np.linalg.norm(self.end - self.start, axis=1)
 
-    def ranked(self, max_edges: int | None = None,
-               near_m: np.ndarray | None = None) -> DiffractingEdges:
+    def air_points(self, per_edge: int = 3, offset_m: float = 0.01) -> np.ndarray:
+        """``(m, per_edge, 3)`` points along each edge, ``offset_m`` off it into the air
+        (along the bisector of its open angle): where visibility from the edge is tested."""
+        half = 0.5 * self.open_angle[:, None]
+        into_air = (np.cos(half) * self.face0
+                    + np.sin(half) * np.cross(self.direction, self.face0))
+        t = (np.arange(per_edge) + 0.5) / per_edge
+        along = self.start[:, None, :] + t[None, :, None] * (self.end - self.start)[:, None, :]
+        return along + offset_m * into_air[:, None, :]
+
+    def ranked(self, max_edges: int | None = None, near_m: np.ndarray | None = None,
+               seen: np.ndarray | None = None) -> DiffractingEdges:
         """These edges in decreasing :func:`edge_importance` for sources and receivers at
         ``near_m`` (ties by position), the first ``max_edges``; ``n_found`` and ``seams``
-        kept. Ranking all of a scene's edges once per group costs far less than finding
-        them."""
-        score = edge_importance(self.start, self.end, self.open_angle, near_m)
+        kept. ``seen``: the share of those positions each edge is in sight of. Ranking all
+        of a scene's edges once per group costs far less than finding them."""
+        score = edge_importance(self.start, self.end, self.open_angle, near_m, seen)
         mid = 0.5 * (self.start + self.end)
         keep = np.lexsort((mid[:, 2], mid[:, 1], mid[:, 0], -score))
         if max_edges is not None:
@@ -100,14 +116,17 @@ class DiffractingEdges:
         near_points = 0 if near_m is None else len(np.asarray(near_m).reshape(-1, 3))
         return DiffractingEdges(self.start[keep], self.end[keep], self.direction[keep],
                                 self.face0[keep], self.open_angle[keep], self.faces[keep],
-                                self.n_found, score[keep], near_points, self.seams)
+                                self.n_found, score[keep], near_points, self.seams,
+                                seen is not None)
 
     def choice(self) -> dict:
         """How the edges were chosen, JSON-ready (the RIR facts' ``diffraction_edges``)."""
         kept = len(self)
+        sight = (f" x ({HIDDEN_WEIGHT:g} + {1 - HIDDEN_WEIGHT:g} x share of them in sight)"
+                 if self.by_sight else "")
         rule = ("importance: length x exposure / (1 m + distance to the nearest of "
-                f"{self.near_points} source and receiver positions)^2" if self.near_points
-                else "importance: length x exposure")
+                f"{self.near_points} source and receiver positions)^2{sight}"
+                if self.near_points else "importance: length x exposure")
         return {"found": int(self.n_found), "kept": kept, "rule": rule,
                 "near_points": int(self.near_points), "seams_left_out": int(self.seams),
                 "length_kept_m": float(self.length_m.sum()) if kept else 0.0}
@@ -120,17 +139,24 @@ def _empty(n_found: int = 0, near_points: int = 0, seams: int = 0) -> Diffractin
 
 
 def edge_importance(start: np.ndarray, end: np.ndarray, open_angle: np.ndarray,
-                    near_m: np.ndarray | None = None) -> np.ndarray:
-    """How much an edge is likely to be heard: ``length × exposure / (1 m + d)²``.
+                    near_m: np.ndarray | None = None, seen: np.ndarray | None = None
+                    ) -> np.ndarray:
+    """How much an edge is likely to be heard:
+    ``length × exposure × (w + (1 − w) × seen) / (1 m + d)²``.
 
     ``exposure = (θ_w − π) / π`` is how far the wedge sticks out into the air (1 for a
     half-plane, 0.5 for a right-angled corner, 0.08 for a 15° bend), which UTD's coefficient
     follows; ``d`` is the distance from the edge (the segment) to the nearest of ``near_m``,
     the sources and receivers of the job (a diffracted path's level falls with both of its
-    legs), and is left out without them (then the longest, most exposed edges come first).
+    legs), and is left out without them (then the longest, most exposed edges come first);
+    ``seen`` is the share of those positions that have the edge in sight (an edge behind a
+    wall is heard only after a reflection: weight ``w`` = :data:`HIDDEN_WEIGHT`), 1 when not
+    given.
     """
     length = np.linalg.norm(end - start, axis=1)
     score = length * (open_angle - math.pi) / math.pi
+    if seen is not None:
+        score = score * (HIDDEN_WEIGHT + (1 - HIDDEN_WEIGHT) * np.asarray(seen, np.float64))
     if near_m is None or len(near_m) == 0 or len(start) == 0:
         return score
     near = np.asarray(near_m, dtype=np.float64).reshape(-1, 3)

@@ -430,7 +430,31 @@ def scene_edges(scene: AcousticScene, max_edges: int,
     found = scene.memoized("diffracting_edges", lambda: diffracting_edges(
         scene.vertices, scene.faces, scene.normals))  # found once, ranked per positions
     key = f"diffracting_edges:{max_edges}:{hash(near.tobytes())}:{len(near)}"
-    return scene.memoized(key, lambda: found.ranked(max_edges, near if len(near) else None))
+    if not len(near):
+        return scene.memoized(key, lambda: found.ranked(max_edges))
+    return scene.memoized(key, lambda: found.ranked(max_edges, near,
+                                                    _edges_in_sight(scene, found, near)))
+
+
+#: Most positions :func:`scene_edges` tests the edges' visibility from (evenly picked).
+SIGHT_POSITIONS = 32
+
+
+def _edges_in_sight(scene: AcousticScene, edges: DiffractingEdges, near: np.ndarray
+                    ) -> np.ndarray:
+    """``(m,)`` share of the positions (at most :data:`SIGHT_POSITIONS` of ``near``) in sight
+    of each edge: of three points along it, 1 cm off into the air, one seen is enough."""
+    if len(edges) == 0:
+        return np.zeros(0)
+    pick = np.unique(np.linspace(0, len(near) - 1, min(len(near), SIGHT_POSITIONS)).round()
+                     .astype(np.int64))
+    points = near[pick]
+    samples = edges.air_points()  # (m, 3, 3)
+    m, k = samples.shape[:2]
+    origins = np.repeat(samples.reshape(-1, 3), len(points), axis=0)
+    targets = np.tile(points, (m * k, 1))
+    visible = ~scene.occluded(origins, targets)
+    return visible.reshape(m, k, len(points)).any(axis=1).mean(axis=1)
 
 
 def _diffraction_edges(scene: AcousticScene, settings: SimulationSettings, mic: np.ndarray,
