@@ -170,9 +170,19 @@ def apartment() -> dict:
     edges = scene_edges(scene, settings.diffraction_max_edges)
     pairs = close_pairs(edges)
     edge_s = time.perf_counter() - t0  # once per scene (memoized by the engine)
+    # issue 32: the edges ranked for one group's positions (a 101-point walk and the mic),
+    # distances and sight from up to 32 of them; once per group in the rir step
+    walk = np.concatenate([MIC_M[None], SOURCE_M[None] + np.linspace(0, 1, 100)[:, None]
+                           * np.array([[-2.0, -1.5, 0.0]])])
+    t0 = time.perf_counter()
+    ranked = scene_edges(scene, settings.diffraction_max_edges, walk)
+    rank_s = time.perf_counter() - t0
+    shared = len({tuple(p) for p in np.round(edges.start, 6)}
+                 & {tuple(p) for p in np.round(ranked.start, 6)})
     out = {"triangles": mesh.n_faces, "traced_triangles": scene.n_faces,
            "edges_found": edges.n_found, "edges_kept": len(edges), "pairs": len(pairs),
-           "edge_search_s": edge_s}
+           "edge_search_s": edge_s, "edge_rank_for_a_walk_s": rank_s,
+           "kept_also_by_length_and_exposure": shared}
     # Off and on interleaved, best of 5 each (the machine is shared): one source, and a
     # 20-point trajectory (one trace, diffraction per point).
     line = SOURCE_M[None] + np.linspace(0, 1, 20)[:, None] * np.array([[-2.0, -1.5, 0.0]])

@@ -122,3 +122,34 @@ def test_bad_inputs_are_named() -> None:
         edges_of(mesh, max_edges=-1)
     with pytest.raises(AcousticsError, match="faces/normals: expected"):
         diffracting_edges(mesh.vertices, mesh.faces, mesh.face_normals[:2])
+
+
+def test_edges_in_sight_of_the_job_come_before_edges_behind_a_wall() -> None:
+    """Two rooms through a door: a box in the sources' room, farther away, counts for more
+    than a box just behind the wall (heard only after reflections)."""
+    from sonicspec.acoustics.engine import scene_edges
+    from sonicspec.acoustics.room.scene import AcousticScene
+
+    xs = np.array([0.0, 0.3, 0.9, 3.0, 3.2, 3.5, 4.1, 6.2])
+    ys = np.array([0.0, 2.0, 2.6, 4.0, 5.0])
+    zs = np.array([0.0, 1.0, 2.5])
+    air = np.ones((7, 4, 2), bool)
+    air[3] = False  # the wall x in [3.0, 3.2] ...
+    air[3, 3, 0] = True  # ... with a door at y in [4, 5]
+    air[1, 1, 0] = False  # box A, the sources' room
+    air[5, 1, 0] = False  # box B, behind the wall
+    mesh = voxel_air_surface(xs, ys, zs, air)
+    n, bands = mesh.n_faces, 3
+    scene = AcousticScene(mesh.vertices, mesh.faces, np.full((n, bands), 0.1),
+                          np.zeros((n, bands)), np.zeros((n, bands)))
+    near = np.array([[2.7, 1.5, 0.5], [2.5, 1.2, 1.5]])
+
+    def box(edges) -> np.ndarray:
+        mid = 0.5 * (edges.start + edges.end)
+        return np.where(mid[:, 0] < 1.0, "A", np.where(mid[:, 0] > 3.3, "B", "door"))
+
+    by_distance = edges_of(mesh, near_m=near)
+    assert box(by_distance)[0] == "B"  # nearer, through the wall
+    by_sight = scene_edges(scene, 4, near)
+    assert by_sight.by_sight and "share of them in sight" in by_sight.choice()["rule"]
+    assert box(by_sight)[0] == "A" and "B" not in box(by_sight)

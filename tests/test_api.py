@@ -162,13 +162,19 @@ def test_custom_materials_procedural_rooms_and_repair(tmp_path) -> None:
                                     materials={"wall": "gypsum_board", "floor": "marble",
                                                "ceiling": "acoustic_ceiling_tile"})
     assert set(relabelled.mesh.materials) == {"gypsum_board", "marble", "acoustic_ceiling_tile"}
-    # repair=True welds the box's separate objects (24 vertices -> 8) and keeps it closed.
+    # Loading welds the box's separate objects (to 8 vertices) without repair (issue 32);
+    # weld_distance_m=0 keeps the file's copies, which repair=True welds.
     obj = write_obj(tmp_path / "room.obj", {"floor": ["floor"], "shell": ["walls", "ceiling"]})
-    plain = ss.Scene.from_file(obj, materials={"floor": "marble", "shell": "marble"})
-    fixed = ss.Scene.from_file(obj, materials={"floor": "marble", "shell": "marble"},
-                               repair=True)
-    assert plain.mesh.vertices.shape[0] > fixed.mesh.vertices.shape[0] == 8
-    assert fixed.mesh.air_volume() == pytest.approx(90.0)
+    mapping = {"floor": "marble", "shell": "marble"}
+    plain = ss.Scene.from_file(obj, materials=mapping)
+    raw = ss.Scene.from_file(obj, materials=mapping, weld_distance_m=0)
+    fixed = ss.Scene.from_file(obj, materials=mapping, weld_distance_m=0, repair=True)
+    assert raw.mesh.vertices.shape[0] > fixed.mesh.vertices.shape[0] == 8
+    assert plain.mesh.vertices.shape[0] == 8
+    assert plain.weld.merged_vertices == raw.mesh.vertices.shape[0] - 8
+    assert raw.weld.merged_vertices == 0
+    for scene in (plain, fixed):
+        assert scene.mesh.air_volume() == pytest.approx(90.0)
 
 
 def test_receivers_settings_and_seeds() -> None:

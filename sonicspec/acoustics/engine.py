@@ -21,6 +21,7 @@ call it.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
@@ -73,6 +74,7 @@ __all__ = [
     "simulate_rirs",
     "traced_geometry",
     "warn_cut_tails",
+    "with_diffraction_focus",
 ]
 
 #: The receiver a call without one gets: one omnidirectional capsule that stays put.
@@ -116,6 +118,11 @@ class SimulationSettings:
     diffraction: bool = False
     diffraction_max_edges: int = 256
     max_rir_cap_s: float = 10.0
+    diffraction_focus_m: tuple[tuple[float, float, float], ...] = ()
+    """The source and receiver positions the diffracting edges are chosen for
+    (:func:`scene_edges`): the rir stage sets every position of a group, so all the group's
+    RIRs and the points added between them use one set of edges; empty: each call's own
+    microphone and sources (:func:`with_diffraction_focus`)."""
 
     def __post_init__(self) -> None:
         length = self.max_rir_length_s
@@ -325,6 +332,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                         ray_trace_settings(settings, early.image_source_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    edge_choice = (_diffraction_edges(scene, settings, mic, points)[0].choice()
+                   if settings.diffraction else None)
     render = receiver_renderer(microphone, settings, hrirs)
     rirs, facts, reports = [], [], []
     for k in range(len(points)):
@@ -337,10 +346,13 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
             "diffracted" if len(early.diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": early.image_source_order,
+                      "image_source_order_asked": settings.image_source_order,
+                      "image_source_order_stopped": early.image_source_stopped,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction,
                       "tail": report.to_dict()})
         if settings.diffraction:
             facts[-1]["diffracted_paths"] = len(early.diffracted[k])
+            facts[-1]["diffraction_edges"] = edge_choice
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
@@ -365,6 +377,8 @@ class EarlyArrivals:
     diffracted: list[Arrivals]
     image_source_order: int
     """The image-source order completed (the candidate limit may stop it early)."""
+    image_source_stopped: str | None = None
+    """Why the completed order is lower than asked, None when it is not."""
 
 
 def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -396,13 +410,65 @@ def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarra
         towards = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
                                 max_path_length_m=c * settings.rir_limit_s)
         at_mic.append(Arrivals.concatenate([d, towards.arrivals[0], diffracted[k]]))
-    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order)
+    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order, ism.stopped)
 
 
-def scene_edges(scene: AcousticScene, max_edges: int) -> DiffractingEdges:
-    """The traced scene's diffracting edges, the longest ``max_edges`` (memoized per scene)."""
-    return scene.memoized(f"diffracting_edges:{max_edges}", lambda: diffracting_edges(
-        scene.vertices, scene.faces, scene.normals, max_edges=max_edges))
+def with_diffraction_focus(settings: SimulationSettings, *points_m: np.ndarray
+                           ) -> SimulationSettings:
+    """``settings`` whose diffracting edges are chosen for these source and receiver
+    positions (each ``(3,)`` or ``(N, 3)``, metres): the edges a group's RIRs share."""
+    flat = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in points_m])
+    focus = tuple(tuple(float(v) for v in row) for row in np.unique(flat, axis=0))
+    return dataclasses.replace(settings, diffraction_focus_m=focus)
+
+
+def scene_edges(scene: AcousticScene, max_edges: int,
+                near_m: np.ndarray | tuple = ()) -> DiffractingEdges:
+    """The traced scene's diffracting edges, the ``max_edges`` most important for sources and
+    receivers at ``near_m`` (by length and exposure alone without them;
+    :func:`~sonicspec.acoustics.paths.edges.edge_importance`), memoized per scene and positions."""
+    near = np.asarray(near_m, dtype=np.float64).reshape(-1, 3)
+    found = scene.memoized("diffracting_edges", lambda: diffracting_edges(
+        scene.vertices, scene.faces, scene.normals))  # found once, ranked per positions
+    key = f"diffracting_edges:{max_edges}:{hash(near.tobytes())}:{len(near)}"
+    if not len(near):
+        return scene.memoized(key, lambda: found.ranked(max_edges))
+    return scene.memoized(key, lambda: found.ranked(max_edges, near,
+                                                    _edges_in_sight(scene, found, near)))
+
+
+#: Most positions :func:`scene_edges` tests the edges' visibility from (evenly picked).
+SIGHT_POSITIONS = 32
+
+
+def _edges_in_sight(scene: AcousticScene, edges: DiffractingEdges, near: np.ndarray
+                    ) -> np.ndarray:
+    """``(m,)`` share of the positions (at most :data:`SIGHT_POSITIONS` of ``near``) in sight
+    of each edge: of three points along it, 1 cm off into the air, one seen is enough."""
+    if len(edges) == 0:
+        return np.zeros(0)
+    pick = np.unique(np.linspace(0, len(near) - 1, min(len(near), SIGHT_POSITIONS)).round()
+                     .astype(np.int64))
+    points = near[pick]
+    samples = edges.air_points()  # (m, 3, 3)
+    m, k = samples.shape[:2]
+    origins = np.repeat(samples.reshape(-1, 3), len(points), axis=0)
+    targets = np.tile(points, (m * k, 1))
+    visible = ~scene.occluded(origins, targets)
+    return visible.reshape(m, k, len(points)).any(axis=1).mean(axis=1)
+
+
+def _diffraction_edges(scene: AcousticScene, settings: SimulationSettings, mic: np.ndarray,
+                       points: np.ndarray) -> tuple[DiffractingEdges, np.ndarray]:
+    """The edges (and their close pairs) of one call: chosen for the settings' focus, or
+    for the call's microphone and sources."""
+    if settings.diffraction_focus_m:
+        near = np.asarray(settings.diffraction_focus_m, dtype=np.float64)
+    else:
+        near = np.unique(np.concatenate([mic.reshape(1, 3), points]), axis=0)
+    edges = scene_edges(scene, settings.diffraction_max_edges, near)
+    key = f"diffracting_edge_pairs:{settings.diffraction_max_edges}:{hash(near.tobytes())}"
+    return edges, scene.memoized(key, lambda: close_pairs(edges))
 
 
 def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -414,9 +480,8 @@ def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     if not settings.diffraction:
         return [Arrivals.empty(scene.n_bands) for _ in points]
-    edges = scene_edges(scene, settings.diffraction_max_edges)
-    pairs = scene.memoized(f"diffracting_edge_pairs:{settings.diffraction_max_edges}",
-                           lambda: close_pairs(edges))
+    edges, pairs = _diffraction_edges(scene, settings, np.asarray(mic_m, dtype=np.float64),
+                                      points)
     return diffracted_sound(scene, edges, points, np.asarray(mic_m, dtype=np.float64),
                             settings.bands_hz, settings.air(), settings.speed_of_sound_m_s,
                             regions=regions, pairs=pairs)
@@ -510,6 +575,11 @@ class RirResult:
         (out of sight, with ``acoustics.diffraction``), or absent.
     image_source_order : int
         The image-source order completed (lower than asked when a scene has too many).
+    image_source_order_asked : int
+        The order the settings asked.
+    image_source_order_stopped : str or None
+        Why the completed order is lower than asked (``"order 3 needs more than 2,000,000
+        candidates"``; the ray tracer covers the rest), None when it is not.
     escaped_ray_fraction : float
         Share of the traced energy that left the scene (a leaking mesh shows here).
     expected : dict
@@ -525,6 +595,10 @@ class RirResult:
         level a cut band reached at the limit.
     diffracted_paths : int
         Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
+    diffraction_edges : dict or None
+        How the diffracting edges were chosen (None with diffraction off):
+        :meth:`~sonicspec.acoustics.paths.edges.DiffractingEdges.choice` (found, kept, the rule,
+        seams left out).
     """
 
     rir: np.ndarray
@@ -540,6 +614,9 @@ class RirResult:
     traced_faces: int
     tail: dict[str, Any] = field(default_factory=dict)
     diffracted_paths: int = 0
+    diffraction_edges: dict[str, Any] | None = None
+    image_source_order_asked: int | None = None
+    image_source_order_stopped: str | None = None
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -580,11 +657,14 @@ class RirResult:
         """The facts, JSON-ready (what ``sonicspec rir --json`` prints, without the RIR)."""
         return {"arrivals": self.arrivals, "direct": self.direct,
                 "image_source_order": self.image_source_order,
+                "image_source_order_asked": self.image_source_order_asked,
+                "image_source_order_stopped": self.image_source_order_stopped,
                 "escaped_ray_fraction": self.escaped_ray_fraction, "expected": self.expected,
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
                 "traced_triangles": self.traced_faces, "diffracted_paths": self.diffracted_paths,
+                "diffraction_edges": self.diffraction_edges,
                 "figures": self.figures.to_dict(),
                 "length_s": self.rir.shape[-1] / self.sample_rate_hz, "tail": self.tail}
 
@@ -615,7 +695,10 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       image_source_order=f["image_source_order"],
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
                       traced_faces=scene.n_faces, tail=f["tail"],
-                      diffracted_paths=f.get("diffracted_paths", 0))
+                      diffracted_paths=f.get("diffracted_paths", 0),
+                      diffraction_edges=f.get("diffraction_edges"),
+                      image_source_order_asked=f["image_source_order_asked"],
+                      image_source_order_stopped=f["image_source_order_stopped"])
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 
@@ -794,6 +877,10 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
 
     src = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     mic = np.asarray(mics_m, dtype=np.float64).reshape(-1, 3)
+    if settings.diffraction and not settings.diffraction_focus_m:
+        # the edges the RIR points' arrivals were found with (:func:`simulate_rirs` chooses
+        # them for its microphone and sources), so the points added share them
+        settings = with_diffraction_focus(settings, src, mic)
     moving = bool(np.any(mic != mic[:1]))
     at = np.arange(len(src), dtype=np.float64)
     known: dict[float, tuple[np.ndarray, np.ndarray, Arrivals, Arrivals, dict]] = {

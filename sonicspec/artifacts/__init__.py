@@ -232,6 +232,14 @@ class RirSource(_Data):
     tail: dict[str, Any]
     """How the RIR's length was chosen (first point;
     :meth:`sonicspec.acoustics.late.tails.TailReport.to_dict`)."""
+    image_source_order: int | None = None
+    """The image-source order reached at every point of the source (the lowest over its
+    points; None in artifacts written before it was recorded)."""
+    image_source_order_asked: int | None = None
+    """The order ``acoustics.image_source_order`` asked."""
+    image_source_order_stopped: str | None = None
+    """Why the order reached is lower than asked (``"order 3 needs more than 2,000,000
+    candidates"``: the ray tracer covers the rest), None when it is not."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
@@ -244,6 +252,10 @@ class RirSource(_Data):
 class RirGroup(_Data):
     group: str
     sources: list[RirSource]
+    diffraction_edges: dict[str, Any] | None = None
+    """With ``acoustics.diffraction``: how the group's diffracting edges were chosen, one set
+    for all of its RIRs (:meth:`sonicspec.acoustics.edges.DiffractingEdges.choice`: found,
+    kept, the rule, the seam edges left out)."""
 
     def source(self, track: str) -> RirSource:
         for s in self.sources:

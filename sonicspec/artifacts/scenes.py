@@ -54,22 +54,25 @@ def _obstacle(ob: ObstacleSpec, path: str | None) -> SceneMesh:
                               material=ob.material, label=ob.label)
 
 
-def load_scan(scene: MeshSceneSpec, paths: dict[str, str], *, obj_labels: bool = False
-              ) -> SceneMesh:
+def load_scan(scene: MeshSceneSpec, paths: dict[str, str], *, obj_labels: bool = False,
+              weld: bool = True) -> SceneMesh:
     """The file of a ``mesh`` scene read as the mesh stage reads it (before materials and
-    repair); ``validate --check-files`` reads meshes through it too. ``obj_labels``: an obj
-    file's lone object keeps its name and a file without objects is labelled by its groups
+    repair), its seams welded by ``scene.weld_distance_m`` unless ``weld`` is False;
+    ``validate --check-files`` reads meshes through it too. ``obj_labels``: an obj file's
+    lone object keeps its name and a file without objects is labelled by its groups
     (``geometry.io.load_mesh``; the plan sets it for obj scenes)."""
     from sonicspec.geometry.io import load_matterport, load_mesh
 
     scale = UNIT_SCALE_M[scene.unit]
     default = scene.default_material or "default"
+    weld_m = scene.weld_distance_m if weld else 0.0
     if "semantic" in paths:
         up = "z" if scene.up_axis == "auto" else scene.up_axis
         return load_matterport(paths["mesh"], paths["semantic"], paths.get("house"),
-                               up_axis=up, unit_scale=scale, material=default)
+                               up_axis=up, unit_scale=scale, material=default,
+                               weld_distance_m=weld_m)
     return load_mesh(paths["mesh"], scene.up_axis, scale, material=default,
-                     obj_labels=obj_labels)
+                     obj_labels=obj_labels, weld_distance_m=weld_m)
 
 
 def build_scene_mesh(
@@ -77,7 +80,7 @@ def build_scene_mesh(
 ) -> tuple[SceneMesh, dict[str, Any]]:
     """The repaired scene mesh of a ``mesh`` job and a report of what was done."""
     from sonicspec.geometry.materials import assign_materials, load_library
-    from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh
+    from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh, weld_seams
 
     scene = params.scene
     scene_id = params.scene_id
@@ -88,7 +91,10 @@ def build_scene_mesh(
         report["repair"] = None
         return mesh, report
 
-    mesh = load_scan(scene, paths, obj_labels=params.obj_labels)
+    # seams welded here rather than in the loader, so the report says what was joined
+    mesh, weld = weld_seams(load_scan(scene, paths, obj_labels=params.obj_labels, weld=False),
+                            scene.weld_distance_m)
+    report["weld"] = weld.to_dict()
     mesh = assign_materials(mesh, load_library(params.library), params.label_materials or {},
                             scene.default_material, where=f"scene {scene_id!r}")
     repair = scene.repair
@@ -103,17 +109,13 @@ def build_scene_mesh(
         mesh = proc.add_obstacles(mesh, obstacles)
     if repair.leak_test_rays > 0:
         leak = leak_test(mesh, rng, repair.leak_test_rays)
-        report["leak"] = {
-            "rays": leak.rays,
-            "escaped": leak.escaped,
-            "backface": leak.backface,
-            "fraction": leak.leak_fraction,
-        }
+        report["leak"] = leak.to_dict()
         if leak.leak_fraction > repair.max_leak_fraction:
             message = (
                 f"scene {scene_id!r}: {leak.leak_fraction:.2%} of {leak.rays} test rays "
-                f"leave the mesh (allowed: {repair.max_leak_fraction:.2%}); raise "
-                "repair.max_hole_size_m or fix the scan"
+                f"from the {leak.origins} air leave the mesh (allowed: "
+                f"{repair.max_leak_fraction:.2%}): {leak.where()}; raise "
+                "repair.max_hole_size_m or fix the scan there"
             )
             if repair.on_leak == "error":
                 raise GeometryError(message)

@@ -177,6 +177,9 @@ class ImageSourceResult:
 
     arrivals: tuple[Arrivals, ...]
     max_order: int
+    stopped: str | None = None
+    """Why ``max_order`` is lower than asked (``"order 3 needs more than 2,000,000
+    candidates"``), None when the asked order was reached."""
 
 
 def _region_extremes(scene: AcousticScene, regions: PlanarRegions
@@ -382,6 +385,7 @@ def image_sources(
     side = np.zeros(1, dtype=np.int64)
     last_pos = src[None, :]
     completed = 0
+    stopped = None
     for order in range(1, max_order + 1):
         # Candidates (parent image, region), compiled: at most min(pairs, limit) rows.
         last_plane = levels[-1][2] if order > 1 else None
@@ -405,6 +409,7 @@ def image_sources(
                 SonicspecWarning,
                 stacklevel=2,
             )
+            stopped = f"order {order} needs more than {max_candidates:,} candidates"
             break
         parent, plane, new_pos, new_side = (x[:count] for x in (parent, plane, new_pos,
                                                                  new_side))
@@ -433,7 +438,8 @@ def image_sources(
         Arrivals.concatenate(parts) if parts else Arrivals.empty(scene.n_bands)
         for parts in per_receiver
     )
-    return ImageSourceResult(arrivals=arrivals, max_order=completed)
+    return ImageSourceResult(arrivals=arrivals, max_order=completed,
+                             stopped=stopped if completed < max_order else None)
 
 
 def _mirrored(iso: np.ndarray, normal: np.ndarray, plane_d: np.ndarray) -> np.ndarray:
