@@ -153,3 +153,25 @@ def test_edges_in_sight_of_the_job_come_before_edges_behind_a_wall() -> None:
     by_sight = scene_edges(scene, 4, near)
     assert by_sight.by_sight and "share of them in sight" in by_sight.choice()["rule"]
     assert box(by_sight)[0] == "A" and "B" not in box(by_sight)
+
+
+def test_a_box_standing_on_the_floor_has_no_edges_where_it_stands() -> None:
+    """Issue 32: edges of a closed solid that another surface cuts into (a box on the floor, a
+    pillar from floor to ceiling) are inner corners of the room, not edges in the air."""
+    from sonicspec.acoustics.engine import scene_edges
+    from sonicspec.acoustics.room.scene import AcousticScene
+
+    def edges_found(z0: float, height: float) -> tuple[int, int]:
+        mesh = SceneMesh.concatenate([
+            shoebox([6.0, 5.0, 3.0]),
+            box_obstacle([2.5, 2.0, z0 + height / 2], [1.0, 0.8, height])])
+        n, bands = mesh.n_faces, 3
+        scene = AcousticScene(mesh.vertices, mesh.faces, np.full((n, bands), 0.1),
+                              np.zeros((n, bands)), np.zeros((n, bands)))
+        found = scene_edges(scene, 1000)
+        assert found.choice()["buried_left_out"] == found.buried
+        return len(found), found.buried
+
+    assert edges_found(0.5, 0.6) == (12, 0)  # floating: every edge of the box is in the air
+    assert edges_found(0.0, 0.6) == (8, 4)  # on the floor: its four bottom edges are not
+    assert edges_found(0.0, 3.0) == (4, 8)  # floor to ceiling: only the four vertical edges

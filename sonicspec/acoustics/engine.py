@@ -428,13 +428,29 @@ def scene_edges(scene: AcousticScene, max_edges: int,
     receivers at ``near_m`` (by length and exposure alone without them;
     :func:`~sonicspec.acoustics.paths.edges.edge_importance`), memoized per scene and positions."""
     near = np.asarray(near_m, dtype=np.float64).reshape(-1, 3)
-    found = scene.memoized("diffracting_edges", lambda: diffracting_edges(
-        scene.vertices, scene.faces, scene.normals))  # found once, ranked per positions
+    found = scene.memoized("diffracting_edges", lambda: _unburied(scene, diffracting_edges(
+        scene.vertices, scene.faces, scene.normals)))  # found once, ranked per positions
     key = f"diffracting_edges:{max_edges}:{hash(near.tobytes())}:{len(near)}"
     if not len(near):
         return scene.memoized(key, lambda: found.ranked(max_edges))
     return scene.memoized(key, lambda: found.ranked(max_edges, near,
                                                     _edges_in_sight(scene, found, near)))
+
+
+def _unburied(scene: AcousticScene, edges: DiffractingEdges) -> DiffractingEdges:
+    """``edges`` less the wedges another surface cuts into: a box standing on the floor or
+    against a wall is a closed solid whose edges there are inner corners of the room (its air
+    spans a quarter turn, not three), so they diffract nothing. An edge is buried where a
+    chord of the arc round it (:meth:`~sonicspec.acoustics.paths.edges.DiffractingEdges.arc_points`)
+    is occluded at two of its three places along it (a box half against a wall keeps its
+    free half's edge)."""
+    if len(edges) == 0:
+        return edges
+    arcs = edges.arc_points()  # (m, 3, s, 3)
+    m, k, s = arcs.shape[:3]
+    cut = scene.occluded(arcs[:, :, :-1].reshape(-1, 3), arcs[:, :, 1:].reshape(-1, 3))
+    cut = cut.reshape(m, k, s - 1).any(axis=2)
+    return edges.without(cut.sum(axis=1) >= 2)
 
 
 #: Most positions :func:`scene_edges` tests the edges' visibility from (evenly picked).

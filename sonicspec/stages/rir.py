@@ -257,9 +257,10 @@ def run(ctx) -> None:
                 *[np.asarray(p) for _, _, p in traces])
             choice = scene_edges(scene, settings.diffraction_max_edges,
                                  group_settings.diffraction_focus_m).choice()
-            log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges left out)",
-                     placement.group, choice["kept"], choice["found"], choice["rule"],
-                     choice["seams_left_out"])
+            log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges and %d "
+                     "buried wedges left out)", placement.group, choice["kept"],
+                     choice["found"], choice["rule"], choice["seams_left_out"],
+                     choice["buried_left_out"])
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,

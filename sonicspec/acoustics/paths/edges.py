@@ -13,6 +13,12 @@ overlaps (the same segment, or a part of it, within ``seam_tolerance_m``) is a s
 pieces of one surface whose vertices were not joined — a material or object boundary of a file
 written one object per material, or the two sides of a T-junction — and diffracts nothing.
 
+A wedge of a closed solid is a diffracting edge only where its air is air: a box standing on
+the floor or against a wall has edges there whose air another surface cuts through (an inner
+corner of the room, not an edge in the air); the RIR engine leaves those out
+(:meth:`DiffractingEdges.arc_points`, ``engine._unburied``), and counts them in
+:attr:`DiffractingEdges.buried`.
+
 Segments that continue one another (collinear, same two planes) are merged into one edge, so a
 wall cut into many triangles still has one edge per corner. A scan may have thousands of
 creases: ``max_edges`` keeps the most important (the budget the RIR stage passes), and the
@@ -38,6 +44,11 @@ _PARALLEL_COS = math.cos(math.radians(0.5))
 #: receiver count about as much as one at this distance (a path's level does not grow without
 #: bound as its edge comes near).
 NEAR_SCALE_M = 1.0
+#: Radius (m) and number of chords of the arcs round an edge that test whether another surface
+#: cuts through its air (:meth:`DiffractingEdges.arc_points`): 2 cm, below a room's features and
+#: above a scan's noise.
+BURIED_RADIUS_M = 0.02
+BURIED_STEPS = 8
 #: Weight of an edge that no source or receiver position sees (heard only after a
 #: reflection) against one that every position sees, in :func:`edge_importance`.
 HIDDEN_WEIGHT = 0.1
@@ -71,6 +82,10 @@ class DiffractingEdges:
         Open edges left out because another open edge overlaps them (unjoined seams).
     by_sight : bool
         Whether the importance counted which positions see each edge.
+    buried : int
+        Wedges left out because another surface cuts through the air around them (a box
+        standing on the floor or against a wall: its edges there are inner corners of the
+        room, not edges in the air; :meth:`buried_mask`).
     """
 
     start: np.ndarray
@@ -84,6 +99,7 @@ class DiffractingEdges:
     near_points: int = 0
     seams: int = 0
     by_sight: bool = False
+    buried: int = 0
 
     def __len__(self) -> int:
         return len(self.open_angle)
@@ -117,7 +133,31 @@ class DiffractingEdges:
         return DiffractingEdges(self.start[keep], self.end[keep], self.direction[keep],
                                 self.face0[keep], self.open_angle[keep], self.faces[keep],
                                 self.n_found, score[keep], near_points, self.seams,
-                                seen is not None)
+                                seen is not None, self.buried)
+
+    def arc_points(self, radius_m: float = BURIED_RADIUS_M, per_edge: int = 3,
+                   steps: int = BURIED_STEPS) -> np.ndarray:
+        """``(m, per_edge, steps, 3)`` points on arcs round each edge, ``radius_m`` from it,
+        spread evenly over its air angle (none on its own faces): at ``per_edge`` places
+        along it."""
+        phi = self.open_angle[:, None] * (np.arange(steps) + 0.5)[None, :] / steps  # (m, s)
+        side = np.cross(self.direction, self.face0)
+        ring = (np.cos(phi)[..., None] * self.face0[:, None, :]
+                + np.sin(phi)[..., None] * side[:, None, :])  # (m, s, 3)
+        t = (np.arange(per_edge) + 0.5) / per_edge
+        along = self.start[:, None, :] + t[None, :, None] * (self.end - self.start)[:, None, :]
+        return along[:, :, None, :] + radius_m * ring[:, None, :, :]
+
+    def without(self, mask: np.ndarray) -> DiffractingEdges:
+        """These edges less those where ``mask`` is true, counted as :attr:`buried` (and no
+        longer in :attr:`n_found`)."""
+        keep = ~np.asarray(mask, dtype=bool)
+        gone = int(np.count_nonzero(~keep))
+        importance = None if self.importance is None else self.importance[keep]
+        return DiffractingEdges(self.start[keep], self.end[keep], self.direction[keep],
+                                self.face0[keep], self.open_angle[keep], self.faces[keep],
+                                self.n_found - gone, importance, self.near_points, self.seams,
+                                self.by_sight, self.buried + gone)
 
     def choice(self) -> dict:
         """How the edges were chosen, JSON-ready (the RIR facts' ``diffraction_edges``)."""
@@ -129,6 +169,7 @@ class DiffractingEdges:
                 if self.near_points else "importance: length x exposure")
         return {"found": int(self.n_found), "kept": kept, "rule": rule,
                 "near_points": int(self.near_points), "seams_left_out": int(self.seams),
+                "buried_left_out": int(self.buried),
                 "length_kept_m": float(self.length_m.sum()) if kept else 0.0}
 
 
