@@ -56,9 +56,9 @@ from bench_rlr import (
     sonicspec_settings,
 )
 
-import sonicspec.acoustics.raytrace as raytrace
+import sonicspec.acoustics.late.raytrace as raytrace
 from sonicspec.acoustics.engine import acoustic_scene, ray_trace_settings
-from sonicspec.acoustics.image_sources import planar_regions
+from sonicspec.acoustics.paths.image_sources import planar_regions
 from sonicspec.geometry.materials import load_library
 
 # Session 7's `sonicset` preset, the baseline of these experiments (the preset now traces

@@ -11,7 +11,7 @@ with ``--speech``). The reference is ``theory.moving_point_source`` of the same 
 along the same walk (positions at emission times, the walk timed as
 ``audio.render.path_position_from_distances`` times it).
 
-The last rows: ``acoustics.moving.render_path``, the time-varying delay that issue 18 asks
+The last rows: ``acoustics.moving.delays.render_path``, the time-varying delay that issue 18 asks
 for (positions along the walk, no RIR points), and the time of the exact reference.
 
 Figures (``audio.fidelity``), over the frames while the source walks: SNR against the exact
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sonicspec.acoustics.moving import render_path
+from sonicspec.acoustics.moving.delays import render_path
 from sonicspec.acoustics.theory import moving_point_source, windowed_sinc
 from sonicspec.audio.fidelity import dip_figures, snr_db, spectral_deviation_db
 from sonicspec.audio.render import INTERPOLATIONS, path_position_from_distances, render_moving

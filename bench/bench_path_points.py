@@ -32,7 +32,7 @@ def accuracy() -> None:
 
     from sonicspec.acoustics import engine
     from sonicspec.acoustics.bands import OctaveFilterBank
-    from sonicspec.acoustics.moving import PathSet, render_paths
+    from sonicspec.acoustics.moving.delays import PathSet, render_paths
     from sonicspec.audio.fidelity import dip_figures, snr_db, spectral_deviation_db
     from sonicspec.geometry.navigation import resample_polyline
 
@@ -87,8 +87,8 @@ def cost() -> None:
         refined_early_paths,
         simulate_rirs,
     )
-    from sonicspec.acoustics.image_sources import planar_regions
-    from sonicspec.acoustics.moving import PathSet
+    from sonicspec.acoustics.moving.delays import PathSet
+    from sonicspec.acoustics.paths.image_sources import planar_regions
     from sonicspec.geometry.materials import load_library
     from sonicspec.geometry.navigation import resample_polyline
 

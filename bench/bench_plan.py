@@ -75,7 +75,7 @@ print(time.perf_counter() - t0)
 TRACER = """
 import sys, time
 import numpy as np
-from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
 from sonicspec.testing.rooms import shoebox, uniform_scene
 scene = uniform_scene(*shoebox(6.0, 4.8, 3.0), alpha=0.2)
 def run(n):

@@ -4,7 +4,7 @@ A 60 s, 16 kHz track of a source walking 90 m at 1.5 m/s down a 100 x 8 x 4 m ha
 sources to order 2: 25 paths), RIRs every 0.75 m (121 points, the engine's own, 2,000 rays,
 0.5 s), rendered three ways, side by side in one run:
 
-* `paths`: every exact path as a time-varying delay (`acoustics.moving.render_paths`, the
+* `paths`: every exact path as a time-varying delay (`acoustics.moving.delays.render_paths`, the
   compiled loop) plus the late part crossfaded (`audio.render.render_sample_crossfade`);
 * `sample_crossfade` of the whole RIRs (the recipe's method, today's default);
 * the naive reference of one path: the same time-varying delay as a vectorised numpy sum
@@ -38,7 +38,7 @@ from sonicspec.acoustics.engine import (
     early_part,
     simulate_rirs,
 )
-from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
+from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.audio.render import render_sample_crossfade
 from sonicspec.geometry.navigation import resample_polyline

@@ -85,9 +85,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_navigation import apartment, subdivide
 
 from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene, simulate_rirs
-from sonicspec.acoustics.image_sources import planar_regions
 from sonicspec.acoustics.metrics import room_acoustic_figures
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.paths.image_sources import planar_regions
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.spec.acoustics import AcousticsSpec

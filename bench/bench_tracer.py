@@ -32,11 +32,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sonicspec.acoustics import engine
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.image_sources import image_sources, planar_regions
-from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
-from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.simplify import simplified_scene
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.paths.direct import direct_sound
+from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.room.scene import AcousticScene
+from sonicspec.acoustics.room.simplify import simplified_scene
 from sonicspec.acoustics.theory import shoebox_decay_t60
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.units import SPEED_OF_SOUND_M_S as C_M_S

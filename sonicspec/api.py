@@ -40,8 +40,10 @@ from sonicspec.acoustics.engine import (
     rir_results,
 )
 from sonicspec.errors import GeometryError
+from sonicspec.geometry.io import WELD_DISTANCE_M
 from sonicspec.geometry.materials import MaterialLibrary, assign_materials, material_library
 from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.repair import LeakReport, WeldReport, weld_seams
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.load import did_you_mean
@@ -103,11 +105,15 @@ class Scene:
         A built-in library, with the user's own materials added.
     name : str
         What messages call the scene (the file name of a mesh file).
+    weld : WeldReport or None
+        What loading joined (:meth:`from_file`): vertices merged, T-junctions stitched, open
+        edges before and after; None for scenes not read from a file.
     """
 
     mesh: SceneMesh
     library: MaterialLibrary
     name: str = "scene"
+    weld: WeldReport | None = None
 
     def __post_init__(self) -> None:
         for material in self.mesh.materials:
@@ -118,7 +124,8 @@ class Scene:
     def from_file(cls, path: str | Path, materials: Mapping[str, str] | None = None, *,
                   default_material: str | None = None, library: str = "sonicspec",
                   custom_materials: Mapping[str, Any] | None = None, up_axis: str = "auto",
-                  unit_scale: float = 1.0, repair: bool | RepairSpec = False) -> Scene:
+                  unit_scale: float = 1.0, repair: bool | RepairSpec = False,
+                  weld_distance_m: float = WELD_DISTANCE_M) -> Scene:
         """A scene from a glb, gltf, ply or obj file, its labels mapped to materials.
 
         Parameters
@@ -143,6 +150,11 @@ class Scene:
         repair : bool or RepairSpec
             Run the geometry library's repair (:func:`~sonicspec.geometry.repair.repair_mesh`
             with the spec's ``repair`` settings, default or given); off by default.
+        weld_distance_m : float
+            Seams are joined on load whatever ``repair`` says: vertices of open edges closer
+            than this (metres, default 0.1 mm), across objects, groups and meshes, and the
+            T-junctions along them (:func:`~sonicspec.geometry.repair.weld_seams`; what was
+            joined is :attr:`weld`). 0 keeps the file's vertices.
 
         Raises
         ------
@@ -164,12 +176,13 @@ class Scene:
             _check_material(lib, name, f"materials[{label!r}]")
         if default_material is not None:
             _check_material(lib, default_material, "default_material")
-        mesh = load_mesh(path, up_axis, unit_scale, obj_labels=True)
+        mesh, weld = weld_seams(load_mesh(path, up_axis, unit_scale, obj_labels=True,
+                                          weld_distance_m=0.0), weld_distance_m)
         _check_labels(mapping, mesh, path.name)
         mesh = assign_materials(mesh, lib, mapping, default_material, where=path.name)
         if repair is not False:
             mesh = _repaired(mesh, RepairSpec() if repair is True else repair)
-        return cls(mesh, lib, path.name)
+        return cls(mesh, lib, path.name, weld)
 
     @classmethod
     def shoebox(cls, size_m: Sequence[float], materials: Mapping[str, str] | None = None, *,
@@ -240,9 +253,9 @@ class Scene:
         """
         import glob
 
+        from sonicspec.artifacts.scenes import build_scene_mesh
         from sonicspec.hashing import rng_for
         from sonicspec.plan.params import MeshParams
-        from sonicspec.stages.scenes import build_scene_mesh
 
         materials = materials or MaterialsSpec()
         base = Path(base_dir)
@@ -276,6 +289,19 @@ class Scene:
     def labels(self) -> tuple[str, ...]:
         """The face labels (empty when the mesh has none)."""
         return self.mesh.labels
+
+    def leak_test(self, rays: int = 10_000, *, points: Sequence[Sequence[float]] | None = None,
+                  seed: int | np.random.Generator = 0) -> LeakReport:
+        """Whether sound can leave the scene: rays from the air that sources and receivers
+        reach (points 0.3–2 m above floors and other upward-facing surfaces, never inside a
+        closed solid), or from ``points`` (e.g. your sources and microphones, metres); the
+        share that escapes or meets a face from behind, and where
+        (:func:`~sonicspec.geometry.repair.leak_test`; ``report.where()`` in words)."""
+        from sonicspec.geometry.repair import leak_test
+
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        interior = None if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return leak_test(self.mesh, rng, rays, interior_points=interior)
 
     def material_areas_m2(self) -> dict[str, float]:
         """Surface area per material, m², largest first."""

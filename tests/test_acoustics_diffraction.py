@@ -1,4 +1,4 @@
-"""UTD edge diffraction (``acoustics.diffraction``) measured against the exact wedge
+"""UTD edge diffraction (``acoustics.paths.diffraction``) measured against the exact wedge
 (``theory.Wedge``): band levels, continuity across the boundaries, delay (issue 19)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sonicspec.acoustics.diffraction import (
+from sonicspec.acoustics.paths.diffraction import (
     band_nodes_hz,
     first_order_band_amplitudes,
     kp_coefficient,

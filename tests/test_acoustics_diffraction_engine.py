@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sonicspec.acoustics import engine
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.acoustics.theory import Wedge, edge_path_length_m, wedge_diffraction_ir
 from sonicspec.testing.meshes import voxel_air_surface
 from sonicspec.testing.rooms import shoebox
@@ -189,7 +189,7 @@ def test_edges_are_found_once_per_scene_and_budgeted() -> None:
 
 
 def test_diffracted_paths_carry_direction_materials_and_air() -> None:
-    from sonicspec.acoustics.edge_paths import diffracted_sound
+    from sonicspec.acoustics.paths.edge_paths import diffracted_sound
 
     src, mic = np.array([[2.5, 2.0, 1.0]]), np.array([6.0, 2.0, 1.2])
     scene = screen_room()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.paths.direct import direct_sound
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError
 from sonicspec.testing.rooms import extruded_room, partitioned_shoebox, shoebox, uniform_scene
 

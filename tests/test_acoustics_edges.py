@@ -1,4 +1,4 @@
-"""Diffracting edges of synthetic meshes (``acoustics.edges``): a screen, a box, a door."""
+"""Diffracting edges of synthetic meshes (``acoustics.paths.edges``): a screen, a box, a door."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sonicspec.acoustics.edges import diffracting_edges
+from sonicspec.acoustics.paths.edges import diffracting_edges
 from sonicspec.acoustics.theory import Wedge
 from sonicspec.errors import AcousticsError
 from sonicspec.geometry.mesh import SceneMesh
@@ -122,3 +122,56 @@ def test_bad_inputs_are_named() -> None:
         edges_of(mesh, max_edges=-1)
     with pytest.raises(AcousticsError, match="faces/normals: expected"):
         diffracting_edges(mesh.vertices, mesh.faces, mesh.face_normals[:2])
+
+
+def test_edges_in_sight_of_the_job_come_before_edges_behind_a_wall() -> None:
+    """Two rooms through a door: a box in the sources' room, farther away, counts for more
+    than a box just behind the wall (heard only after reflections)."""
+    from sonicspec.acoustics.engine import scene_edges
+    from sonicspec.acoustics.room.scene import AcousticScene
+
+    xs = np.array([0.0, 0.3, 0.9, 3.0, 3.2, 3.5, 4.1, 6.2])
+    ys = np.array([0.0, 2.0, 2.6, 4.0, 5.0])
+    zs = np.array([0.0, 1.0, 2.5])
+    air = np.ones((7, 4, 2), bool)
+    air[3] = False  # the wall x in [3.0, 3.2] ...
+    air[3, 3, 0] = True  # ... with a door at y in [4, 5]
+    air[1, 1, 0] = False  # box A, the sources' room
+    air[5, 1, 0] = False  # box B, behind the wall
+    mesh = voxel_air_surface(xs, ys, zs, air)
+    n, bands = mesh.n_faces, 3
+    scene = AcousticScene(mesh.vertices, mesh.faces, np.full((n, bands), 0.1),
+                          np.zeros((n, bands)), np.zeros((n, bands)))
+    near = np.array([[2.7, 1.5, 0.5], [2.5, 1.2, 1.5]])
+
+    def box(edges) -> np.ndarray:
+        mid = 0.5 * (edges.start + edges.end)
+        return np.where(mid[:, 0] < 1.0, "A", np.where(mid[:, 0] > 3.3, "B", "door"))
+
+    by_distance = edges_of(mesh, near_m=near)
+    assert box(by_distance)[0] == "B"  # nearer, through the wall
+    by_sight = scene_edges(scene, 4, near)
+    assert by_sight.by_sight and "share of them in sight" in by_sight.choice()["rule"]
+    assert box(by_sight)[0] == "A" and "B" not in box(by_sight)
+
+
+def test_a_box_standing_on_the_floor_has_no_edges_where_it_stands() -> None:
+    """Issue 32: edges of a closed solid that another surface cuts into (a box on the floor, a
+    pillar from floor to ceiling) are inner corners of the room, not edges in the air."""
+    from sonicspec.acoustics.engine import scene_edges
+    from sonicspec.acoustics.room.scene import AcousticScene
+
+    def edges_found(z0: float, height: float) -> tuple[int, int]:
+        mesh = SceneMesh.concatenate([
+            shoebox([6.0, 5.0, 3.0]),
+            box_obstacle([2.5, 2.0, z0 + height / 2], [1.0, 0.8, height])])
+        n, bands = mesh.n_faces, 3
+        scene = AcousticScene(mesh.vertices, mesh.faces, np.full((n, bands), 0.1),
+                              np.zeros((n, bands)), np.zeros((n, bands)))
+        found = scene_edges(scene, 1000)
+        assert found.choice()["buried_left_out"] == found.buried
+        return len(found), found.buried
+
+    assert edges_found(0.5, 0.6) == (12, 0)  # floating: every edge of the box is in the air
+    assert edges_found(0.0, 0.6) == (8, 4)  # on the floor: its four bottom edges are not
+    assert edges_found(0.0, 3.0) == (4, 8)  # floor to ceiling: only the four vertical edges

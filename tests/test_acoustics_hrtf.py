@@ -10,7 +10,7 @@ import pytest
 
 from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.hrtf import (
+from sonicspec.acoustics.receivers.hrtf import (
     HrirSet,
     SphereHead,
     _counted_weights,
@@ -89,7 +89,7 @@ def test_sphere_low_frequency_gain_is_unity() -> None:
 
 
 def test_binaural_late_energy_equals_mono_and_is_deterministic() -> None:
-    from sonicspec.acoustics.synthesis import synthesize_rir
+    from sonicspec.acoustics.receivers.synthesis import synthesize_rir
 
     bins = np.arange(100)
     hist = EnergyHistogram(0.005, np.outer(np.exp(-bins / 20), np.full(6, 1e-4)),

@@ -9,8 +9,8 @@ import pyroomacoustics as pra
 import pytest
 import trimesh
 
-from sonicspec.acoustics.image_sources import image_sources, planar_regions
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.errors import AcousticsError, SonicspecWarning
 from sonicspec.testing import rooms
 from sonicspec.testing.rooms import extruded_room, shoebox
@@ -191,7 +191,7 @@ def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, li
     arrivals as building them (limits around the 150 order-3 candidates of this shoebox, with
     a path-length limit that keeps every one of them, and ones that keep only some: at 12 m,
     135 of them, so a limit of 140 must let order 3 be built)."""
-    from sonicspec.acoustics import image_sources as ism
+    from sonicspec.acoustics.paths import image_sources as ism
 
     verts, faces = shoebox(5.0, 4.0, 3.0)
     scene = uniform_scene(verts, faces)
@@ -276,7 +276,7 @@ def _reach_every_vertex(scene, regions, tol):
 def test_reach_table_from_region_outlines_matches_every_vertex():
     """Pruning uses only each region's outline corners: on a finely tessellated L-room the
     table equals the every-vertex one; on a noisy scan it only ever adds reachable pairs."""
-    from sonicspec.acoustics.image_sources import _reach_tables
+    from sonicspec.acoustics.paths.image_sources import _reach_tables
 
     poly = [(0, 0), (6, 0), (6, 3), (3, 3), (3, 6), (0, 6)]
     verts, faces = extruded_room(poly, [(3, 4, 5), (3, 5, 0), (3, 0, 1), (3, 1, 2)], 3.0)
@@ -329,7 +329,7 @@ def test_compiled_prefilter_keeps_every_valid_path_and_drops_most_pairs(monkeypa
     order 3 are the same bytes as with every pair passed through, from several positions;
     unsubdivided, it passes on under a third of the pairs (the probe-tested regions of the
     subdivided room are left to the exact pass)."""
-    from sonicspec.acoustics import _image_source_kernels as KI
+    from sonicspec.acoustics.paths import _image_source_kernels as KI
     from sonicspec.geometry.procedural import add_obstacles, box_obstacle, l_shape
 
     room = l_shape([6.0, 5.0, 2.7], [2.5, 2.0])

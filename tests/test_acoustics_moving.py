@@ -1,5 +1,5 @@
-"""Moving sources rendered as time-varying delays (``acoustics.moving.render_path``), measured
-against the exact moving point source of ``acoustics.theory`` (issue 18's bars)."""
+"""Moving sources rendered as time-varying delays (``acoustics.moving.delays.render_path``),
+measured against the exact moving point source of ``acoustics.theory`` (issue 18's bars)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.signal import hilbert
 
-from sonicspec.acoustics.moving import PathSet, render_path
+from sonicspec.acoustics.moving.delays import PathSet, render_path
 from sonicspec.acoustics.theory import (
     moving_arrival_times,
     moving_point_source,
@@ -159,7 +159,7 @@ def engine_walk(microphone=None):
     stage reads it: ``(points, paths, index, bank)``."""
     from sonicspec.acoustics.bands import OctaveFilterBank
     from sonicspec.acoustics.engine import simulate_rirs
-    from sonicspec.acoustics.moving import PathSet
+    from sonicspec.acoustics.moving.delays import PathSet
     from sonicspec.geometry.navigation import resample_polyline
 
     points = resample_polyline(ENDS, 0.25)
@@ -180,7 +180,7 @@ def test_the_engines_paths_of_a_walking_source_match_the_exact_image_sum() -> No
     0.25 m, :class:`PathSet` follows each path across the points (its image of the microphone
     is fixed), :func:`render_paths` renders them as time-varying delays. In a shoebox whose
     walls reflect 0.8 of the pressure, against the exact moving image-source sum."""
-    from sonicspec.acoustics.moving import render_paths
+    from sonicspec.acoustics.moving.delays import render_paths
 
     n = 2 * FS
     dry = pink(n, seed=3)
@@ -207,7 +207,7 @@ def test_paths_and_late_part_of_a_static_source_are_its_rir(kind: str) -> None:
     import sonicspec as ss
     from sonicspec.acoustics.bands import OctaveFilterBank
     from sonicspec.acoustics.engine import acoustic_scene, early_part, simulate_rirs
-    from sonicspec.acoustics.moving import PathSet, render_paths
+    from sonicspec.acoustics.moving.delays import PathSet, render_paths
     from sonicspec.spec.microphone import BinauralMicSpec, MonoMicSpec
     from sonicspec.stages.render import path_receiver
 
@@ -279,7 +279,7 @@ def test_channels_that_differ_in_gain_are_the_vectorised_sum_each() -> None:
     """The loop that renders one path for several channels at once (ambisonic channels, a
     sphere-head ear and its shadowed part: one pass of arrivals and taps, a gain per
     channel) against the vectorised sum of each channel alone, to 120 dB."""
-    from sonicspec.acoustics.moving import _render_into
+    from sonicspec.acoustics.moving.delays import _render_into
 
     n = 2 * FS
     dry = pink(n, seed=5)
@@ -295,7 +295,7 @@ def test_channels_that_differ_in_gain_are_the_vectorised_sum_each() -> None:
 def test_directions_from_an_image_are_the_numpy_form() -> None:
     """The compiled directions of arrival (the direction the image sees the source in,
     mapped back by the path's mirrors) against numpy's normalise-and-multiply."""
-    from sonicspec.acoustics._moving_kernels import image_directions
+    from sonicspec.acoustics.moving._delay_kernels import image_directions
 
     rng = np.random.default_rng(8)
     track = rng.uniform(-3, 3, (500, 3))
@@ -312,7 +312,7 @@ def test_a_path_valid_over_part_of_the_walk_renders_what_the_whole_would() -> No
     """render_paths renders a path only over the emissions it is heard from (its band
     factors are zero elsewhere), a few silent ones kept each side: the same signal as the
     whole walk rendered, the band factors interpolated between the points in numpy."""
-    from sonicspec.acoustics.moving import render_paths
+    from sonicspec.acoustics.moving.delays import render_paths
 
     n = 2 * FS
     dry = pink(n, seed=6)
@@ -342,8 +342,8 @@ def test_the_paths_of_a_walking_source_at_a_directional_receiver(kind: str) -> N
     Each path's mirrors are recovered from the data (order 0 and 1 by construction, order 2
     by the Kabsch fit), so directions and capsule images are exact along the walk."""
     from sonicspec.acoustics.engine import array_offsets
-    from sonicspec.acoustics.moving import Receiver, render_paths
-    from sonicspec.acoustics.receivers import sh_sn3d
+    from sonicspec.acoustics.moving.delays import Receiver, render_paths
+    from sonicspec.acoustics.receivers.arrays import sh_sn3d
 
     n = 2 * FS
     dry = pink(n, seed=4)
@@ -384,7 +384,7 @@ def test_an_ambisonic_path_with_no_known_direction_between_two_points_stays_fini
     ambisonic render NaN (directions interpolated: no microphone position to recover the
     mirrors from). Now those emissions, silent anyway, get zero gain: the W channel is the
     mono render of the same paths."""
-    from sonicspec.acoustics.moving import Receiver, render_paths
+    from sonicspec.acoustics.moving.delays import Receiver, render_paths
 
     n = 2 * FS
     dry = pink(n, seed=9)

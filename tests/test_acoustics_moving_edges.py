@@ -9,7 +9,7 @@ from test_acoustics_diffraction_engine import FS, C, door_room, screen_room, set
 
 from sonicspec.acoustics import engine
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.moving import PathSet, _length_at, render_paths
+from sonicspec.acoustics.moving.delays import PathSet, _length_at, render_paths
 from sonicspec.acoustics.theory import Wedge, edge_path_length_m
 from sonicspec.audio.fidelity import dip_figures, snr_db, spectral_deviation_db
 from sonicspec.geometry.navigation import resample_polyline

@@ -10,9 +10,9 @@ import pytest
 from scipy.signal import oaconvolve
 
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.hrtf import HrirSet, covering_angle_rad, hrir_weights
-from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
-from sonicspec.acoustics.receivers import rotation
+from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
+from sonicspec.acoustics.receivers.arrays import rotation
+from sonicspec.acoustics.receivers.hrtf import HrirSet, covering_angle_rad, hrir_weights
 from sonicspec.acoustics.theory import moving_point_source
 from sonicspec.audio.fidelity import snr_db
 

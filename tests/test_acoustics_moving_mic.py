@@ -30,7 +30,7 @@ def engine_pairs(source_track, mic_track, n: int, microphone=None, yaw_deg=None)
     every sample."""
     from sonicspec.acoustics.bands import OctaveFilterBank
     from sonicspec.acoustics.engine import simulate_rirs
-    from sonicspec.acoustics.moving import PathSet
+    from sonicspec.acoustics.moving.delays import PathSet
 
     scene, settings = reflecting_shoebox(SIZE)
     at = np.arange(0, n, int(STEP_S * FS))
@@ -65,7 +65,7 @@ def test_a_walking_microphone_hears_the_exact_moving_image_sum(source_moves: boo
     pressure, image sources to order 2) past a static source, and with the source walking
     too: the engine's 25 paths followed by their isometries, rendered to the microphone's
     moving images, against the exact sum (both ends moving, retarded time solved exactly)."""
-    from sonicspec.acoustics.moving import Receiver, render_paths
+    from sonicspec.acoustics.moving.delays import Receiver, render_paths
 
     n = 2 * FS
     t = np.arange(n) / FS
@@ -89,7 +89,7 @@ def test_a_moving_microphone_past_a_static_source_is_the_reciprocal_walk() -> No
     time), agree. The direct path: each image has its own travel time, so one retiming
     matches one path (with all 25 paths: 24.5 dB, the images' retiming mismatch of up to
     2 cm; their exactness is the test above)."""
-    from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
+    from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
 
     n = 2 * FS
     t = np.arange(n) / FS
@@ -123,9 +123,9 @@ def test_a_walking_directional_microphone_turns_with_its_walk(kind: str) -> None
     held at the walk's heading (its first-order delays and shadows are the static head's,
     tested in test_acoustics_moving; here: that turning the head turns its ears)."""
     from sonicspec.acoustics.engine import array_offsets, sphere_head
-    from sonicspec.acoustics.hrtf import ear_axes
-    from sonicspec.acoustics.moving import Receiver, render_paths
-    from sonicspec.acoustics.receivers import rotation, sh_sn3d
+    from sonicspec.acoustics.moving.delays import Receiver, render_paths
+    from sonicspec.acoustics.receivers.arrays import rotation, sh_sn3d
+    from sonicspec.acoustics.receivers.hrtf import ear_axes
 
     n = 2 * FS
     t = np.arange(n) / FS

@@ -9,15 +9,15 @@ import pytest
 import trimesh
 from numba import njit
 
-from sonicspec.acoustics import _trace_kernels as K
-from sonicspec.acoustics import raytrace
 from sonicspec.acoustics.arrivals import Arrivals
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.image_sources import image_sources
+from sonicspec.acoustics.late import _trace_kernels as K
+from sonicspec.acoustics.late import raytrace
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.metrics import room_acoustic_figures
-from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
-from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.synthesis import synthesize_rir
+from sonicspec.acoustics.paths.direct import direct_sound
+from sonicspec.acoustics.paths.image_sources import image_sources
+from sonicspec.acoustics.receivers.synthesis import synthesize_rir
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.acoustics.theory import (
     barron_clarity_db,
     kuttruff_t60,

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sonicspec.acoustics import _trace_kernels as K
-from sonicspec.acoustics import raytrace
-from sonicspec.acoustics.raytrace import RayTraceSettings, receiver_clearance_m, trace_rays
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.late import _trace_kernels as K
+from sonicspec.acoustics.late import raytrace
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, receiver_clearance_m, trace_rays
+from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.testing.rooms import (
     extruded_room,
     flutter_scene,
@@ -37,7 +37,7 @@ def test_receiver_spheres_together_equal_one_by_one():
     """Twelve receivers in one trace (enough for the sphere tests to visit only those within
     reach along the receivers' widest axis), then one at a time (every receiver tested): the
     same sums. Receiver spheres only (no rain), some receivers near walls (small radius cap)."""
-    from sonicspec.acoustics._trace_kernels import CULL_ABOVE
+    from sonicspec.acoustics.late._trace_kernels import CULL_ABOVE
 
     scene = uniform_scene(*shoebox(6.0, 5.0, 3.0), alpha=0.3, s=0.4, n_bands=2)
     src = np.array([1.0, 1.0, 1.5])

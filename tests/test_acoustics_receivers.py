@@ -9,7 +9,7 @@ import pytest
 
 from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.receivers import (
+from sonicspec.acoustics.receivers.arrays import (
     capsule_offsets,
     diffuse_coherence,
     sh_sn3d,
@@ -153,7 +153,7 @@ def test_array_coherence_filters_are_compact_in_time() -> None:
 
 
 def test_local_directions_are_in_the_microphone_frame() -> None:
-    from sonicspec.acoustics.receivers import local_directions
+    from sonicspec.acoustics.receivers.arrays import local_directions
 
     # Facing +y (yaw 90): +y is straight ahead, +x to the right (azimuth -90), up is up.
     az, el, d = local_directions(np.array([[0, 2, 0], [3, 0, 0], [0, 0, 1]], float), 90, 0)
@@ -170,13 +170,13 @@ def test_an_ambisonic_microphone_hears_in_its_own_frame() -> None:
     """Ambisonic channels are in the microphone's frame: turned by 90° (yaw), a plane wave
     from the scene's +y arrives from its front (+x); at yaw 0 the channels are the scene
     frame's to the last bit (the default gives what it gave before the frame was honoured)."""
-    from sonicspec.acoustics.receivers import ambisonic_early
+    from sonicspec.acoustics.receivers.arrays import ambisonic_early
 
     bank = OctaveFilterBank(16000)
     side, front = plane_wave((0.0, 1.0, 0.0)), plane_wave((1.0, 0.0, 0.0))
     turned = ambisonic_early(side, 1, bank, 2048, yaw_deg=90.0)
     np.testing.assert_allclose(turned, ambisonic_early(front, 1, bank, 2048), atol=1e-12)
-    from sonicspec.acoustics.synthesis import synthesize_early
+    from sonicspec.acoustics.receivers.synthesis import synthesize_early
 
     gains = sh_sn3d(1, side.directions)[0]  # the scene frame's channels, as before
     before = np.stack([synthesize_early(Arrivals(side.times_s, side.amplitudes * g, side.directions,

@@ -9,9 +9,9 @@ import pytest
 import trimesh
 
 from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene
-from sonicspec.acoustics.image_sources import image_sources
-from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.simplify import simplified_scene, simplify_flat_areas
+from sonicspec.acoustics.paths.image_sources import image_sources
+from sonicspec.acoustics.room.scene import AcousticScene
+from sonicspec.acoustics.room.simplify import simplified_scene, simplify_flat_areas
 from sonicspec.errors import AcousticsError
 from sonicspec.geometry.materials import load_library
 from sonicspec.geometry.mesh import SceneMesh

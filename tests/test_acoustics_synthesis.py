@@ -10,7 +10,7 @@ import pytest
 from sonicspec.acoustics.arrivals import KIND_DIRECT, Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.metrics import room_acoustic_figures
-from sonicspec.acoustics.synthesis import synthesize_late, synthesize_rir
+from sonicspec.acoustics.receivers.synthesis import synthesize_late, synthesize_rir
 from sonicspec.errors import AcousticsError
 
 FS = 16000

@@ -10,8 +10,8 @@ import pytest
 
 from sonicspec.acoustics import engine
 from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.late.tails import band_decay
 from sonicspec.acoustics.metrics import edc_db
-from sonicspec.acoustics.tails import band_decay
 from sonicspec.acoustics.theory import shoebox_decay_t60
 from sonicspec.errors import AcousticsError, SonicspecWarning
 from sonicspec.spec.acoustics import AcousticsSpec
@@ -83,8 +83,8 @@ def test_a_silent_late_field_gives_a_short_rir() -> None:
     """No late energy in any band (a source the rays never reach): the envelope keeps one
     empty bin and the RIR is the early arrivals alone, not the cap's 10 s of zeros."""
     from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
-    from sonicspec.acoustics.synthesis import synthesize_rir
-    from sonicspec.acoustics.tails import shape_tail
+    from sonicspec.acoustics.late.tails import shape_tail
+    from sonicspec.acoustics.receivers.synthesis import synthesize_rir
 
     silent = EnergyHistogram(BIN_S, np.zeros((10_000, 2)), np.full((10_000, 3), np.nan),
                              np.full((10_000, 3), np.nan))

@@ -162,13 +162,19 @@ def test_custom_materials_procedural_rooms_and_repair(tmp_path) -> None:
                                     materials={"wall": "gypsum_board", "floor": "marble",
                                                "ceiling": "acoustic_ceiling_tile"})
     assert set(relabelled.mesh.materials) == {"gypsum_board", "marble", "acoustic_ceiling_tile"}
-    # repair=True welds the box's separate objects (24 vertices -> 8) and keeps it closed.
+    # Loading welds the box's separate objects (to 8 vertices) without repair (issue 32);
+    # weld_distance_m=0 keeps the file's copies, which repair=True welds.
     obj = write_obj(tmp_path / "room.obj", {"floor": ["floor"], "shell": ["walls", "ceiling"]})
-    plain = ss.Scene.from_file(obj, materials={"floor": "marble", "shell": "marble"})
-    fixed = ss.Scene.from_file(obj, materials={"floor": "marble", "shell": "marble"},
-                               repair=True)
-    assert plain.mesh.vertices.shape[0] > fixed.mesh.vertices.shape[0] == 8
-    assert fixed.mesh.air_volume() == pytest.approx(90.0)
+    mapping = {"floor": "marble", "shell": "marble"}
+    plain = ss.Scene.from_file(obj, materials=mapping)
+    raw = ss.Scene.from_file(obj, materials=mapping, weld_distance_m=0)
+    fixed = ss.Scene.from_file(obj, materials=mapping, weld_distance_m=0, repair=True)
+    assert raw.mesh.vertices.shape[0] > fixed.mesh.vertices.shape[0] == 8
+    assert plain.mesh.vertices.shape[0] == 8
+    assert plain.weld.merged_vertices == raw.mesh.vertices.shape[0] - 8
+    assert raw.weld.merged_vertices == 0
+    for scene in (plain, fixed):
+        assert scene.mesh.air_volume() == pytest.approx(90.0)
 
 
 def test_receivers_settings_and_seeds() -> None:
@@ -255,11 +261,11 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
     """The rir stage and the API call the same engine: the same scene, settings, receiver
     and generator give the same bytes for every point of a group's trajectories; and
     ``sonicspec rir SPEC`` is compute_rir with its own seed."""
+    from sonicspec.artifacts import decode, read_mesh
     from sonicspec.hashing import rng_for
     from sonicspec.plan.compile import compile_spec
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
-    from sonicspec.stages.artifacts import decode, read_mesh
     from sonicspec.stages.rir import _source_points, rir_from_spec
     from sonicspec.store import ArtifactStore
 
@@ -330,10 +336,10 @@ def test_a_spec_scene_from_an_obj_with_one_object_gets_its_materials(tmp_path) -
     """Issue 17: an obj whose single object lost its name (trimesh drops a lone object's
     name) made every face the default material in a build, silently. The plan now reads obj
     scenes as the API does; only obj scenes' mesh keys carry the flag."""
+    from sonicspec.artifacts.scenes import build_scene_mesh
     from sonicspec.plan.compile import compile_spec
     from sonicspec.plan.params import read_params
     from sonicspec.spec import validate_text
-    from sonicspec.stages.scenes import build_scene_mesh
 
     write_obj(tmp_path / "lone.obj", {"room": ["floor", "walls", "ceiling"]})
     text = (ROOT / "specs" / "demo.yaml").read_text().replace(

@@ -355,8 +355,8 @@ def test_validate_knows_a_scene_file(tmp_path: Path, capsys) -> None:
     assert code == 2 and "acoustics.rays" in err
 
 
-def test_the_readmes_scene_file_runs_as_written(tmp_path: Path, capsys) -> None:
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+def test_the_docs_scene_file_runs_as_written(tmp_path: Path, capsys) -> None:
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "rir.md").read_text()
     text = readme.split("cat > studio.yaml <<'YAML'\n", 1)[1].split("\nYAML\n", 1)[0]
     command = readme.split("\nYAML\n", 1)[1].splitlines()[0]
     assert command == ("sonicspec validate studio.yaml && sonicspec rir studio.yaml "

@@ -423,7 +423,7 @@ def _line(root: Path, rel: str) -> str:
 def test_the_build_writes_the_exports_the_spec_asks_for(root: Path, tmp_path: Path) -> None:
     # outputs.manifests: [huggingface, webdataset]: beside the dataset folder, the same
     # shards `sonicspec export` writes, and a second build rewrites none of them.
-    from sonicspec.cli import export_folder
+    from sonicspec.cli.build import export_folder
 
     for fmt in ("huggingface", "webdataset"):
         built = export_folder(root, fmt)
@@ -454,16 +454,19 @@ def test_export_errors(root: Path, tmp_path: Path) -> None:
     assert result.returncode == 2 and "inside the dataset folder" in result.stderr
 
 
-# -- the README's examples ----------------------------------------------------------------
+# -- the documentation's examples ---------------------------------------------------------
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "guide"
+
 
 def _readme_blocks() -> list[str]:
+    """The code blocks of the pages on using the data and on evaluating a model (once the
+    README's "Using a dataset" section), in order."""
     import re
 
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    found = re.search(r"^## Using a dataset: loader, evaluation, exports\n(.*?)^## ", text,
-                      re.S | re.M)
-    assert found, "README.md: the 'Using a dataset' section moved"
-    return re.findall(r"^```(?:python|bash)\n(.*?)^```", found.group(1), re.S | re.M)
+    text = "".join((DOCS / page).read_text(encoding="utf-8")
+                   for page in ("data.md", "evaluate.md"))
+    return re.findall(r"^```(?:python|bash)\n(.*?)^```", text, re.S | re.M)
 
 
 def _on(root: Path, tmp: Path, code: str) -> str:
@@ -472,8 +475,8 @@ def _on(root: Path, tmp: Path, code: str) -> str:
 
 
 def test_readme_examples_run_as_written(root: Path, tmp_path: Path) -> None:
-    """Every example of the README's section, on the test dataset instead of the demo:
-    the Python blocks run here, the shell commands through the CLI."""
+    """Every example of docs/guide/data.md and evaluate.md, on the test dataset instead of
+    the demo: the Python blocks run here, the shell commands through the CLI."""
     import re
     import shlex
 
@@ -481,9 +484,9 @@ def test_readme_examples_run_as_written(root: Path, tmp_path: Path) -> None:
     python = [b for b in blocks if b.startswith("from ")]
     assert len(python) == 2  # the loader, and the DataLoader (which needs torch)
     namespace: dict = {}  # the DataLoader block goes on from the loader block
-    exec(compile(_on(root, tmp_path, python[0]), "README.md", "exec"), namespace)
+    exec(compile(_on(root, tmp_path, python[0]), "docs/guide/data.md", "exec"), namespace)
     if _torch_available():
-        exec(compile(_on(root, tmp_path, python[1]), "README.md", "exec"), namespace)
+        exec(compile(_on(root, tmp_path, python[1]), "docs/guide/data.md", "exec"), namespace)
     commands = []
     for block in blocks:
         if block.startswith("from "):
@@ -499,7 +502,7 @@ def test_readme_examples_run_as_written(root: Path, tmp_path: Path) -> None:
     assert sum(1 for _, c in commands if c.startswith("sonicspec evaluate")) == 2
     for kind, code in commands:
         if kind == "python":
-            exec(compile(code, "README.md", "exec"), {})
+            exec(compile(code, "docs/guide", "exec"), {})
             continue
         args = shlex.split(code.partition("#")[0])
         if args[1] == "build":

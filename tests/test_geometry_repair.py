@@ -186,7 +186,8 @@ def test_report_to_dict(repaired):
     data = report.to_dict()
     assert data["watertight"] is True and data["before"]["watertight"] is False
     assert data["holes_closed"] == 1
-    assert data["leak"] == {"rays": 20_000, "escaped": 0, "backface": 0, "leak_fraction": 0.0}
+    assert data["leak"] == {"rays": 20_000, "escaped": 0, "backface": 0, "leak_fraction": 0.0,
+                            "origins": "navigable", "places": []}
 
 
 def test_two_storey_house_fixture_is_closed_and_repair_keeps_it():

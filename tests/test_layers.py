@@ -1,4 +1,5 @@
-"""The package map of DESIGN.md §2, checked on the source: who may import whom.
+"""The package map of DESIGN.md §2 and docs/architecture.md, checked on the source: who may
+import whom.
 
 Every module under ``sonicspec/`` is parsed with ``ast``; every import counts, lazy ones inside
 functions included. Floors, from the ground up:
@@ -7,8 +8,14 @@ functions included. Floors, from the ground up:
   ``atomic``, ``shares``, ...; not ``cli``) import nothing of sonicspec above them;
 * ``spec`` (the language) and ``store`` stand on the ground floor only;
 * the libraries ``geometry``, ``acoustics``, ``audio`` stand on the ground floor and on each
-  other, never on the spec, the store or anything above;
-* ``stages``, ``plan``, ``export`` and then ``cli`` are above them; nothing below imports up;
+  other, never on the spec, the store or anything above (``acoustics`` has floors of its own:
+  the pipeline of one RIR its package docstring draws);
+* ``plan`` (the compiler) stands on the spec, the store and the libraries;
+* ``artifacts`` (what steps hand each other: the codec of every artifact kind, and the scene
+  mesh a mesh job builds) stands on the spec, the libraries and the plan's params;
+* ``stages``, ``export``, the Python API (``api``) and then ``cli`` are above them; nothing
+  below imports up, and **nothing outside ``stages/`` and ``cli/`` imports ``stages``** (the
+  one-way rule: the pipeline's steps are an entry, never a library);
 * ``dataload`` (the loader, evaluation and exports) reads built dataset folders: it stands on
   the ground floor, the libraries and ``export``, never on the spec, the store or the pipeline;
 * ``testing`` holds test fixtures: it may use the libraries, and nothing in the package uses it.
@@ -25,7 +32,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "sonicspec"
 ROOT = PACKAGE.parent
 
 LIBRARIES = {"geometry", "acoustics", "audio"}
-UPPER = {"stages", "plan", "export", "dataload", "cli", "testing"}
+UPPER = {"stages", "plan", "artifacts", "export", "dataload", "cli", "testing"}
 
 KNOWN_CYCLES: list[set[str]] = []
 
@@ -130,6 +137,39 @@ def test_libraries_know_nothing_of_the_spec_or_the_store() -> None:
     assert _offences({f: allowed for f in LIBRARIES}) == []
 
 
+def test_plan_and_artifacts_stand_below_the_stages_and_the_export() -> None:
+    assert _offences({"plan": {"ground", "spec", "store", *LIBRARIES, "plan"}}) == []
+    assert _offences({"artifacts": {"ground", "spec", *LIBRARIES, "plan", "artifacts"}}) == []
+    # the export (report, plots) decodes artifacts through the codecs, not the stages
+    assert {"sonicspec.artifacts"} <= {t for t, _ in imports("sonicspec.export.report_data")}
+
+
+def test_nothing_outside_stages_and_cli_imports_stages() -> None:
+    # The one-way rule: the steps read the codecs and the libraries below them; the report,
+    # the Python API and the libraries never reach up into the steps. (workflow/rules/common.smk
+    # runs sonicspec.stages.workflow: the workflow is an entry, like the command line.)
+    def inside(module: str, package: str) -> bool:
+        return module == package or module.startswith(package + ".")
+
+    offences = [f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+                if inside(b, "sonicspec.stages")
+                and not (inside(a, "sonicspec.stages") or inside(a, "sonicspec.cli"))]
+    assert offences == []
+
+
+def test_docs_architecture_maps_every_floor() -> None:
+    # docs/architecture.md draws these floors for people: every floor, every package of
+    # sonicspec/ and every acoustics subpackage named here is on the page, and so is the rule.
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    packages = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()}
+    acoustics = {p.name for p in (PACKAGE / "acoustics").iterdir() if (p / "__init__.py").is_file()}
+    named = {*LIBRARIES, *UPPER, "spec", "store", "api", *packages}
+    assert [n for n in sorted(named) if f"`{n}/`" not in text and f"`{n}`" not in text] == []
+    assert [n for n in sorted(acoustics | set(ACOUSTICS) - {"basics"})
+            if f"`{n}/`" not in text and f"`{n}`" not in text] == []
+    assert "nothing outside `stages/` and `cli/` imports `stages/`" in " ".join(text.split())
+
+
 def test_dataload_reads_folders_not_the_pipeline() -> None:
     allowed = {"ground", *LIBRARIES, "export", "dataload"}
     assert _offences({"dataload": allowed}) == []
@@ -142,6 +182,46 @@ def test_nothing_in_the_package_imports_testing() -> None:
     workflow = ROOT / "workflow"
     assert [p for p in workflow.rglob("*") if p.is_file()
             and "sonicspec.testing" in p.read_text(encoding="utf-8", errors="replace")] == []
+
+
+# The acoustics library's own floors, as sonicspec/acoustics/__init__.py draws the pipeline of
+# one RIR: the shared basics at its top (bands, air, arrivals, directions, metrics and the
+# references in theory), the room on Embree, the exact paths, the stochastic late field, the
+# receivers, the moving paths, and the engine, which runs them all.
+ACOUSTICS = {
+    "basics": {"basics"},
+    "room": {"basics", "room"},
+    "paths": {"basics", "room", "paths"},
+    "late": {"basics", "room", "paths", "late"},
+    "receivers": {"basics", "receivers"},
+    "moving": {"basics", "receivers", "moving"},
+    "engine": {"basics", "room", "paths", "late", "receivers", "moving", "engine"},
+}
+
+
+def acoustics_floor(module: str) -> str:
+    """``engine``, an acoustics subpackage's name, or ``basics`` (the modules at its top)."""
+    parts = module.split(".")
+    if len(parts) >= 3 and (PACKAGE / "acoustics" / parts[2]).is_dir():
+        return parts[2]
+    return "engine" if parts[2:] == ["engine"] else "basics"
+
+
+def test_acoustics_imports_go_down_its_pipeline() -> None:
+    inside = [m for m in modules() if floor(m) == "acoustics"]
+    assert {acoustics_floor(m) for m in inside} == set(ACOUSTICS)
+    assert acoustics_floor("sonicspec.acoustics.theory") == "basics"
+    assert acoustics_floor("sonicspec.acoustics.late._trace_kernels") == "late"
+    offences = [f"{_where(a, line)}: {a} imports {b}" for a, b, line in edges()
+                if floor(a) == floor(b) == "acoustics"
+                and acoustics_floor(b) not in ACOUSTICS[acoustics_floor(a)]]
+    assert offences == []
+    # The package docstring draws every subpackage and names the references.
+    drawing = ast.get_docstring(tree("sonicspec.acoustics")) or ""
+    subpackages = sorted(p.name for p in (PACKAGE / "acoustics").iterdir()
+                         if (p / "__init__.py").is_file())
+    assert [s for s in subpackages if f"{s}/" not in drawing] == []
+    assert "sonicspec.acoustics.theory" in drawing
 
 
 def _cycles() -> list[set[str]]:
@@ -230,10 +310,11 @@ def test_stages_read_parameters_as_typed_fields() -> None:
     assert lookups == []
 
 
-def test_a_stage_decodes_artifacts_only_through_stages_artifacts() -> None:
+def test_a_stage_decodes_artifacts_only_through_sonicspec_artifacts() -> None:
     # Issue 17: a stage does not import the producing stage's module to read its artifact;
-    # every artifact's encoding lives in sonicspec.stages.artifacts. (corpus and mesh serve
-    # other stages with functions of their own: corpus roots, and the scene a command shows.)
+    # every artifact's encoding lives in sonicspec.artifacts, below the stages and the export.
+    # (corpus and mesh serve other stages with functions of their own: corpus roots, and the
+    # scene a command shows.)
     runners = {"mesh", "navigation", "placement", "arrange", "rir", "render", "mix", "export",
                "dataset"}
     offences = [
@@ -242,3 +323,4 @@ def test_a_stage_decodes_artifacts_only_through_stages_artifacts() -> None:
         and b.startswith("sonicspec.stages.") and b.rpartition(".")[2] in runners
     ]
     assert offences == []
+    assert "sonicspec.artifacts" in {t for t, _ in imports("sonicspec.stages.rir")}

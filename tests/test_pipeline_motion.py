@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from sonicspec.acoustics.receivers import sh_sn3d
+from sonicspec.acoustics.receivers.arrays import sh_sn3d
 from sonicspec.acoustics.theory import moving_point_source
 from sonicspec.audio.fidelity import dip_figures, spectral_deviation_db
 from sonicspec.cli import main
@@ -206,7 +206,7 @@ def test_a_moving_microphone_builds_and_hears_the_exact_relative_motion(kind: st
         assert np.all(np.std(direct, axis=0) > 0)
         assert abs(np.std(direct[:, 0]) / np.std(direct[:, 1]) - 1) > 0.05
         return
-    from sonicspec.acoustics.receivers import capsule_offsets, rotation
+    from sonicspec.acoustics.receivers.arrays import capsule_offsets, rotation
 
     spans = meta["source1"]["start_end_points"]
     core = slice(spans[0][0] + 800, spans[-1][1] - 800)

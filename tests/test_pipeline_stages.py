@@ -303,8 +303,8 @@ def test_a_clip_repeated_in_a_track_and_cut_at_the_end_renders(tmp_path: Path) -
     """Issue 20's bug: with a small corpus a noise clip repeats in its track and its last use
     is cut at the clip's end; the render kept only the cut copy and the full use failed
     ("segment 'n0': needs 48000 samples ... the clip has ...")."""
+    from sonicspec.artifacts import ArrangedTrack
     from sonicspec.audio.arrange import Clip, arrange_background, assemble
-    from sonicspec.stages.artifacts import ArrangedTrack
     from sonicspec.stages.render import _AudioCache, track_audio
 
     fs = 16000
@@ -384,3 +384,31 @@ def test_a_cap_below_the_decay_is_a_warning_in_the_rir_jobs_log(tmp_path: Path,
     assert record.levelname == "WARNING"
     assert record.getMessage().startswith("scene 'room' (")
     assert "cut at 0.2 s (acoustics.max_rir_cap_s)" in record.getMessage()
+
+
+def test_the_rir_job_records_its_edges_and_image_source_order(tmp_path: Path, caplog) -> None:
+    """Issues 32 and 27: the rir artifact says per group how the diffracting edges were chosen
+    (one set for the group, for its own positions) and per source the image-source order
+    asked and reached; the job's log says how many edges it kept."""
+    text = SPEC.replace("max_rir_length_s: 0.3}", "max_rir_length_s: 0.3, "
+                        "diffraction: true, diffraction_max_edges: 2}").replace(
+        "ceiling: acoustic_ceiling_tile}", "ceiling: acoustic_ceiling_tile}\n    obstacles: "
+        "[{kind: box, center_m: [5.5, 4.5, 0.4], size_m: [0.4, 0.4, 0.8]}]")
+    (tmp_path / "spec.yaml").write_text(text)
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    with caplog.at_level("INFO", logger="sonicspec.stages.rir"):
+        for job in plan.jobs:
+            if job.step in ("mesh", "navigation", "placement", "rir"):
+                run_job(plan, job.key)
+    (rir_job,) = [j for j in plan.jobs if j.step == "rir"]
+    data = ArtifactStore(plan.store_dir).read_data("rir", rir_job.key)
+    for group in data["groups"]:
+        edges = group["diffraction_edges"]
+        assert (edges["found"], edges["kept"]) == (12, 2) and edges["near_points"] >= 2
+        assert "distance to the nearest of" in edges["rule"]
+        for source in group["sources"]:
+            assert source["image_source_order"] == source["image_source_order_asked"] == 1
+            assert source["image_source_order_stopped"] is None
+    lines = [r.getMessage() for r in caplog.records if "diffraction keeps" in r.getMessage()]
+    assert len(lines) == len(data["groups"])
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]

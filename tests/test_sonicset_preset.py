@@ -79,9 +79,9 @@ def test_plan_summary_prints_the_papers_table(paper_data: Path) -> None:
     assert rows["val"] == ["19", "40", "247", "741", "4.12", "12.35"]
     assert rows["test"] == ["9", "40", "247", "741", "4.12", "12.35"]
     assert rows["total"][:2] == ["90", "1,001"]
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    page = (ROOT / "docs" / "guide" / "sonicset.md").read_text(encoding="utf-8")
     start = done.stdout.index("split ")
-    assert done.stdout[start:].strip() in readme  # the README shows this very table
+    assert done.stdout[start:].strip() in page  # the docs show this very table
     # The paper's 57,102 / 247 / 247 and ~952 / 4 / 4 h: training counted per trajectory,
     # validation and test per group (247 is no multiple of three).
     summary = json.loads(cli("plan", "--summary", "--json", "sonicset.yaml",

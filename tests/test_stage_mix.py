@@ -7,9 +7,9 @@ import logging
 import numpy as np
 import pytest
 
+from sonicspec.artifacts import RenderedTrack, RenderGroup
 from sonicspec.audio.mix import integrated_loudness
 from sonicspec.plan.params import MixParams
-from sonicspec.stages.artifacts import RenderedTrack, RenderGroup
 from sonicspec.stages.mix import mix_group
 
 FS = 16000
@@ -62,7 +62,7 @@ def test_a_median_cut_above_one_db_is_a_warning_in_the_jobs_log(caplog) -> None:
         job = type("J", (), {"label": "mix train/room#0"})()
 
         def input(self, step):
-            from sonicspec.stages.artifacts import RenderData
+            from sonicspec.artifacts import RenderData
             return type("A", (), {"arrays": arrays, "data": RenderData(
                 groups=[group], sample_rate_hz=FS).model_dump(mode="json")})()
 

@@ -29,7 +29,7 @@ __all__ = ["IDENTITY", "KIND_DIFFRACTED", "KIND_DIRECT", "KIND_SPECULAR", "Arriv
 KIND_DIRECT = 0
 #: ``Arrivals.kind`` code of a specular reflection found by the image-source method.
 KIND_SPECULAR = 1
-#: ``Arrivals.kind`` code of an edge-diffracted path (:mod:`sonicspec.acoustics.edge_paths`).
+#: ``Arrivals.kind`` code of an edge-diffracted path (:mod:`sonicspec.acoustics.paths.edge_paths`).
 KIND_DIFFRACTED = 2
 
 
@@ -69,10 +69,10 @@ class Arrivals:
         traced from to the path's image (the identity for the direct sound, the product of
         the path's mirrors for an image source); NaN where a path has none (an edge-diffracted
         path, or arrivals made without it). With it a path is followed while both of its
-        ends move (:class:`~sonicspec.acoustics.moving.PathSet`).
+        ends move (:class:`~sonicspec.acoustics.moving.delays.PathSet`).
     path_id : (n,) int64
         Which geometric path an edge-diffracted arrival takes (its edges and reflector, the
-        same for every source and receiver position: :mod:`~sonicspec.acoustics.edge_paths`),
+        same for every source and receiver position: :mod:`~sonicspec.acoustics.paths.edge_paths`),
         so it is followed along a walk; -1 for other arrivals.
     """
 

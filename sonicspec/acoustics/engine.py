@@ -4,11 +4,11 @@ For one microphone and many source positions (a trajectory), the ray tracer runs
 the microphone, with every position as a receiver (reciprocity: the RIR from A to B equals the
 RIR from B to A for omnidirectional ends). Direct sound and image sources are exact and cheap,
 so they are computed per position. Each position's RIR is then synthesised
-(:mod:`sonicspec.acoustics.synthesis`).
+(:mod:`sonicspec.acoustics.receivers.synthesis`).
 
 Receivers: mono, linear/circular/custom arrays and ambisonics
-(:mod:`sonicspec.acoustics.receivers`), and binaural through the rigid-sphere head or a
-measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.hrtf`). A receiver is
+(:mod:`sonicspec.acoustics.receivers.arrays`), and binaural through the rigid-sphere head or a
+measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.receivers.hrtf`). A receiver is
 described by a mapping with the spec's microphone fields (``{"kind": "ambisonics", "order":
 1, ...}``, what ``MicrophoneSpec.model_dump()`` gives).
 
@@ -21,6 +21,7 @@ call it.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
@@ -33,24 +34,24 @@ import numpy as np
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
-from sonicspec.acoustics.direct import direct_sound
-from sonicspec.acoustics.edge_paths import close_pairs, diffracted_sound
-from sonicspec.acoustics.edges import DiffractingEdges, diffracting_edges
-from sonicspec.acoustics.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
+from sonicspec.acoustics.late.tails import TailReport, cut_warning, shape_tail
 from sonicspec.acoustics.metrics import (
     RoomAcousticFigures,
     figures_from_energy,
     room_acoustic_figures,
 )
-from sonicspec.acoustics.raytrace import RayTraceSettings, trace_rays
-from sonicspec.acoustics.scene import AcousticScene
-from sonicspec.acoustics.simplify import simplify_flat_areas
-from sonicspec.acoustics.synthesis import synthesize_early, synthesize_rir
-from sonicspec.acoustics.tails import TailReport, cut_warning, shape_tail
+from sonicspec.acoustics.paths.direct import direct_sound
+from sonicspec.acoustics.paths.edge_paths import close_pairs, diffracted_sound
+from sonicspec.acoustics.paths.edges import DiffractingEdges, diffracting_edges
+from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.receivers.synthesis import synthesize_early, synthesize_rir
+from sonicspec.acoustics.room.scene import AcousticScene
+from sonicspec.acoustics.room.simplify import simplify_flat_areas
 from sonicspec.errors import AcousticsError, SonicspecWarning
 
 if TYPE_CHECKING:
-    from sonicspec.acoustics.hrtf import HrirSet
+    from sonicspec.acoustics.receivers.hrtf import HrirSet
     from sonicspec.geometry.materials import MaterialLibrary
     from sonicspec.geometry.mesh import SceneMesh
 
@@ -73,6 +74,7 @@ __all__ = [
     "simulate_rirs",
     "traced_geometry",
     "warn_cut_tails",
+    "with_diffraction_focus",
 ]
 
 #: The receiver a call without one gets: one omnidirectional capsule that stays put.
@@ -90,7 +92,7 @@ class SimulationSettings:
     tests and benches use to measure the tracer alone.
 
     ``max_rir_length_s`` is a number of seconds or ``"auto"``: either way a RIR ends where
-    every band's late decay is 60 dB below its early level (:mod:`~sonicspec.acoustics.tails`),
+    every band's late decay is 60 dB below its early level (:mod:`~sonicspec.acoustics.late.tails`),
     at most that number or, with ``"auto"``, ``max_rir_cap_s``.
     """
 
@@ -116,6 +118,11 @@ class SimulationSettings:
     diffraction: bool = False
     diffraction_max_edges: int = 256
     max_rir_cap_s: float = 10.0
+    diffraction_focus_m: tuple[tuple[float, float, float], ...] = ()
+    """The source and receiver positions the diffracting edges are chosen for
+    (:func:`scene_edges`): the rir stage sets every position of a group, so all the group's
+    RIRs and the points added between them use one set of edges; empty: each call's own
+    microphone and sources (:func:`with_diffraction_focus`)."""
 
     def __post_init__(self) -> None:
         length = self.max_rir_length_s
@@ -256,8 +263,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     rng : numpy.random.Generator
         The only randomness used (rays and the late noise's draw).
     regions
-        The scene's planar regions (:func:`~sonicspec.acoustics.image_sources.planar_regions`),
-        when the caller reuses them over many calls.
+        The scene's planar regions
+        (:func:`~sonicspec.acoustics.paths.image_sources.planar_regions`), when the caller
+        reuses them over many calls.
     microphone : mapping, optional
         The receiver, with the spec's microphone fields (default: mono). For directional
         receivers the early arrivals are traced from each source to the microphone, so their
@@ -279,7 +287,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         the microphone (``"early_arrivals"``, directions at the source point: where each
         path's image of the microphone is) and towards it (``"early_arrivals_at_mic"``,
         directions of arrival at the microphone, as rendered into the RIR). A moving source's
-        paths are rendered from them (:class:`~sonicspec.acoustics.moving.PathSet`), its late
+        paths are rendered from them (:class:`~sonicspec.acoustics.moving.delays.PathSet`), its late
         part is the RIR less :func:`early_part` of the latter. Edge-diffracted paths are in
         both lists (directions at the microphone), identified by their ``path_id``.
         Receivers of :data:`PATH_RECEIVERS`.
@@ -294,7 +302,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         out of sight and heard round edges, or ``"blocked"``), ``diffracted_paths`` (with
         diffraction on), ``image_source_order`` (completed), ``escaped_ray_fraction``,
         ``tail`` (how the length was chosen:
-        :meth:`~sonicspec.acoustics.tails.TailReport.to_dict`).
+        :meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`).
 
     Warns
     -----
@@ -324,6 +332,8 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                         ray_trace_settings(settings, early.image_source_order),
                         air, n_threads=n_threads, progress=progress)
     blocked = scene.occluded(np.repeat(mic[None], len(points), axis=0), points)
+    edge_choice = (_diffraction_edges(scene, settings, mic, points)[0].choice()
+                   if settings.diffraction else None)
     render = receiver_renderer(microphone, settings, hrirs)
     rirs, facts, reports = [], [], []
     for k in range(len(points)):
@@ -336,10 +346,13 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
             "diffracted" if len(early.diffracted[k]) else "blocked")
         facts.append({"arrivals": len(arrivals), "direct": path,
                       "image_source_order": early.image_source_order,
+                      "image_source_order_asked": settings.image_source_order,
+                      "image_source_order_stopped": early.image_source_stopped,
                       "escaped_ray_fraction": traces[k].escaped_ray_fraction,
                       "tail": report.to_dict()})
         if settings.diffraction:
             facts[-1]["diffracted_paths"] = len(early.diffracted[k])
+            facts[-1]["diffraction_edges"] = edge_choice
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
             facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
@@ -364,6 +377,8 @@ class EarlyArrivals:
     diffracted: list[Arrivals]
     image_source_order: int
     """The image-source order completed (the candidate limit may stop it early)."""
+    image_source_stopped: str | None = None
+    """Why the completed order is lower than asked, None when it is not."""
 
 
 def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -395,27 +410,94 @@ def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarra
         towards = image_sources(scene, points[k], mic[None], ism.max_order, air, c, regions,
                                 max_path_length_m=c * settings.rir_limit_s)
         at_mic.append(Arrivals.concatenate([d, towards.arrivals[0], diffracted[k]]))
-    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order)
+    return EarlyArrivals(from_mic, at_mic, direct, diffracted, ism.max_order, ism.stopped)
 
 
-def scene_edges(scene: AcousticScene, max_edges: int) -> DiffractingEdges:
-    """The traced scene's diffracting edges, the longest ``max_edges`` (memoized per scene)."""
-    return scene.memoized(f"diffracting_edges:{max_edges}", lambda: diffracting_edges(
-        scene.vertices, scene.faces, scene.normals, max_edges=max_edges))
+def with_diffraction_focus(settings: SimulationSettings, *points_m: np.ndarray
+                           ) -> SimulationSettings:
+    """``settings`` whose diffracting edges are chosen for these source and receiver
+    positions (each ``(3,)`` or ``(N, 3)``, metres): the edges a group's RIRs share."""
+    flat = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in points_m])
+    focus = tuple(tuple(float(v) for v in row) for row in np.unique(flat, axis=0))
+    return dataclasses.replace(settings, diffraction_focus_m=focus)
+
+
+def scene_edges(scene: AcousticScene, max_edges: int,
+                near_m: np.ndarray | tuple = ()) -> DiffractingEdges:
+    """The traced scene's diffracting edges, the ``max_edges`` most important for sources and
+    receivers at ``near_m`` (by length and exposure alone without them;
+    :func:`~sonicspec.acoustics.paths.edges.edge_importance`), memoized per scene and positions."""
+    near = np.asarray(near_m, dtype=np.float64).reshape(-1, 3)
+    found = scene.memoized("diffracting_edges", lambda: _unburied(scene, diffracting_edges(
+        scene.vertices, scene.faces, scene.normals)))  # found once, ranked per positions
+    key = f"diffracting_edges:{max_edges}:{hash(near.tobytes())}:{len(near)}"
+    if not len(near):
+        return scene.memoized(key, lambda: found.ranked(max_edges))
+    return scene.memoized(key, lambda: found.ranked(max_edges, near,
+                                                    _edges_in_sight(scene, found, near)))
+
+
+def _unburied(scene: AcousticScene, edges: DiffractingEdges) -> DiffractingEdges:
+    """``edges`` less the wedges another surface cuts into: a box standing on the floor or
+    against a wall is a closed solid whose edges there are inner corners of the room (its air
+    spans a quarter turn, not three), so they diffract nothing. An edge is buried where a
+    chord of the arc round it (:meth:`~sonicspec.acoustics.paths.edges.DiffractingEdges.arc_points`)
+    is occluded at two of its three places along it (a box half against a wall keeps its
+    free half's edge)."""
+    if len(edges) == 0:
+        return edges
+    arcs = edges.arc_points()  # (m, 3, s, 3)
+    m, k, s = arcs.shape[:3]
+    cut = scene.occluded(arcs[:, :, :-1].reshape(-1, 3), arcs[:, :, 1:].reshape(-1, 3))
+    cut = cut.reshape(m, k, s - 1).any(axis=2)
+    return edges.without(cut.sum(axis=1) >= 2)
+
+
+#: Most positions :func:`scene_edges` tests the edges' visibility from (evenly picked).
+SIGHT_POSITIONS = 32
+
+
+def _edges_in_sight(scene: AcousticScene, edges: DiffractingEdges, near: np.ndarray
+                    ) -> np.ndarray:
+    """``(m,)`` share of the positions (at most :data:`SIGHT_POSITIONS` of ``near``) in sight
+    of each edge: of three points along it, 1 cm off into the air, one seen is enough."""
+    if len(edges) == 0:
+        return np.zeros(0)
+    pick = np.unique(np.linspace(0, len(near) - 1, min(len(near), SIGHT_POSITIONS)).round()
+                     .astype(np.int64))
+    points = near[pick]
+    samples = edges.air_points()  # (m, 3, 3)
+    m, k = samples.shape[:2]
+    origins = np.repeat(samples.reshape(-1, 3), len(points), axis=0)
+    targets = np.tile(points, (m * k, 1))
+    visible = ~scene.occluded(origins, targets)
+    return visible.reshape(m, k, len(points)).any(axis=1).mean(axis=1)
+
+
+def _diffraction_edges(scene: AcousticScene, settings: SimulationSettings, mic: np.ndarray,
+                       points: np.ndarray) -> tuple[DiffractingEdges, np.ndarray]:
+    """The edges (and their close pairs) of one call: chosen for the settings' focus, or
+    for the call's microphone and sources."""
+    if settings.diffraction_focus_m:
+        near = np.asarray(settings.diffraction_focus_m, dtype=np.float64)
+    else:
+        near = np.unique(np.concatenate([mic.reshape(1, 3), points]), axis=0)
+    edges = scene_edges(scene, settings.diffraction_max_edges, near)
+    key = f"diffracting_edge_pairs:{settings.diffraction_max_edges}:{hash(near.tobytes())}"
+    return edges, scene.memoized(key, lambda: close_pairs(edges))
 
 
 def diffraction_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                          settings: SimulationSettings, regions=None) -> list[Arrivals]:
     """Edge-diffracted arrivals from every source position at the microphone (empty ones
     when ``settings.diffraction`` is off): over one edge, two edges, and one edge with a
-    reflection (:mod:`~sonicspec.acoustics.edge_paths`), directions of arrival at the
+    reflection (:mod:`~sonicspec.acoustics.paths.edge_paths`), directions of arrival at the
     microphone."""
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     if not settings.diffraction:
         return [Arrivals.empty(scene.n_bands) for _ in points]
-    edges = scene_edges(scene, settings.diffraction_max_edges)
-    pairs = scene.memoized(f"diffracting_edge_pairs:{settings.diffraction_max_edges}",
-                           lambda: close_pairs(edges))
+    edges, pairs = _diffraction_edges(scene, settings, np.asarray(mic_m, dtype=np.float64),
+                                      points)
     return diffracted_sound(scene, edges, points, np.asarray(mic_m, dtype=np.float64),
                             settings.bands_hz, settings.air(), settings.speed_of_sound_m_s,
                             regions=regions, pairs=pairs)
@@ -428,7 +510,7 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
     its ``arrivals`` (directions of arrival at the microphone) synthesised as the receiver's
     renderer does. The RIR less this is its late, ray-traced part. Receivers of
     :data:`PATH_RECEIVERS` (a SOFA HRTF with its ``hrirs``)."""
-    from sonicspec.acoustics.receivers import ambisonic_early, array_early
+    from sonicspec.acoustics.receivers.arrays import ambisonic_early, array_early
 
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
     kind = microphone["kind"]
@@ -438,14 +520,14 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
         return ambisonic_early(arrivals, microphone["order"], bank, n_samples,
                                yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sofa":
-        from sonicspec.acoustics.hrtf import hrir_binaural_early
+        from sonicspec.acoustics.receivers.hrtf import hrir_binaural_early
 
         check_receiver(microphone, hrirs)
         return hrir_binaural_early(arrivals, hrirs.resampled(settings.sample_rate_hz), bank,
                                    n_samples, yaw_deg=microphone["yaw_deg"],
                                    pitch_deg=microphone["pitch_deg"])
     if kind == "binaural" and microphone["hrtf"]["kind"] == "sphere":
-        from sonicspec.acoustics.hrtf import sphere_binaural_early
+        from sonicspec.acoustics.receivers.hrtf import sphere_binaural_early
 
         return sphere_binaural_early(arrivals, sphere_head(microphone), bank, n_samples,
                                      yaw_deg=microphone["yaw_deg"],
@@ -465,7 +547,7 @@ def late_envelope(histogram: EnergyHistogram, settings: SimulationSettings
     """The late envelope one RIR is synthesised from: the tracer's histogram smoothed
     (:data:`LATE_ENVELOPE_RELATIVE_WIDTH`), each band's decay continued by the fit to its
     last 20 dB where the rays ran out, ending where every band is 60 dB below its early
-    level or at the longest RIR allowed (:func:`~sonicspec.acoustics.tails.shape_tail`)."""
+    level or at the longest RIR allowed (:func:`~sonicspec.acoustics.late.tails.shape_tail`)."""
     late = histogram.smoothed(LATE_ENVELOPE_RELATIVE_WIDTH)
     rule = "auto" if settings.max_rir_length_s == "auto" else "fixed"
     return shape_tail(late, settings.bands_hz, rule, settings.rir_limit_s,
@@ -509,6 +591,11 @@ class RirResult:
         (out of sight, with ``acoustics.diffraction``), or absent.
     image_source_order : int
         The image-source order completed (lower than asked when a scene has too many).
+    image_source_order_asked : int
+        The order the settings asked.
+    image_source_order_stopped : str or None
+        Why the completed order is lower than asked (``"order 3 needs more than 2,000,000
+        candidates"``; the ray tracer covers the rest), None when it is not.
     escaped_ray_fraction : float
         Share of the traced energy that left the scene (a leaking mesh shows here).
     expected : dict
@@ -517,12 +604,17 @@ class RirResult:
     traced_faces : int
         Triangles traced (after flat areas were merged).
     tail : dict
-        How the RIR's length was chosen (:meth:`~sonicspec.acoustics.tails.TailReport.to_dict`):
+        How the RIR's length was chosen
+        (:meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`):
         the rule (``auto`` or ``fixed``), the longest RIR allowed, per band when the decay
         is 60 dB down, where a fitted continuation starts (the rays ran out before), and the
         level a cut band reached at the limit.
     diffracted_paths : int
         Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
+    diffraction_edges : dict or None
+        How the diffracting edges were chosen (None with diffraction off):
+        :meth:`~sonicspec.acoustics.paths.edges.DiffractingEdges.choice` (found, kept, the rule,
+        seams left out).
     """
 
     rir: np.ndarray
@@ -538,6 +630,9 @@ class RirResult:
     traced_faces: int
     tail: dict[str, Any] = field(default_factory=dict)
     diffracted_paths: int = 0
+    diffraction_edges: dict[str, Any] | None = None
+    image_source_order_asked: int | None = None
+    image_source_order_stopped: str | None = None
 
     @cached_property
     def figures(self) -> RoomAcousticFigures:
@@ -578,11 +673,14 @@ class RirResult:
         """The facts, JSON-ready (what ``sonicspec rir --json`` prints, without the RIR)."""
         return {"arrivals": self.arrivals, "direct": self.direct,
                 "image_source_order": self.image_source_order,
+                "image_source_order_asked": self.image_source_order_asked,
+                "image_source_order_stopped": self.image_source_order_stopped,
                 "escaped_ray_fraction": self.escaped_ray_fraction, "expected": self.expected,
                 "source_m": list(self.source_m), "mic_m": list(self.mic_m),
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
                 "traced_triangles": self.traced_faces, "diffracted_paths": self.diffracted_paths,
+                "diffraction_edges": self.diffraction_edges,
                 "figures": self.figures.to_dict(),
                 "length_s": self.rir.shape[-1] / self.sample_rate_hz, "tail": self.tail}
 
@@ -613,7 +711,10 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                       image_source_order=f["image_source_order"],
                       escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
                       traced_faces=scene.n_faces, tail=f["tail"],
-                      diffracted_paths=f.get("diffracted_paths", 0))
+                      diffracted_paths=f.get("diffracted_paths", 0),
+                      diffraction_edges=f.get("diffraction_edges"),
+                      image_source_order_asked=f["image_source_order_asked"],
+                      image_source_order_stopped=f["image_source_order_stopped"])
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 
@@ -624,7 +725,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
                       hrirs: HrirSet | None = None) -> Renderer:
     """A function ``(arrivals, late histogram, rng) -> (channels, samples)`` for the
     receiver kind of ``microphone`` (the spec's microphone fields)."""
-    from sonicspec.acoustics.receivers import (
+    from sonicspec.acoustics.receivers.arrays import (
         synthesize_ambisonic_rir,
         synthesize_array_rir,
     )
@@ -639,7 +740,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
             a, h, microphone["order"], fs, rng, yaw_deg=microphone["yaw_deg"],
             pitch_deg=microphone["pitch_deg"], **common)
     if kind == "binaural":
-        from sonicspec.acoustics.hrtf import (
+        from sonicspec.acoustics.receivers.hrtf import (
             synthesize_hrir_binaural_rir,
             synthesize_sphere_binaural_rir,
         )
@@ -661,7 +762,7 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
 def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
     """Where an array microphone's capsules are, ``(M, 3)`` offsets from its centre in the
     scene's frame, metres."""
-    from sonicspec.acoustics.receivers import capsule_offsets
+    from sonicspec.acoustics.receivers.arrays import capsule_offsets
 
     return capsule_offsets(
         microphone["kind"], n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
@@ -676,9 +777,9 @@ every kind (binaural with the sphere head or a SOFA HRTF set)."""
 
 
 def sphere_head(microphone: Mapping[str, Any]):
-    """The :class:`~sonicspec.acoustics.hrtf.SphereHead` of a binaural microphone with the
+    """The :class:`~sonicspec.acoustics.receivers.hrtf.SphereHead` of a binaural microphone with the
     sphere-head model."""
-    from sonicspec.acoustics.hrtf import SphereHead
+    from sonicspec.acoustics.receivers.hrtf import SphereHead
 
     hrtf = microphone["hrtf"]
     return SphereHead(head_radius_m=hrtf["head_radius_m"], ear_angle_deg=hrtf["ear_angle_deg"])
@@ -697,7 +798,7 @@ def load_hrirs(path: str | Path) -> HrirSet:
         ``sofar`` is not installed, the file is missing or unreadable, or it holds no
         usable HRIR set; the message names the file.
     """
-    from sonicspec.acoustics.hrtf import hrir_set_from_sofa
+    from sonicspec.acoustics.receivers.hrtf import hrir_set_from_sofa
 
     try:
         import sofar
@@ -780,7 +881,7 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
     edge comes between the source and the microphone, a reflection leaves its wall) or its
     band factor changes by more than ``tolerance_db`` (a diffracted path near its shadow
     boundary) — among the paths within 40 dB of the loudest
-    (:func:`~sonicspec.acoustics.moving.paths_differ`) — the interval is halved
+    (:func:`~sonicspec.acoustics.moving.delays.paths_differ`) — the interval is halved
     (:func:`early_arrivals` at its middle, no ray trace) until neither end moves more than
     ``resolution_m`` across it: the renderer then switches and shapes the path there, as the
     geometry does, instead of fading it over the spacing.
@@ -788,10 +889,14 @@ def refined_early_paths(scene: AcousticScene, settings: SimulationSettings, sour
     ``sources_m``, ``mics_m``: ``(N, 3)`` the source and the microphone at each RIR point;
     ``from_mic``, ``at_mic``: their early arrivals (:class:`EarlyArrivals`).
     """
-    from sonicspec.acoustics.moving import heard_paths, paths_differ
+    from sonicspec.acoustics.moving.delays import heard_paths, paths_differ
 
     src = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     mic = np.asarray(mics_m, dtype=np.float64).reshape(-1, 3)
+    if settings.diffraction and not settings.diffraction_focus_m:
+        # the edges the RIR points' arrivals were found with (:func:`simulate_rirs` chooses
+        # them for its microphone and sources), so the points added share them
+        settings = with_diffraction_focus(settings, src, mic)
     moving = bool(np.any(mic != mic[:1]))
     at = np.arange(len(src), dtype=np.float64)
     known: dict[float, tuple[np.ndarray, np.ndarray, Arrivals, Arrivals, dict]] = {

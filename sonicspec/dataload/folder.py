@@ -1,6 +1,6 @@
 """Reading a built dataset folder: its groups, their tracks and mixtures, windows of audio.
 
-A folder is what ``sonicspec build`` writes (README, "What a build writes"): ``dataset.json``
+A folder is what ``sonicspec build`` writes (docs/reference/dataset.md): ``dataset.json``
 lists the groups; each group's ``metadata.json`` (SonicSet form) names its tracks
 (``source1``…, ``noise``, ``music``, each with ``file``), the stems beside them
 (``source1_dry``…, found by name) and its ``mixtures`` (``name``, ``task``, ``components``,

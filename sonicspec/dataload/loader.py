@@ -150,6 +150,8 @@ class SonicspecDataset:
     seed
         The seed of every draw (with the epoch and the index).
 
+    Notes
+    -----
     Each item is a dict: ``mixture`` ``(C, T)`` float32, ``targets`` ``(k, C, T)``,
     ``<stem>`` ``(k, C, T)`` per stem, ``tracks`` (the source numbers, ``int64`` ``(k,)``),
     ``start`` (first sample of the crop), ``sir_db`` ``(k-1,)`` and ``snr_db`` (the gains

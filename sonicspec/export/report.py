@@ -155,7 +155,7 @@ def _distributions(spec, groups, splits) -> list[dict[str, Any]]:
 
 
 def _mesh_of(scene: dict[str, Any]):
-    from sonicspec.stages.artifacts import read_mesh
+    from sonicspec.artifacts import read_mesh
 
     return read_mesh(scene["arrays"], scene["report"])
 

@@ -554,7 +554,7 @@ class StoreView:
         artifact's bands and rate; None if the store lacks them."""
         if not self.store.exists("rir", rir_key):
             return None
-        from sonicspec.stages.artifacts import decode
+        from sonicspec.artifacts import decode
 
         data = decode("rir", self.store.read_data("rir", rir_key))
         entry = next((g for g in data.groups if g.group == group), None)

@@ -36,10 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from sonicspec.errors import GeometryError, SonicspecWarning
-from sonicspec.geometry.mesh import UNLABELED, SceneMesh
+from sonicspec.geometry.mesh import UNLABELED, WELD_DISTANCE_M, SceneMesh
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
+    "WELD_DISTANCE_M",
     "HouseCategory",
     "HouseObject",
     "MatterportHouse",
@@ -52,6 +53,7 @@ __all__ = [
 
 SUPPORTED_EXTENSIONS = (".glb", ".gltf", ".obj", ".ply")
 DEFAULT_MATERIAL = "default"
+
 
 #: PLY face properties read as a semantic label (integers, kept as their decimal text) ...
 _PLY_LABEL_PROPERTIES = ("label", "category", "category_id", "semantic_label")
@@ -174,6 +176,7 @@ def load_mesh(
     *,
     material: str = DEFAULT_MATERIAL,
     obj_labels: bool = False,
+    weld_distance_m: float = WELD_DISTANCE_M,
 ) -> SceneMesh:
     """Read a glb, gltf, ply or obj file into one :class:`SceneMesh` in the scene frame.
 
@@ -193,11 +196,17 @@ def load_mesh(
         (trimesh drops it), and a file without objects (``o`` lines) is labelled by its
         groups (``g`` lines). Off by default: the mesh stage reads obj files without it
         (new labels would change what existing scenes' meshes are made of).
+    weld_distance_m : float
+        Vertices of open edges closer than this (metres, default 0.1 mm) are joined, across
+        objects, groups and meshes, and T-junctions along those seams stitched
+        (:func:`~sonicspec.geometry.repair.weld_seams`): a file written one object per
+        material loads as one surface. 0 keeps the file's vertices as they are.
 
     Returns
     -------
     SceneMesh
-        Scene graphs flattened with their node transforms (nodes in name order). Labels,
+        Scene graphs flattened with their node transforms (nodes in name order), seams
+        welded, each face with its own label and material. Labels,
         when the file has them: per geometry, its name (glb/gltf meshes, obj objects); per
         face, a PLY integer face property ``label``/``category``/``category_id``/
         ``semantic_label`` (as decimal text). A PLY ``object_id``/``instance`` property
@@ -296,7 +305,13 @@ def load_mesh(
             )
         except GeometryError as exc:
             raise GeometryError(f"{path}: {exc}") from exc
-    return SceneMesh.concatenate(pieces)
+    return _welded(SceneMesh.concatenate(pieces), weld_distance_m)
+
+
+def _welded(mesh: SceneMesh, distance_m: float) -> SceneMesh:
+    from sonicspec.geometry.repair import weld_seams
+
+    return weld_seams(mesh, distance_m)[0]
 
 
 # --------------------------------------------------------------------------- Matterport3D
@@ -457,6 +472,7 @@ def load_matterport(
     up_axis: str = "z",
     unit_scale: float = 1.0,
     material: str = DEFAULT_MATERIAL,
+    weld_distance_m: float = WELD_DISTANCE_M,
 ) -> SceneMesh:
     """Import a Matterport3D scene as served for Habitat, faces labelled with mpcat40 names.
 
@@ -472,6 +488,8 @@ def load_matterport(
         As in :func:`load_mesh`; MP3D files are z up in metres (see the module docstring).
     material
         Material name for every face, until :meth:`SceneMesh.with_materials`.
+    weld_distance_m
+        As in :func:`load_mesh`: seams (vertices of open edges this close, metres) joined.
 
     Returns
     -------
@@ -495,12 +513,14 @@ def load_matterport(
                 "labels the semantic mesh's objects), got house_path only"
             )
         # Render-mesh submesh names are not categories: drop them.
-        render = load_mesh(glb_path, up_axis=up_axis, unit_scale=unit_scale, material=material)
+        render = load_mesh(glb_path, up_axis=up_axis, unit_scale=unit_scale, material=material,
+                           weld_distance_m=weld_distance_m)
         return render.replace(face_label=None, labels=())
     semantic_path = _check_path(semantic_ply_path, "load_matterport", (".ply",))
     up = _resolve_up(up_axis, semantic_path)
-    mesh, object_id = _read_semantic_ply(semantic_path, up, _check_scale(unit_scale))
-    mesh = mesh.with_materials(material)
+    mesh, _ = _read_semantic_ply(semantic_path, up, _check_scale(unit_scale))
+    mesh = _welded(mesh.with_materials(material), weld_distance_m)
+    object_id = np.asarray(mesh.face_object, dtype=np.int64)
     if house_path is None:
         return mesh
     house = read_house(house_path)

@@ -21,11 +21,16 @@ import numpy as np
 
 from sonicspec.errors import GeometryError
 
-__all__ = ["UNLABELED", "SceneMesh"]
+__all__ = ["UNLABELED", "WELD_DISTANCE_M", "SceneMesh"]
 
 #: Label given to faces that carry none when meshes with and without labels are merged
 #: (the same word as mpcat40's category 41).
 UNLABELED = "unlabeled"
+
+#: Default distance within which loading joins the vertices of open edges, metres (0.1 mm:
+#: far below any feature of a room, far above the rounding of coordinates written as text;
+#: :func:`sonicspec.geometry.repair.weld_seams`).
+WELD_DISTANCE_M = 1e-4
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:

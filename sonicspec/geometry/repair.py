@@ -48,17 +48,20 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from sonicspec.errors import GeometryError, SonicspecWarning
-from sonicspec.geometry.mesh import SceneMesh
+from sonicspec.geometry.mesh import WELD_DISTANCE_M, SceneMesh
 from sonicspec.geometry.procedural import triangulate_polygon
 
 __all__ = [
+    "WELD_DISTANCE_M",
     "LeakReport",
     "MeshStats",
     "RepairReport",
     "RepairSettings",
+    "WeldReport",
     "leak_test",
     "mesh_stats",
     "repair_mesh",
+    "weld_seams",
 ]
 
 # Fixed, non-axis-aligned probe directions for the parity vote: deterministic without an RNG,
@@ -156,21 +159,73 @@ class MeshStats:
 
 
 @dataclass(frozen=True)
+class LeakPlace:
+    """Where leaking rays leave the air: a hole they pass, or a face they meet from behind.
+
+    ``kind`` is ``"hole"`` (a loop of open edges the rays pass through; ``where_m`` its
+    centre, ``size_m`` the diagonal of its bounding box), ``"face"`` (rays that met this face
+    from behind without passing a hole: the face points out of the air, or the rays went
+    through a gap between pieces; ``where_m`` the mean of their hit points) or ``"escaped"``
+    (rays that hit nothing and passed no hole found; ``where_m`` where the first of them
+    leaves the mesh's bounding box). ``face`` is the face hit, or one bordering the hole
+    (-1 for none), with its ``label`` and ``material``; ``rays`` counts the rays.
+    """
+
+    kind: str
+    where_m: tuple[float, float, float]
+    size_m: float
+    rays: int
+    face: int
+    label: str | None
+    material: str | None
+
+    def describe(self) -> str:
+        """One phrase: ``through a hole of 0.42 m at [1.20, 0.00, 1.50] (face 12, 'wall')``."""
+        at = "[" + ", ".join(f"{v:.2f}" for v in self.where_m) + "]"
+        names = ", ".join(repr(n) for n in (self.label, self.material) if n is not None)
+        face = f" (face {self.face}{', ' + names if names else ''})" if self.face >= 0 else ""
+        if self.kind == "hole":
+            return f"{self.rays} through a hole of {self.size_m:.2f} m at {at}{face}"
+        if self.kind == "face":
+            return f"{self.rays} onto the back of a face at {at}{face}"
+        return f"{self.rays} escaped past {at}"
+
+
+@dataclass(frozen=True)
 class LeakReport:
-    """Rays cast from points in the air: how many left it.
+    """Rays cast from points in the air: how many left it, and where.
 
     ``escaped`` rays hit nothing (gone to infinity); ``backface`` rays first hit a face from
-    behind (they passed through a hole into the space behind a surface).
+    behind (they passed through a hole into the space behind a surface). ``origins`` says
+    where the rays started: ``"navigable"`` (points 0.3–2 m above upward-facing surfaces
+    with a clear column of air above them, inside the envelope: where sources and receivers
+    stand), ``"navigable, not enclosed"`` (the same points where ray parity finds no
+    enclosed air: an open model), ``"enclosed"`` (points of the bounding box that ray parity
+    puts in the air, when no surface faces up) or ``"given"`` (the caller's points).
+    ``places`` lists where the leaking rays went, most rays first (at most
+    :data:`MAX_LEAK_PLACES`).
     """
 
     rays: int
     escaped: int
     backface: int
+    origins: str = "given"
+    places: tuple[LeakPlace, ...] = ()
 
     @property
     def leak_fraction(self) -> float:
         """Share of rays that left the air, escaped or through to a back face."""
         return (self.escaped + self.backface) / self.rays if self.rays else 0.0
+
+    def where(self, places: int = 3) -> str:
+        """Where the rays leak, in words (empty without leaks)."""
+        return "; ".join(p.describe() for p in self.places[:places])
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (the mesh stage's report, ``scene inspect --json``)."""
+        return {"rays": self.rays, "escaped": self.escaped, "backface": self.backface,
+                "fraction": self.leak_fraction, "origins": self.origins,
+                "places": [dict(p.__dict__, where_m=list(p.where_m)) for p in self.places]}
 
 
 @dataclass(frozen=True)
@@ -212,11 +267,10 @@ class RepairReport:
         out["before"] = dict(self.before.__dict__, watertight=self.before.watertight)
         out["after"] = dict(self.after.__dict__, watertight=self.after.watertight)
         out["watertight"] = self.watertight
-        out["leak"] = (
-            None
-            if self.leak is None
-            else dict(self.leak.__dict__, leak_fraction=self.leak.leak_fraction)
-        )
+        out["leak"] = None
+        if self.leak is not None:
+            leak = self.leak.to_dict()
+            out["leak"] = {"leak_fraction": leak.pop("fraction"), **leak}
         return out
 
 
@@ -272,6 +326,18 @@ def _face_components(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarra
     return int(face_labels.max()) + 1 if n_faces else 0, face_labels
 
 
+def _n_open_edges(faces: np.ndarray, n_vertices: int) -> int:
+    """Edges used by one face."""
+    if len(faces) == 0:
+        return 0
+    keys = np.sort(_undirected(faces, n_vertices)[0])
+    single = np.ones(len(keys), bool)
+    same = keys[1:] == keys[:-1]
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    return int(np.count_nonzero(single))
+
+
 def _n_components(faces: np.ndarray, n_vertices: int) -> int:
     return _face_components(faces, n_vertices)[0]
 
@@ -282,7 +348,8 @@ def _areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- repair steps
-def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
+def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float,
+                    keep_position: bool = False):
     """Merge vertices closer than ``distance_m`` when they are two sides of a crack.
 
     A crack has open edges on both sides, so both of its vertices are on open (or otherwise
@@ -291,6 +358,10 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
     is already closed there (fine or noisy tessellation, a fold of a scan's surface, perhaps
     beside a crack): merging them would collapse an edge or glue two parts of the surface
     into a fin or a pinch.
+
+    Each cluster moves to its mean position, or, with ``keep_position``, to the position of
+    its lexicographically smallest member (coincident copies keep their exact coordinates,
+    whatever the order of the vertices).
     """
     if distance_m <= 0 or len(vertices) < 2:
         return vertices, faces, 0
@@ -310,6 +381,13 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, distance_m: float):
         return vertices, faces, 0
     graph = sparse.coo_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), (n, n))
     n_clusters, cluster = connected_components(graph, directed=False)
+    if keep_position:
+        order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))
+        rank = np.empty(n, np.int64)
+        rank[order] = np.arange(n)
+        best = np.full(n_clusters, n, np.int64)
+        np.minimum.at(best, cluster, rank)
+        return vertices[order[best]], cluster.astype(np.int64)[faces], n - n_clusters
     # Each cluster moves to its mean position.
     counts = np.bincount(cluster, minlength=n_clusters)[:, None]
     merged = np.zeros((n_clusters, 3))
@@ -1021,14 +1099,117 @@ def repair_mesh(
     return repaired, report
 
 
+# --------------------------------------------------------------------------- welding on load
+@dataclass(frozen=True)
+class WeldReport:
+    """What :func:`weld_seams` joined (counts).
+
+    ``merged_vertices`` vertices were joined into others; ``t_junctions_stitched`` vertices
+    were inserted into an open edge of the other side of a seam; ``collapsed_faces`` faces
+    lost an edge to the weld (two of their corners joined) and were dropped;
+    ``open_edges_before``/``open_edges_after`` count edges with one face.
+    """
+
+    distance_m: float
+    merged_vertices: int
+    t_junctions_stitched: int
+    collapsed_faces: int
+    open_edges_before: int
+    open_edges_after: int
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (the mesh stage's report, ``scene inspect --json``)."""
+        return dict(self.__dict__)
+
+
+def weld_seams(mesh: SceneMesh, distance_m: float = WELD_DISTANCE_M
+               ) -> tuple[SceneMesh, WeldReport]:
+    """Join the seams of a mesh written as separate objects (one per material or group).
+
+    Exporters (SketchUp, Blender, CAD tools, glTF writers with one mesh per material) give
+    every object its own copy of the vertices along a seam, so the seam is two open edges:
+    a crack for the tracer, two false free rims for diffraction. This joins vertices of open
+    edges closer than ``distance_m`` (vertices of closed surfaces stay apart: a box standing
+    on the floor is not glued to it) keeping the position of one of them, drops the faces
+    that collapse, and stitches T-junctions (a vertex of one side lying on an open edge of
+    the other side, within ``distance_m``) by splitting that edge's face. Each face keeps its
+    material, label and object; nothing else changes (no re-orientation, no hole filling:
+    that is :func:`repair_mesh`).
+
+    Parameters
+    ----------
+    mesh : SceneMesh
+        As loaded.
+    distance_m : float
+        Largest gap joined, metres; 0 returns the mesh unchanged.
+
+    Returns
+    -------
+    (SceneMesh, WeldReport)
+
+    Raises
+    ------
+    GeometryError
+        ``distance_m`` negative or not finite.
+    """
+    if not np.isfinite(distance_m) or distance_m < 0:
+        raise GeometryError(
+            f"weld_distance_m: expected a finite distance >= 0 in metres, got {distance_m!r}"
+        )
+    faces = np.array(mesh.faces)
+    n_vertices = len(mesh.vertices)
+    open_before = _n_open_edges(faces, n_vertices)
+    if distance_m == 0 or open_before == 0:
+        return mesh, WeldReport(float(distance_m), 0, 0, 0, open_before, open_before)
+    vertices, faces, merged = _merge_vertices(
+        np.array(mesh.vertices), faces, distance_m, keep_position=True
+    )
+    keep = np.arange(len(faces))
+    repeated = (
+        (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    )
+    faces, keep = faces[~repeated], keep[~repeated]
+    collapsed = int(np.count_nonzero(repeated))
+    faces, keep, stitched = _stitch_t_junctions(vertices, faces, keep, distance_m)
+    if stitched:
+        repeated = (
+            (faces[:, 0] == faces[:, 1])
+            | (faces[:, 1] == faces[:, 2])
+            | (faces[:, 0] == faces[:, 2])
+        )
+        faces, keep = faces[~repeated], keep[~repeated]
+        collapsed += int(np.count_nonzero(repeated))
+    welded = SceneMesh(
+        vertices=vertices,
+        faces=faces,
+        face_material=mesh.face_material[keep],
+        materials=mesh.materials,
+        face_label=None if mesh.face_label is None else mesh.face_label[keep],
+        labels=mesh.labels,
+        face_object=None if mesh.face_object is None else mesh.face_object[keep],
+    )
+    open_after = _n_open_edges(welded.faces, len(vertices))
+    return welded, WeldReport(float(distance_m), merged, stitched, collapsed, open_before,
+                              open_after)
+
+
 # --------------------------------------------------------------------------- leak test
+#: Most places a :class:`LeakReport` lists.
+MAX_LEAK_PLACES = 10
+#: Heights above an upward-facing surface where the leak test's rays start, metres: where
+#: people's mouths and ears and loudspeakers are.
+NAVIGABLE_HEIGHTS_M = (0.3, 2.0)
+_UPWARD_NZ = 0.7  # a face whose normal (into the air) is within ~45° of up carries air above
+
+
 def leak_test(
     mesh: SceneMesh,
     rng: np.random.Generator,
     n_rays: int = 10_000,
     interior_points: np.ndarray | None = None,
 ) -> LeakReport:
-    """Cast random rays from points in the air and count those that leave it.
+    """Cast random rays from points of the air that sources and receivers reach, and count
+    (and locate) those that leave it.
 
     Parameters
     ----------
@@ -1039,13 +1220,19 @@ def leak_test(
     n_rays : int
         Number of rays.
     interior_points : (P, 3) array, optional
-        Points known to be in the air, used in turn as ray origins. Without them, origins are
-        uniform random points of the bounding box kept when ray parity, counted per piece,
-        puts them in the air: inside an envelope and inside no obstacle, also where
-        obstacles intersect (:class:`_AirTest`).
+        Points known to be in the air (the job's sources and receivers), used in turn as ray
+        origins. Without them, origins are drawn from the navigable air: points 0.3–2 m above
+        random points of upward-facing surfaces (floors, stairs, the tops of furniture),
+        kept when the column of air above the surface reaches them and ray parity, counted
+        per piece, puts them inside an envelope and inside no closed solid
+        (:class:`_AirTest`). Where parity finds no enclosed air (an open model) the
+        navigable points are used as they are; where no surface faces up (normals pointing
+        out of the air), points of the bounding box that parity puts in the air.
 
     A ray leaks when it hits nothing (escaped to infinity) or first hits a face from behind
-    (it left the air through a hole, or the face points out of the air).
+    (it left the air through a hole, or the face points out of the air). Each leaking ray is
+    traced to the hole (loop of open edges) it passes, or the face it meets from behind
+    (:attr:`LeakReport.places`).
 
     Returns
     -------
@@ -1054,7 +1241,7 @@ def leak_test(
     Raises
     ------
     GeometryError
-        No sampled origin lies in the air (normals pointing out of the air everywhere).
+        No origin lies in the air (normals pointing out of the air everywhere).
     """
     if n_rays <= 0:
         raise GeometryError(f"leak_test.n_rays: expected a positive count, got {n_rays!r}")
@@ -1064,7 +1251,7 @@ def leak_test(
     vertices, faces = np.array(mesh.vertices), np.array(mesh.faces)
     intersector = _ray_intersector(vertices, faces)
     if interior_points is None:
-        origins = _origins_in_air(mesh, _AirTest(vertices, faces), rng, n_rays)
+        origins, kind = _navigable_origins(mesh, intersector, rng, n_rays)
     else:
         interior = np.asarray(interior_points, dtype=np.float64)
         if interior.ndim != 2 or interior.shape[1] != 3 or len(interior) == 0:
@@ -1072,16 +1259,153 @@ def leak_test(
                 "leak_test.interior_points: expected an array of shape (P, 3) with P > 0, "
                 f"got shape {interior.shape}"
             )
-        origins = interior[np.arange(n_rays) % len(interior)]
+        origins, kind = interior[np.arange(n_rays) % len(interior)], "given"
     directions = rng.normal(size=(n_rays, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     first = intersector.intersects_first(origins, directions)
     escaped = first < 0
     hit = np.flatnonzero(~escaped)
-    backface = np.einsum("ij,ij->i", directions[hit], mesh.face_normals[first[hit]]) > 0
+    backface = np.zeros(n_rays, bool)
+    backface[hit] = np.einsum("ij,ij->i", directions[hit], mesh.face_normals[first[hit]]) > 0
+    places = _leak_places(mesh, origins, directions, first, escaped, backface)
     return LeakReport(
-        rays=int(n_rays), escaped=int(np.count_nonzero(escaped)), backface=int(backface.sum())
+        rays=int(n_rays), escaped=int(np.count_nonzero(escaped)),
+        backface=int(backface.sum()), origins=kind, places=places,
     )
+
+
+def _plane_distance(vertices, faces, face, origins, directions) -> np.ndarray:
+    """Distance along each ray to the plane of its face (inf where parallel)."""
+    a = vertices[faces[face, 0]]
+    normal = np.cross(vertices[faces[face, 1]] - a, vertices[faces[face, 2]] - a)
+    denom = np.einsum("ij,ij->i", directions, normal)
+    num = np.einsum("ij,ij->i", a - origins, normal)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(denom) > 0, num / denom, np.inf)
+
+
+def _navigable_origins(mesh: SceneMesh, intersector, rng, n_rays: int
+                       ) -> tuple[np.ndarray, str]:
+    """Origins in the air that sources and receivers reach (see :func:`leak_test`)."""
+    vertices, faces = np.array(mesh.vertices), np.array(mesh.faces)
+    normals, areas = mesh.face_normals, mesh.face_areas
+    upward = np.flatnonzero((normals[:, 2] >= _UPWARD_NZ) & (areas > 0))
+    air_test = _AirTest(vertices, faces)
+    weights = areas[upward] / max(areas[upward].sum(), 1e-300)
+    lo_h, hi_h = NAVIGABLE_HEIGHTS_M
+    eps = 1e-6 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    enclosed: list[np.ndarray] = []
+    navigable: list[np.ndarray] = []
+    n_enclosed = 0
+    for _ in range(6 if len(upward) else 0):  # resample until enough pass (a few rounds)
+        n = max(2 * (n_rays - n_enclosed), 64)
+        face = upward[rng.choice(len(upward), size=n, p=weights)]
+        u, v = rng.uniform(size=(2, n))
+        flip = u + v > 1
+        u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+        a, b, c = (vertices[faces[face, k]] for k in range(3))
+        base = a + u[:, None] * (b - a) + v[:, None] * (c - a) + eps * normals[face]
+        height = rng.uniform(lo_h, hi_h, size=n)
+        up = np.tile([0.0, 0.0, 1.0], (n, 1))
+        above = intersector.intersects_first(base, up)
+        clear = above < 0
+        blocked = np.flatnonzero(~clear)
+        clear[blocked] = (
+            _plane_distance(vertices, faces, above[blocked], base[blocked], up[blocked])
+            > height[blocked]
+        )
+        points = base[clear] + height[clear, None] * up[clear]
+        navigable.append(points)
+        inside = points[air_test(points)] if len(points) else points
+        enclosed.append(inside)
+        n_enclosed += len(inside)
+        if n_enclosed >= n_rays:
+            break
+    kept = np.concatenate(enclosed) if enclosed else np.zeros((0, 3))
+    all_navigable = np.concatenate(navigable) if navigable else np.zeros((0, 3))
+    # parity finds enclosed air for most navigable points of a closed model; where it does
+    # not, the surfaces facing up may face out of the air (an inverted model: then the air
+    # is where parity puts it), or the model is open (a roofless room: then no point is
+    # enclosed, and the navigable points are the air)
+    if len(kept) and len(kept) >= 0.1 * len(all_navigable):
+        return kept[np.arange(n_rays) % len(kept)], "navigable"
+    try:
+        return _origins_in_air(mesh, air_test, rng, n_rays), "enclosed"
+    except GeometryError:
+        if not len(all_navigable):
+            raise
+    return all_navigable[np.arange(n_rays) % len(all_navigable)], "navigable, not enclosed"
+
+
+def _leak_places(mesh, origins, directions, first, escaped, backface
+                 ) -> tuple[LeakPlace, ...]:
+    """Where the leaking rays go: the hole each passes first (loops of open edges), else the
+    face it meets from behind, else the point it leaves the bounding box."""
+    leaking = np.flatnonzero(escaped | backface)
+    if len(leaking) == 0:
+        return ()
+    vertices, faces = np.array(mesh.vertices), np.array(mesh.faces)
+    o, d = origins[leaking], directions[leaking]
+    reach = np.full(len(leaking), np.inf)  # how far each ray goes before its back-face hit
+    hit = ~escaped[leaking]
+    reach[hit] = _plane_distance(vertices, faces, first[leaking][hit], o[hit], d[hit])
+    loops = _boundary_loops(faces, len(vertices))
+    hole = np.full(len(leaking), -1)
+    best = np.full(len(leaking), np.inf)
+    centres, sizes, borders = [], [], []
+    if loops:
+        directed, face_of = _edge_keys(faces, len(vertices))
+        by_key = np.argsort(directed)
+        for k, loop in enumerate(loops):
+            points = vertices[loop]
+            centre = points.mean(axis=0)
+            _, _, vt = np.linalg.svd(points - centre)
+            normal = vt[2]
+            radius = float(np.linalg.norm(points - centre, axis=1).max())
+            centres.append(centre)
+            sizes.append(float(np.linalg.norm(points.max(axis=0) - points.min(axis=0))))
+            # a face bordering the hole: the loop edge u→v borders the face running v→u
+            key = loop[1] * len(vertices) + loop[0]
+            at = np.searchsorted(directed[by_key], key)
+            borders.append(int(face_of[by_key[min(at, len(by_key) - 1)]]))
+            denom = d @ normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((centre - o) @ normal) / denom
+            q = o + np.where(np.isfinite(t), t, 0)[:, None] * d
+            passes = (np.isfinite(t) & (t > 0) & (t <= reach + 1e-9)
+                      & (np.linalg.norm(q - centre, axis=1) <= radius * 1.05) & (t < best))
+            hole[passes], best[passes] = k, t[passes]
+    out: list[LeakPlace] = []
+
+    def names(face: int) -> tuple[str | None, str | None]:
+        if face < 0:
+            return None, None
+        label = None if mesh.face_label is None else mesh.labels[mesh.face_label[face]]
+        return label, mesh.materials[mesh.face_material[face]]
+
+    for k in np.unique(hole[hole >= 0]):
+        n = int(np.count_nonzero(hole == k))
+        out.append(LeakPlace("hole", tuple(float(v) for v in centres[k]), sizes[k], n,
+                             borders[k], *names(borders[k])))
+    rest = hole < 0
+    faces_hit = first[leaking]
+    for f in np.unique(faces_hit[rest & hit]):
+        sel = rest & hit & (faces_hit == f)
+        point = (o[sel] + reach[sel, None] * d[sel]).mean(axis=0)
+        out.append(LeakPlace("face", tuple(float(v) for v in point), 0.0,
+                             int(np.count_nonzero(sel)), int(f), *names(int(f))))
+    gone = np.flatnonzero(rest & ~hit)
+    if len(gone):
+        lo, hi = mesh.bounds
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(d[gone[0]] > 0, (hi - o[gone[0]]) / d[gone[0]],
+                         (lo - o[gone[0]]) / d[gone[0]])
+        exit_t = float(np.nanmin(np.where(np.isfinite(t), t, np.nan)))
+        point = o[gone[0]] + max(exit_t, 0.0) * d[gone[0]]
+        out.append(LeakPlace("escaped", tuple(float(v) for v in point), 0.0, len(gone), -1,
+                             None, None))
+    out.sort(key=lambda p: (-p.rays, p.kind, p.where_m))
+    return tuple(out[:MAX_LEAK_PLACES])
 
 
 def _origins_in_air(mesh, in_air: _AirTest, rng, n_rays: int) -> np.ndarray:

@@ -251,6 +251,15 @@ class MeshSceneSpec(_SceneBase):
         "auto", description="Up axis of the file; 'auto' is y for glb/gltf and z otherwise."
     )
     unit: Literal["m", "cm", "mm", "in", "ft"] = Field("m", description="Length unit of the file.")
+    weld_distance_m: float = Field(
+        1e-4,
+        ge=0,
+        le=0.01,
+        description="On load, vertices of open edges closer than this are joined across "
+        "objects, groups and meshes, and T-junctions along those seams stitched (a file "
+        "written one object per material loads as one surface), metres, after the unit "
+        "conversion; 0 keeps the file's vertices.",
+    )
     label_materials: dict[str, str] = Field(
         default_factory=dict,
         description="Semantic label -> material name, overriding the library's label rule.",

@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec import artifacts
+from sonicspec.artifacts import speech_track_name
 from sonicspec.audio.arrange import Clip, arrange_background, arrange_speech
 from sonicspec.audio.corpora import CorpusIndex, CorpusItem
 from sonicspec.errors import AudioError, CorpusError
 from sonicspec.hashing import rng_for
 from sonicspec.plan.params import ArrangeParams
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import speech_track_name
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_role
 from sonicspec.units import seconds_to_samples

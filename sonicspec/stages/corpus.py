@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.audio.corpora import (
     CorpusIndex,
     cached_index,
@@ -38,7 +39,6 @@ from sonicspec.spec.corpora import (
     GeneratedSpeechSpec,
     LibriSpeechCorpusSpec,
 )
-from sonicspec.stages import artifacts
 from sonicspec.stages.context import JobContext
 from sonicspec.store import ArtifactStore
 

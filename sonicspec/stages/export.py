@@ -17,19 +17,19 @@ from typing import Any
 
 import numpy as np
 
-from sonicspec.acoustics.receivers import local_directions
-from sonicspec.export.checksums import file_record
-from sonicspec.export.files import write_audio, write_json
-from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
-from sonicspec.plan.params import ExportParams
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import (
+from sonicspec import artifacts
+from sonicspec.acoustics.receivers.arrays import local_directions
+from sonicspec.artifacts import (
     ArrangedGroup,
     GroupPlacement,
     MixGroup,
     RenderGroup,
     RirGroup,
 )
+from sonicspec.export.checksums import file_record
+from sonicspec.export.files import write_audio, write_json
+from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
+from sonicspec.plan.params import ExportParams
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
 from sonicspec.hashing import rng_for
@@ -21,7 +22,6 @@ from sonicspec.spec.load import LoadedSpec, did_you_mean
 from sonicspec.stages.navigation import settings_from as nav_settings
 from sonicspec.stages.placement import place_group
 from sonicspec.stages.placement import settings_from as placement_settings
-from sonicspec.stages.scenes import build_scene_mesh
 
 
 def scene_ids(loaded: LoadedSpec) -> list[str]:
@@ -71,6 +71,12 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
                                 rng_for(spec.seed, "inspect", scene_id))
     except PlacementError as exc:
         placement_error = str(exc)
+    traced_vertices, traced_faces, _ = traced_geometry(mesh,
+                                                       spec.acoustics.simplify_tolerance_m)
+    edges = None
+    if spec.acoustics.diffraction:
+        edges = _edge_choice(traced_vertices, traced_faces, spec.acoustics.diffraction_max_edges,
+                             placement)
     facts = {
         "scene_id": scene_id,
         "kind": report["kind"],
@@ -78,9 +84,11 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         "vertices": int(mesh.vertices.shape[0]),
         "faces": int(mesh.faces.shape[0]),
         "simplify_tolerance_m": spec.acoustics.simplify_tolerance_m,
-        "traced_faces": len(traced_geometry(mesh, spec.acoustics.simplify_tolerance_m)[1]),
+        "traced_faces": len(traced_faces),
+        "diffraction_edges": edges,
         "surface_area_m2": float(areas.sum()),
         "air_volume_m3": float(mesh.air_volume()),
+        "weld": report.get("weld"),
         "repair": report.get("repair"),
         "leak": report.get("leak"),
         "warnings": caught + report.get("warnings", []),
@@ -98,6 +106,31 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
     return facts
 
 
+def _edge_choice(vertices: np.ndarray, faces: np.ndarray, max_edges: int,
+                 placement: dict[str, Any] | None) -> dict[str, Any]:
+    """The diffracting edges a group's RIRs would use (for the sampled group's microphone and
+    RIR points, else by length and exposure), as the RIR facts report them."""
+    from sonicspec.acoustics.paths.edges import diffracting_edges
+
+    near = None
+    if placement is not None:
+        sources = [*placement["speech"], placement.get("noise"), placement.get("music")]
+        near = np.array([*placement["mic_path_m"], *(p for s in sources if s is not None
+                                                     for p in s["rir_points_m"])],
+                        dtype=np.float64)
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                     vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    normals = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
+    return diffracting_edges(vertices, faces, normals, max_edges=max_edges,
+                             near_m=near).choice()
+
+
+def _leak_place(place: dict[str, Any]) -> str:
+    from sonicspec.geometry.repair import LeakPlace
+
+    return LeakPlace(**{**place, "where_m": tuple(place["where_m"])}).describe()
+
+
 def format_facts(facts: dict[str, Any]) -> str:
     """The facts as a short report for a terminal."""
     lo, hi = facts["bounds_m"]
@@ -110,6 +143,13 @@ def format_facts(facts: dict[str, Any]) -> str:
         f" m (size {' x '.join(f'{v:.2f}' for v in size)} m)",
         f"surface {facts['surface_area_m2']:.1f} m², air volume {facts['air_volume_m3']:.1f} m³",
     ]
+    weld = facts.get("weld")
+    if weld is not None:
+        lines.append(
+            f"seams welded on load (weld_distance_m {weld['distance_m']:g} m): "
+            f"{weld['merged_vertices']} vertices joined, {weld['t_junctions_stitched']} "
+            f"T-junctions stitched; open edges {weld['open_edges_before']} -> "
+            f"{weld['open_edges_after']}")
     rep = facts["repair"]
     if rep is not None:
         lines.append(
@@ -119,7 +159,15 @@ def format_facts(facts: dict[str, Any]) -> str:
             f"{'yes' if rep['watertight'] else 'NO'}")
     if facts["leak"] is not None:
         leak = facts["leak"]
-        lines.append(f"leak test: {leak['fraction']:.4%} of {leak['rays']} rays escape")
+        where = "; ".join(_leak_place(p) for p in leak.get("places", [])[:3])
+        lines.append(f"leak test: {leak['fraction']:.4%} of {leak['rays']} rays from the "
+                     f"{leak.get('origins', 'sampled')} air escape" + (f": {where}" if where
+                                                                       else ""))
+    edges = facts.get("diffraction_edges")
+    if edges is not None:
+        lines.append(f"diffraction: {edges['kept']} of {edges['found']} edges kept "
+                     f"({edges['rule']}); {edges['seams_left_out']} open edges left out as "
+                     "seams")
     lines.append("materials (area):")
     total = sum(facts["materials_m2"].values()) or 1.0
     for name, area in facts["materials_m2"].items():

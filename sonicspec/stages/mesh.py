@@ -5,10 +5,10 @@ from __future__ import annotations
 import logging
 import warnings
 
+from sonicspec import artifacts
+from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import SonicspecWarning
-from sonicspec.stages import artifacts
 from sonicspec.stages.context import JobContext
-from sonicspec.stages.scenes import build_scene_mesh
 
 log = logging.getLogger("sonicspec.stages.mesh")
 

@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec import artifacts
+from sonicspec.artifacts import ComponentLevel, MixData, MixGroup, Mixture, RenderGroup
 from sonicspec.audio.mix import gain_to_loudness, integrated_loudness, peak_guard, task_mixtures
 from sonicspec.errors import AudioError
 from sonicspec.plan.params import MixParams
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import ComponentLevel, MixData, MixGroup, Mixture, RenderGroup
 from sonicspec.stages.context import JobContext
 
 log = logging.getLogger("sonicspec.stages.mix")

@@ -23,12 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sonicspec.acoustics.moving import read_at
+from sonicspec.acoustics.moving.delays import read_at
+from sonicspec.artifacts import GroupPlacement, SourcePlacement
 from sonicspec.audio.arrange import Segment, speech_span, walk_window
 from sonicspec.audio.render import walk_index
 from sonicspec.geometry.navigation import cumulative_length
 from sonicspec.spec.trajectory import StaticTrajectorySpec
-from sonicspec.stages.artifacts import GroupPlacement, SourcePlacement
 
 
 @dataclass(frozen=True)

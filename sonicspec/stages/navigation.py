@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from sonicspec import artifacts
 from sonicspec.geometry.navigation import NavigationSettings, build_navigation
 from sonicspec.plan.params import NavigationParams
-from sonicspec.stages import artifacts
 from sonicspec.stages.context import JobContext
 
 

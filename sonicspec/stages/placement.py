@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.errors import PlacementError
 from sonicspec.geometry.navigation import cumulative_length, resample_polyline
 from sonicspec.geometry.placement import PlacementSettings, sample_placement
@@ -22,7 +23,6 @@ from sonicspec.spec.trajectory import (
     TrajectorySpec,
     WaypointsTrajectorySpec,
 )
-from sonicspec.stages import artifacts
 from sonicspec.stages.context import JobContext
 
 _MOTION = {"static": "static", "line": "line", "shortest_path": "shortest_path",

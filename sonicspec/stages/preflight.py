@@ -127,11 +127,11 @@ def _meshes(spec: DatasetSpec, base: Path, missing: set[tuple]) -> list[Problem]
     if not any(isinstance(s, MeshSceneSpec) or any(isinstance(o, MeshObstacleSpec)
                                                    for o in s.obstacles) for s in spec.scenes):
         return []
+    from sonicspec.artifacts.scenes import load_scan
     from sonicspec.errors import CompileError
     from sonicspec.geometry.io import load_mesh
     from sonicspec.plan.compile import FileDigests, SceneEntry, scene_jobs
     from sonicspec.plan.params import read_params
-    from sonicspec.stages.scenes import load_scan
 
     out: list[Problem] = []
     for i, scene in enumerate(spec.scenes):

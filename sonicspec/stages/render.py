@@ -8,8 +8,8 @@ float32.
 
 ``interpolation: paths``: the direct sound and every image-source path are rendered as
 time-varying delays from the source's position at each emission
-(:func:`sonicspec.acoustics.moving.render_paths`), and the late part of the RIRs (the RIRs less
-those paths) is crossfaded between RIR points. Otherwise the whole RIRs are blended
+(:func:`sonicspec.acoustics.moving.delays.render_paths`), and the late part of the RIRs (the
+RIRs less those paths) is crossfaded between RIR points. Otherwise the whole RIRs are blended
 (:func:`sonicspec.audio.render.render_moving` with the spec's interpolation).
 
 Optional training targets, rendered with the same path: ``direct`` (each RIR cut just after
@@ -26,23 +26,23 @@ from pathlib import Path
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.engine import array_offsets, load_hrirs, sphere_head
-from sonicspec.acoustics.hrtf import ear_axes
-from sonicspec.acoustics.moving import PathSet, Receiver, render_paths
+from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
+from sonicspec.acoustics.receivers.hrtf import ear_axes
+from sonicspec.artifacts import (
+    ArrangedTrack,
+    RenderData,
+    RenderedTrack,
+    RenderGroup,
+)
 from sonicspec.audio.arrange import Segment, assemble
 from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
 from sonicspec.spec.microphone import SofaHrtfSpec
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import (
-    ArrangedTrack,
-    RenderData,
-    RenderedTrack,
-    RenderGroup,
-)
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
@@ -181,7 +181,7 @@ HRIR_RADIUS_FACTOR = 1.25
 def hrir_radius(hrirs) -> float:
     """The angle a SOFA set's HRIRs are blended over (:data:`HRIR_RADIUS_FACTOR` times its
     covering angle), radians."""
-    from sonicspec.acoustics.hrtf import covering_angle_rad
+    from sonicspec.acoustics.receivers.hrtf import covering_angle_rad
 
     return HRIR_RADIUS_FACTOR * covering_angle_rad(hrirs)
 

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
@@ -23,23 +24,24 @@ from sonicspec.acoustics.engine import (
     load_hrirs,
     refined_early_paths,
     rir_results,
+    scene_edges,
     simulate_rirs,
+    with_diffraction_focus,
 )
-from sonicspec.acoustics.image_sources import planar_regions
-from sonicspec.acoustics.moving import PathSet
-from sonicspec.errors import SonicspecWarning, StageError
-from sonicspec.geometry.materials import material_library
-from sonicspec.plan.params import MaterialTable, RirParams
-from sonicspec.spec.materials import MaterialsSpec
-from sonicspec.spec.microphone import SofaHrtfSpec
-from sonicspec.stages import artifacts
-from sonicspec.stages.artifacts import (
+from sonicspec.acoustics.moving.delays import PathSet
+from sonicspec.acoustics.paths.image_sources import planar_regions
+from sonicspec.artifacts import (
     GroupPlacement,
     RirData,
     RirGroup,
     RirSource,
     speech_track_name,
 )
+from sonicspec.errors import SonicspecWarning, StageError
+from sonicspec.geometry.materials import material_library
+from sonicspec.plan.params import MaterialTable, RirParams
+from sonicspec.spec.materials import MaterialsSpec
+from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")
@@ -246,6 +248,19 @@ def run(ctx) -> None:
                         f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
                         "microphone's path (microphone.trajectory) or the sources' rules")
         traces, refs = _traces(sources, lines, placement.mic_m, params.microphone.yaw_deg)
+        # one set of diffracting edges for the group: the most important for all of its
+        # source and microphone positions
+        group_settings, choice = settings, None
+        if settings.diffraction:
+            group_settings = with_diffraction_focus(
+                settings, *[np.asarray(m) for m, _, _ in traces],
+                *[np.asarray(p) for _, _, p in traces])
+            choice = scene_edges(scene, settings.diffraction_max_edges,
+                                 group_settings.diffraction_focus_m).choice()
+            log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges and %d "
+                     "buried wedges left out)", placement.group, choice["kept"],
+                     choice["found"], choice["rule"], choice["seams_left_out"],
+                     choice["buried_left_out"])
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
@@ -260,14 +275,17 @@ def run(ctx) -> None:
                                  f"{done:,}/{total:,} rays")
 
                 results.append(simulate_rirs(
-                    scene, mic_m, np.asarray(points), settings, rng, regions,
+                    scene, mic_m, np.asarray(points), group_settings, rng, regions,
                     {**microphone, "yaw_deg": yaw}, hrirs, progress=progress,
                     where=scene_name, keep_arrivals=params.early_paths))
         for w in caught:
             if issubclass(w.category, SonicspecWarning):
-                log.warning("%s", w.message)
+                if not str(w.message).startswith("image sources: order"):
+                    log.warning("%s", w.message)  # the search's own: one line per group below
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        _warn_lower_order(scene_name, placement.group, settings.image_source_order,
+                          [f for _, facts in results for f in facts])
         entries = []
         for s, ((name, _), line, ref) in enumerate(zip(sources, lines, refs, strict=True)):
             block = [results[t][0][i] for t, i in ref]
@@ -290,7 +308,7 @@ def run(ctx) -> None:
                          if line is None else line.mic_m)
                 # where a path appears or disappears between two points, points are added
                 fine = refined_early_paths(
-                    scene, settings, src_m, mic_m, from_mic, at_mic, regions=regions,
+                    scene, group_settings, src_m, mic_m, from_mic, at_mic, regions=regions,
                     directional=directional,
                     image_source_order=facts[0]["image_source_order"])
                 if line is None:
@@ -313,10 +331,36 @@ def run(ctx) -> None:
                 name=name, array=key, points=len(block),
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
                 direct=facts[0]["direct"], tail=facts[0]["tail"],
-                escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths))
-        groups.append(RirGroup(group=placement.group, sources=entries))
+                escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths,
+                **_order_reached(facts, settings.image_source_order)))
+        groups.append(RirGroup(group=placement.group, sources=entries,
+                               diffraction_edges=choice))
     ctx.write(arrays, artifacts.encode("rir", RirData(
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
+
+
+def _order_reached(facts: list[dict[str, Any]], asked: int) -> dict[str, Any]:
+    """The image-source order a source's RIRs reached (the lowest over its points), the order
+    asked and why it is lower."""
+    low = min(facts, key=lambda f: f["image_source_order"])
+    return {"image_source_order": low["image_source_order"], "image_source_order_asked": asked,
+            "image_source_order_stopped": low.get("image_source_order_stopped")}
+
+
+def _warn_lower_order(scene_name: str, group: str, asked: int,
+                      facts: list[dict[str, Any]]) -> None:
+    """One warning line (the job's log, which the build summary collects) when the image-source
+    search stopped below the asked order for some of a group's RIRs."""
+    low = [f for f in facts if f["image_source_order"] < asked]
+    if not low:
+        return
+    worst = min(low, key=lambda f: f["image_source_order"])
+    log.warning("%s, group %s: image-source order %d asked, %d reached in %d "
+                "of %d RIRs (%s); the ray tracer covers the higher orders, less exactly; lower "
+                "acoustics.image_source_order for this scene or simplify its mesh "
+                "(acoustics.simplify_tolerance_m)", scene_name, group, asked,
+                worst["image_source_order"], len(low), len(facts),
+                worst.get("image_source_order_stopped") or "the candidate limit")
 
 
 def _finite(value: float) -> float | None:

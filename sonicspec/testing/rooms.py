@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sonicspec.acoustics.scene import AcousticScene
+from sonicspec.acoustics.room.scene import AcousticScene
 
 
 def extruded_room(polygon_ccw: Sequence[Sequence[float]],
