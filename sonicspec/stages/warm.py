@@ -44,7 +44,7 @@ def warm() -> None:
 
     from sonicspec.acoustics.bands import OctaveFilterBank
     from sonicspec.acoustics.engine import acoustic_scene, simulate_rirs
-    from sonicspec.acoustics.moving import PathSet, render_paths
+    from sonicspec.acoustics.moving.delays import PathSet, render_paths
     from sonicspec.api import RirSettings, Scene
     from sonicspec.audio.render import INTERPOLATIONS, render_moving
 
