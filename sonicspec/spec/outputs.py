@@ -74,7 +74,7 @@ class OutputsSpec(SpecModel):
         description="With scale: per_file, the precision of the samples, bits relative to "
         "the file's peak (the error is at most 2^-bits of the peak); the bits below are "
         "zero, which FLAC stores for free. null: the subtype's (16 or 24). The sonicset "
-        "presets use PCM_24 with 18 bits: 1.18x the size of 16-bit FLAC, 24 bits costs 1.7x "
+        "presets use PCM_24 with 18 bits: 1.19x the size of 16-bit FLAC, 24 bits costs 1.76x "
         "(bench/RESULTS.md, issue 27).",
     )
     sources: bool = Field(True, description="Write each reverberant source track.")
