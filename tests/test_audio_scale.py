@@ -68,6 +68,8 @@ def test_scale_write_errors(tmp_path: Path) -> None:
         write_audio(tmp_path / "x.flac", x, 16000, subtype="PCM_24", scale=-1.0)
     with pytest.raises(StoreError, match=r"bits: expected 8\.\.16 for PCM_16, got 18"):
         write_audio(tmp_path / "x.flac", x, 16000, subtype="PCM_16", scale=4.0, bits=18)
+    with pytest.raises(StoreError, match=r"x\.flac: bits \(18\) apply with a scale"):
+        write_audio(tmp_path / "x.flac", x / 4, 16000, subtype="PCM_24", bits=18)
     with pytest.raises(StoreError, match="a scale applies to"):
         peak_scale(x, "FLOAT")
     assert list(tmp_path.iterdir()) == []

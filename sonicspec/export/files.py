@@ -87,6 +87,8 @@ def write_audio(path: Path, audio: np.ndarray, sample_rate_hz: int, *, audio_for
         raise StoreError(f"subtype: {subtype!r} cannot be written as {audio_format}")
     if scale is not None and subtype == "FLOAT":
         raise StoreError(f"{path.name}: a scale applies to PCM subtypes; FLOAT keeps any level")
+    if bits is not None and scale is None:
+        raise StoreError(f"{path.name}: bits ({bits}) apply with a scale (see peak_scale)")
     data = np.asarray(audio, dtype=np.float64)
     if data.ndim == 1:
         data = data[None, :]
