@@ -20,6 +20,7 @@ import pytest
 import soundfile as sf
 
 from sonicspec.audio.mix import integrated_loudness
+from sonicspec.dataload.folder import Group
 from sonicspec.errors import CompileError, CorpusError
 from sonicspec.plan.compile import compile_spec
 from sonicspec.plan.model import Plan
@@ -219,7 +220,7 @@ def test_a_one_group_per_split_cut_builds_and_keeps_the_papers_levels(tmp_path: 
     """The paper preset with three scans and 3 / 4 / 3 speakers (one group per scene and
     split; dev-clean's fourth speaker sits out) and, to keep the test fast, fewer rays and
     image sources: every component lands at the paper's level (-17 / -21 / -24 LUFS), no
-    group is scaled, and mixtures louder than 0 dBFS are stored as they are."""
+    group is scaled, and mixtures louder than 0 dBFS are kept (by each file's scale)."""
     write_sonicset_inputs(tmp_path / "data", ["s0", "s1", "s2"],
                           {"train-clean-360": 3, "dev-clean": 4, "test-clean": 3})
     text = PAPER
@@ -245,14 +246,21 @@ def test_a_one_group_per_split_cut_builds_and_keeps_the_papers_levels(tmp_path: 
         speakers = [meta[f"source{k}"]["speaker"] for k in (1, 2, 3)]
         assert len(set(speakers)) == 3
         assert set(speakers) <= {p.name for p in (ls / SUBSET[split]).iterdir()}
+        # 18 bits in 24-bit FLAC, each file scaled to just under full scale (issue 27)
+        g = Group(out, f"{split}/000000", meta)
         for name, lufs in (("source1", -17), ("source2", -17), ("source3", -17),
                            ("noise", -21), ("music", -24)):
-            x, rate = sf.read(str(group / f"{name}.wav"), dtype="float64")
-            assert sf.info(str(group / f"{name}.wav")).subtype == "FLOAT"
-            assert integrated_loudness(x, rate) == pytest.approx(lufs, abs=0.1), (split, name)
+            info = sf.info(str(group / f"{name}.flac"))
+            assert (info.format, info.subtype) == ("FLAC", "PCM_24")
+            x = g.read(name).astype(np.float64)[0]
+            assert integrated_loudness(x, g.sample_rate_hz) == pytest.approx(lufs, abs=0.1), (
+                split, name)
         for mixture in (group / "mixtures").iterdir():
-            loudest = max(loudest, float(np.max(np.abs(sf.read(str(mixture))[0]))))
-    assert loudest > 1.0  # kept, not clipped or scaled: float WAV holds it
+            raw = float(np.max(np.abs(sf.read(str(mixture))[0])))
+            assert raw < 1.0  # a plain reader gets valid audio, at the gain 1 / scale
+            loudest = max(loudest, float(np.max(np.abs(g.read(f"{split}/000000/mixtures/"
+                                                              f"{mixture.name}")))))
+    assert loudest > 1.0  # kept, not clipped nor limited: the scale holds it
 
 
 def test_speakers_counted_from_folder_names_are_the_indexs(tmp_path: Path) -> None:

@@ -4,7 +4,11 @@ A folder is what ``sonicspec build`` writes (docs/reference/dataset.md): ``datas
 lists the groups; each group's ``metadata.json`` (SonicSet form) names its tracks
 (``source1``…, ``noise``, ``music``, each with ``file``), the stems beside them
 (``source1_dry``…, found by name) and its ``mixtures`` (``name``, ``task``, ``components``,
-``targets``, ``file``). Nothing here writes.
+``targets``, ``file``). A dataset built with ``outputs.scale: per_file`` also has
+``audio_scales`` (file relative to the group's folder -> scale): its PCM files peak just under
+full scale and the signal is the decoded samples times the scale, which every read here applies
+(a dataset without the map reads as decoded: scale 1, or a file's own ``sonicspec_scale`` tag).
+Nothing here writes.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.errors import SonicspecError
+from sonicspec.export.files import SCALE_TAG, check_scale, read_scale_tag, scale_from_comment
 
 STEMS = ("dry", "direct", "early")
 BACKGROUNDS = {"noise": ("noise",), "music": ("music",), "both": ("noise", "music"), "none": ()}
@@ -81,21 +86,90 @@ class Group:
     def read(self, name_or_path: str | Path, start: int = 0, stop: int | None = None,
              channels: tuple[int, ...] | None = None) -> np.ndarray:
         """Samples ``[start, stop)`` of a track (or a file under the folder) as float32
-        ``(channels, samples)``."""
-        path = (self.track_path(name_or_path) if isinstance(name_or_path, str)
+        ``(channels, samples)``, at the signal's level (the file's scale applied)."""
+        path = self.path_of(name_or_path)
+        return read_audio(path, start, stop, channels, scale=self.recorded_scale(path))
+
+    def path_of(self, name_or_path: str | Path) -> Path:
+        """The file of a track or stem name, or of a path relative to the folder."""
+        return (self.track_path(name_or_path) if isinstance(name_or_path, str)
                 and "/" not in name_or_path else self.root / name_or_path)
-        return read_audio(path, start, stop, channels)
+
+    def recorded_scale(self, path: Path) -> float | None:
+        """The scale ``metadata.json``'s ``audio_scales`` records for a file of the group
+        (``outputs.scale: per_file``); None when the dataset records none (built without
+        scales, or before them: the files are at their level, or carry their own tag). A
+        file the map lacks, or a value that is not a finite number > 0, is a
+        :class:`DatasetError`."""
+        scales = self.metadata.get("audio_scales")
+        if scales is None:
+            return None
+        where = f"{self.root / self.id}/metadata.json: audio_scales"
+        if not isinstance(scales, dict):
+            raise DatasetError(f"{where}: expected a map of file -> scale, got {scales!r}")
+        try:
+            rel = Path(path).relative_to(self.root / self.id).as_posix()
+        except ValueError:
+            raise DatasetError(f"{path}: not a file of group {self.id}") from None
+        if rel not in scales:
+            raise DatasetError(f"{where}: no scale for {rel!r} (its samples are scaled to "
+                               "full scale; without the scale its level is unknown); rebuild "
+                               "the group or restore its metadata.json")
+        try:
+            return check_scale(scales[rel], f"{where}[{rel!r}]")
+        except SonicspecError as exc:
+            raise DatasetError(str(exc)) from None
+
+    def scale(self, name_or_path: str | Path) -> float:
+        """The factor that brings a file's decoded samples to the signal's level: the
+        recorded scale, else the file's own tag (``sonicspec_scale=``), else 1."""
+        path = self.path_of(name_or_path)
+        recorded = self.recorded_scale(path)
+        return recorded if recorded is not None else _tag_scale(path) or 1.0
+
+
+def _tag_scale(path: Path) -> float | None:
+    try:
+        return read_scale_tag(path)
+    except SonicspecError as exc:
+        raise DatasetError(str(exc)) from None
+    except (RuntimeError, OSError) as exc:
+        raise DatasetError(f"{path}: cannot read audio ({exc})") from None
 
 
 def read_audio(path: Path, start: int = 0, stop: int | None = None,
-               channels: tuple[int, ...] | None = None) -> np.ndarray:
-    """Samples ``[start, stop)`` of an audio file, float32 ``(channels, samples)``."""
+               channels: tuple[int, ...] | None = None, *, scale: float | None = None
+               ) -> np.ndarray:
+    """Samples ``[start, stop)`` of an audio file, float32 ``(channels, samples)``, at the
+    signal's level.
+
+    ``scale`` is the one the dataset records for the file; the file's own comment tag
+    (``sonicspec_scale=``, :data:`sonicspec.export.files.SCALE_TAG`) must then agree with
+    it. Without ``scale`` the tag's is used, and without a tag the samples are as decoded
+    (float WAV, or files written without scales).
+    """
     import soundfile as sf
 
     try:
-        data, _ = sf.read(str(path), start=start, stop=stop, dtype="float32", always_2d=True)
+        with sf.SoundFile(str(path)) as fh:
+            tag = scale_from_comment(fh.comment, path)
+            end = fh.frames if stop is None else min(stop, fh.frames)
+            if start:
+                fh.seek(start)
+            want = np.float32 if (scale or tag or 1.0) == 1.0 else np.float64
+            data = fh.read(max(0, end - start), dtype=want, always_2d=True)
+    except SonicspecError as exc:
+        raise DatasetError(str(exc)) from None
     except (sf.LibsndfileError, RuntimeError, OSError) as exc:
         raise DatasetError(f"{path}: cannot read audio ({exc})") from None
+    if scale is not None and tag is not None and tag != scale:
+        raise DatasetError(f"{path}: its tag {SCALE_TAG}={tag!r} differs from the scale the "
+                           f"metadata records ({scale!r}); the file or metadata.json changed "
+                           "after the build (sonicspec verify names which)")
+    factor = scale if scale is not None else tag
+    if factor is not None and factor != 1.0:
+        # One rounding to float32, after the scale (the file's integers are exact in float64).
+        data = (data * factor).astype(np.float32)
     out = data.T
     if channels is not None:
         if max(channels) >= out.shape[0]:

@@ -16,6 +16,11 @@ shards nothing refers to any more.
   (``train/000000``) with members ``<key>.<track>.flac`` (``source1``, ``noise``,
   ``source1_dry``, a mixture's name such as ``sep_s1s2_noise``) and ``<key>.metadata.json``.
   Tar members carry no time or owner, so the same groups give the same bytes.
+
+A dataset built with ``outputs.scale: per_file`` keeps each file's scale with it: the audio
+bytes are the files' own (each carries its ``sonicspec_scale=`` comment tag), and each record
+adds ``audio_scales`` (record name -> scale; a Parquet struct column, a ``<key>.scales.json``
+member): multiply a decoded audio column by its scale for the signal's level.
 """
 
 from __future__ import annotations
@@ -92,7 +97,18 @@ def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
     }
     for name, rel in files.items():
         row[name] = {"bytes": (group.root / rel).read_bytes(), "path": rel}
+    scales = audio_scales(group, files)
+    if scales is not None:
+        row["audio_scales"] = scales
     return row
+
+
+def audio_scales(group: Group, files: dict[str, str]) -> dict[str, float] | None:
+    """Record name -> scale of a group built with ``outputs.scale: per_file`` (None for one
+    built without: its files are at their level)."""
+    if group.metadata.get("audio_scales") is None:
+        return None
+    return {name: group.scale(rel) for name, rel in files.items()}
 
 
 def _write_parquet(path: Path, groups: list[Group]) -> None:
@@ -110,6 +126,10 @@ def _write_parquet(path: Path, groups: list[Group]) -> None:
                                f"{groups[0].id}'s {sorted(names)}; one table needs the same "
                                "columns")
         rows.append(_row(g, files))
+    scaled = "audio_scales" in rows[0]
+    if any(("audio_scales" in r) != scaled for r in rows):
+        raise DatasetError(f"groups {groups[0].id}…{groups[-1].id}: some record audio_scales "
+                           "and some do not; one table needs the same columns (rebuild)")
     features = datasets.Features({
         "group": datasets.Value("string"), "split": datasets.Value("string"),
         "scene_id": datasets.Value("string"), "sample_rate_hz": datasets.Value("int64"),
@@ -120,7 +140,8 @@ def _write_parquet(path: Path, groups: list[Group]) -> None:
         "drr_db": datasets.Sequence(datasets.Value("float64")),
         "metadata": datasets.Value("string"),
         **{n: datasets.Audio(sampling_rate=groups[0].sample_rate_hz, decode=True)
-           for n in names}})
+           for n in names},
+        **({"audio_scales": {n: datasets.Value("float64") for n in names}} if scaled else {})})
     # The table is made with pyarrow against the features' own Arrow schema (which carries
     # them in its "huggingface" metadata, as datasets writes Parquet): datasets' encoder would
     # need torchcodec to pass FLAC bytes through unchanged.
@@ -138,6 +159,10 @@ def _write_tar(path: Path, groups: list[Group]) -> None:
             members = [(f"{name}{Path(rel).suffix}", (g.root / rel).read_bytes())
                        for name, rel in group_files(g).items()]
             members.append(("metadata.json", (g.root / g.id / "metadata.json").read_bytes()))
+            scales = audio_scales(g, group_files(g))
+            if scales is not None:
+                members.append(("scales.json", (json.dumps(scales, sort_keys=True)
+                                                + "\n").encode()))
             for ext, data in members:
                 info = tarfile.TarInfo(f"{g.id}.{ext}")
                 info.size, info.mtime, info.mode = len(data), 0, 0o644

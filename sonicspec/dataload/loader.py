@@ -339,8 +339,10 @@ class SonicspecDataset:
                               duration=d.length / rate,
                               channel=channel[0] if len(channel) == 1 else channel,
                               recording=rec)
-                if d.gains[name] != 1.0:
-                    cut = cut.perturb_volume(factor=d.gains[name], affix_id=False)
+                # The file's scale (outputs.scale: per_file) times the drawn gain.
+                factor = d.gains[name] * d.group.scale(name)
+                if factor != 1.0:
+                    cut = cut.perturb_volume(factor=factor, affix_id=False)
                 tracks.append(MixTrack(cut=cut))
             cuts.append(MixedCut(id=f"{self.split}-{self.task}-{epoch}-{i}", tracks=tracks))
         return CutSet.from_cuts(cuts)

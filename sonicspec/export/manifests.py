@@ -5,7 +5,9 @@ its ``to_dict`` writes; sonicspec writes that shape without importing Lhotse:
 
 * recording: ``{id, sources: [{type: "file", channels: [0..C-1], source: path}],
   sampling_rate, num_samples, duration, channel_ids}``, and for a source's own file
-  ``custom: {track: {hop_s, positions_m, azimuth_deg, elevation_deg, distance_m}}``
+  ``custom: {track: {hop_s, positions_m, azimuth_deg, elevation_deg, distance_m}}``, and for
+  a scaled file (``outputs.scale: per_file``) ``transforms: [{name: "Volume", kwargs:
+  {factor: <scale>}}]``, which Lhotse applies on load
 * supervision: ``{id, recording_id, start, duration, channel, text, speaker}``
 """
 
@@ -30,9 +32,14 @@ class RecordingEntry:
     channels: int
     custom: Mapping[str, Any] | None = None
     """Extra fields (Lhotse's ``custom``): a source's position ``track``."""
+    scale: float | None = None
+    """The file's scale (``outputs.scale: per_file``): Lhotse applies it as the recording's
+    ``Volume`` transform, so ``load_audio()`` gives the signal at its level."""
 
     def to_lhotse(self) -> dict[str, Any]:
-        extra = {"custom": dict(self.custom)} if self.custom else {}
+        extra: dict[str, Any] = {"custom": dict(self.custom)} if self.custom else {}
+        if self.scale is not None:
+            extra["transforms"] = [{"name": "Volume", "kwargs": {"factor": self.scale}}]
         return {
             **extra,
             "id": self.id,

@@ -123,6 +123,18 @@ class OutputsParams(OutputsSpec):
     allow_outside_spec_folder: None = _DROPPED  # type: ignore[assignment]
     groups_per_shard: None = _DROPPED  # type: ignore[assignment]
 
+    omitted_when: ClassVar[Mapping[str, Any]] = {"scale": "none", "bits": None}
+    """Left out at their defaults (added in issue 27), so exports that do not use them keep
+    their keys."""
+
+    @model_serializer(mode="wrap")
+    def _omit(self, handler: Any) -> Any:
+        data = handler(self)
+        for name, value in self.omitted_when.items():
+            if name in data and data[name] == value:
+                del data[name]
+        return data
+
 
 # ----------------------------------------------------------------- the step models
 class StepParams(BaseModel):

@@ -553,11 +553,18 @@ def _check_outputs(spec: DatasetSpec) -> Iterator[Problem]:
         )
     if Path(o.dir) == Path(o.store_dir):
         yield _err(("outputs", "store_dir"), "must differ from outputs.dir")
-    if spec.mixture.loudness.peak_limit_dbfs is None and o.subtype != "FLOAT":
+    if o.bits is not None and (o.scale != "per_file" or o.subtype == "FLOAT"
+                               or o.bits > (16 if o.subtype == "PCM_16" else 24)):
+        yield _err(("outputs", "bits"),
+                   f"expected bits only with scale: per_file and a PCM subtype holding them "
+                   f"(PCM_16: 16, PCM_24: 16..24), got bits {o.bits} with scale {o.scale}, "
+                   f"subtype {o.subtype}")
+    if (spec.mixture.loudness.peak_limit_dbfs is None and o.subtype != "FLOAT"
+            and o.scale != "per_file"):
         yield _err(("mixture", "loudness", "peak_limit_dbfs"),
                    f"null keeps absolute levels, which may pass 0 dBFS: {o.subtype} would clip "
-                   "them; write float WAV (outputs.audio_format: wav, subtype: FLOAT) or set a "
-                   "limit")
+                   "them; record a scale per file (outputs.scale: per_file), write float WAV "
+                   "(outputs.audio_format: wav, subtype: FLOAT) or set a limit")
     if channel_count(spec.microphone) > 8 and o.audio_format == "flac":
         yield _err(
             ("outputs", "audio_format"),

@@ -71,8 +71,8 @@ class LoudnessSpec(SpecModel):
         le=0,
         description="If any written signal or mixture would peak above this, the whole group "
         "is scaled down by one gain (recorded as group_gain_db; the build warns when a shard's "
-        "median cut exceeds 1 dB), dBFS. null keeps absolute levels (no guard; needs float "
-        "WAV output: outputs.audio_format wav, subtype FLOAT).",
+        "median cut exceeds 1 dB), dBFS. null keeps absolute levels (no guard; needs "
+        "outputs.scale: per_file, or float WAV: outputs.audio_format wav, subtype FLOAT).",
     )
 
 

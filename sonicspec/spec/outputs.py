@@ -57,6 +57,26 @@ class OutputsSpec(SpecModel):
     subtype: Literal["PCM_16", "PCM_24", "FLOAT"] = Field(
         "PCM_16", description="Sample format (FLOAT only with wav)."
     )
+    scale: Literal["none", "per_file"] = Field(
+        "none",
+        description="'per_file': each PCM file is peak-normalised to just under full scale "
+        "and its scale recorded (metadata.json's audio_scales, the file's comment tag "
+        "sonicspec_scale=<scale>, the Lhotse recording's Volume transform); the signal is the "
+        "decoded samples times the scale, so levels above 0 dBFS (mixture.loudness."
+        "peak_limit_dbfs: null) are kept without float WAV. sonicspec's loader, evaluate and "
+        "exports apply it. 'none': samples as they are (levels must stay within full scale). "
+        "FLOAT files are never scaled.",
+    )
+    bits: int | None = Field(
+        None,
+        ge=16,
+        le=24,
+        description="With scale: per_file, the precision of the samples, bits relative to "
+        "the file's peak (the error is at most 2^-bits of the peak); the bits below are "
+        "zero, which FLAC stores for free. null: the subtype's (16 or 24). The sonicset "
+        "presets use PCM_24 with 18 bits: 1.19x the size of 16-bit FLAC, 24 bits costs 1.76x "
+        "(bench/RESULTS.md, issue 27).",
+    )
     sources: bool = Field(True, description="Write each reverberant source track.")
     background: bool = Field(True, description="Write the reverberant noise and music tracks.")
     mixtures: bool = Field(True, description="Write the task mixtures.")

@@ -41,7 +41,8 @@ def run(ctx: JobContext) -> None:
         if "csv" in params.manifests:
             rows = [dict(f, split=split, group=g["group"]) for g in items for f in g["files"]]
             path = out / "manifests" / f"{split}.csv"
-            write_text(path, csv_text(rows, CSV_COLUMNS))
+            scaled = params.spec.outputs.scale == "per_file"  # a column: the file's scale
+            write_text(path, csv_text(rows, (*CSV_COLUMNS, "scale") if scaled else CSV_COLUMNS))
             files_written.append(str(path.relative_to(out)))
     counts = {split: {"groups": len(items),
                       "files": sum(len(g["files"]) for g in items),

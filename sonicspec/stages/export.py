@@ -5,7 +5,9 @@ Per group, under ``<output dir>/<split>/<index>/``: each reverberant source (``s
 (``mixtures/sep_s1s2_noise``…), the RIRs if asked (``rirs/<track>/<point>.wav``, float32) and
 ``metadata.json`` in the SonicSet form — ``source1..N: {audio, start_end_points, words}``,
 ``noise``, ``music`` — extended with the speaker, trajectory, RIR points, microphone, gains,
-acoustic figures and the content keys. Every file is written atomically. The artifact records
+acoustic figures and the content keys; with ``outputs.scale: per_file`` also ``audio_scales``
+(each audio file, relative to the group's folder -> its scale: the signal is the decoded samples
+times it). Every file is written atomically. The artifact records
 the files (each with the SHA-256 of the bytes written, which ``checksums.sha256``, ``verify`` and
 the next build check), the manifest entries and the metadata for the ``dataset`` stage.
 """
@@ -27,7 +29,7 @@ from sonicspec.artifacts import (
     RirGroup,
 )
 from sonicspec.export.checksums import file_record
-from sonicspec.export.files import write_audio, write_json
+from sonicspec.export.files import peak_scale, write_audio, write_json
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.plan.params import ExportParams
 from sonicspec.stages.context import JobContext
@@ -44,24 +46,35 @@ class _GroupWriter:
         self.files: list[dict[str, Any]] = []
         self.recordings: list[dict[str, Any]] = []
         self.rec_ids: dict[str, str] = {}
+        self.scales: dict[str, float] = {}
+        """File (relative to the group's folder) -> scale, with outputs.scale per_file."""
 
     def audio(self, kind: str, name: str, x: np.ndarray, *, float_wav: bool = False,
               custom: dict[str, Any] | None = None) -> str:
         ext = "wav" if float_wav else self.outputs.audio_format
+        subtype = "FLOAT" if float_wav else self.outputs.subtype
         path = self.folder / f"{name}.{ext}"
-        write_audio(path, x, self.rate, audio_format=ext,
-                    subtype="FLOAT" if float_wav else self.outputs.subtype)
+        # outputs.scale per_file: the file peaks just under full scale and its scale (the
+        # signal is the decoded samples times it) goes in the file's tag, the record, the
+        # Lhotse recording and metadata.json's audio_scales; float files keep any level.
+        scaled = self.outputs.scale == "per_file" and subtype != "FLOAT"
+        scale = peak_scale(x, subtype, self.outputs.bits) if scaled else None
+        write_audio(path, x, self.rate, audio_format=ext, subtype=subtype, scale=scale,
+                    bits=self.outputs.bits if scaled else None)
+        if self.outputs.scale == "per_file":
+            self.scales[path.relative_to(self.folder).as_posix()] = 1.0 if scale is None else scale
         rel = path.relative_to(self.out).as_posix()
         x2 = np.atleast_2d(x)
         entry = {"kind": kind, "name": name, **file_record(self.out, path),
                  "channels": int(x2.shape[0]), "num_samples": int(x2.shape[1]),
-                 "sample_rate_hz": self.rate}
+                 "sample_rate_hz": self.rate, **({"scale": scale} if scaled else {})}
         self.files.append(entry)
         if not float_wav:
             rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
             self.rec_ids[name] = rec_id
             self.recordings.append(RecordingEntry(rec_id, rel, self.rate, entry["num_samples"],
-                                                  entry["channels"], custom).to_lhotse())
+                                                  entry["channels"], custom,
+                                                  scale).to_lhotse())
         return rel
 
 
@@ -169,6 +182,8 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         num_samples=render.clip_samples, mixtures=mixtures,
         group_gain_db=mix.group_gain_db, keys=keys,
         microphone_track=microphone_track(line, w.rate))
+    if w.scales:
+        metadata["audio_scales"] = w.scales
     if outputs.metadata:
         write_json(w.folder / "metadata.json", metadata)
         w.files.append({"kind": "metadata", "name": "metadata",
