@@ -423,7 +423,7 @@ def _line(root: Path, rel: str) -> str:
 def test_the_build_writes_the_exports_the_spec_asks_for(root: Path, tmp_path: Path) -> None:
     # outputs.manifests: [huggingface, webdataset]: beside the dataset folder, the same
     # shards `sonicspec export` writes, and a second build rewrites none of them.
-    from sonicspec.cli import export_folder
+    from sonicspec.cli.build import export_folder
 
     for fmt in ("huggingface", "webdataset"):
         built = export_folder(root, fmt)

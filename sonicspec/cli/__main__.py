@@ -1,0 +1,7 @@
+"""``python -m sonicspec.cli``: the ``sonicspec`` command."""
+
+import sys
+
+from sonicspec.cli import main
+
+sys.exit(main())

@@ -1,0 +1,140 @@
+"""Using a built dataset: ``sonicspec report`` (HTML), ``sonicspec evaluate`` (a model's
+scores) and ``sonicspec export`` (Hugging Face or WebDataset shards; sonicspec.dataload)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from sonicspec import __version__
+from sonicspec.cli.common import (
+    EXIT_INVALID,
+    EXIT_OK,
+    report_line,
+    report_unavailable,
+)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from sonicspec.export.report import write_report
+
+    if report_unavailable("sonicspec report"):
+        return EXIT_INVALID
+    folder = Path(args.dataset)
+    if not folder.is_dir():
+        print(f"sonicspec: error: {folder}: no such folder", file=sys.stderr)
+        return EXIT_INVALID
+    if args.group_pages is not None and args.group_pages < 0:
+        print(f"sonicspec: error: --group-pages: expected >= 0, got {args.group_pages}",
+              file=sys.stderr)
+        return EXIT_INVALID
+    from sonicspec.export.report_data import ReportError
+
+    try:
+        report = write_report(folder, args.output, split=args.split,
+                              group_pages=args.group_pages)
+    except ReportError as exc:
+        print(f"sonicspec: error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    print(report_line(report))
+    return EXIT_OK
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from sonicspec.audio.metrics import METRICS
+    from sonicspec.dataload.evaluate import evaluate, summarise, summary_table, write_results
+    from sonicspec.dataload.folder import DatasetError
+
+    metrics = args.metrics or list(METRICS)
+    try:
+        unknown = [m for m in metrics if m not in METRICS]
+        if unknown:
+            raise DatasetError(f"--metrics: expected names from {list(METRICS)}, got "
+                               f"{unknown[0]!r}")
+        rows = evaluate(args.dataset, args.split, args.task, estimates=args.estimates,
+                        oracle=args.oracle, channel=args.channel, metrics=metrics)
+    except DatasetError as exc:
+        print(f"sonicspec: error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    summary = summarise(rows, metrics)
+    settings = {"dataset": str(Path(args.dataset).resolve()), "split": args.split,
+                "task": args.task, "estimates": args.estimates, "oracle": args.oracle,
+                "channel": args.channel, "metrics": metrics, "window_s": 6.0, "hop_s": 3.0,
+                "sonicspec_version": __version__}
+    out = Path(args.output or f"evaluation-{args.split}-{args.task}")
+    csv_path, json_path = write_results(out, rows, summary, settings)
+    print(summary_table(summary, metrics))
+    print(f"scores: {csv_path}\nsummary: {json_path}")
+    return EXIT_OK
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from sonicspec.dataload.folder import DatasetError
+    from sonicspec.dataload.hub import export
+
+    try:
+        result = export(args.dataset, args.output, args.format, splits=args.split,
+                        groups_per_shard=args.groups_per_shard)
+    except DatasetError as exc:
+        print(f"sonicspec: error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    print(f"{args.output}: {len(result['written'])} shard(s) written, {len(result['kept'])} "
+          f"unchanged, {len(result['removed'])} removed ({args.format})")
+    return EXIT_OK
+
+
+def add_report(sub) -> None:
+    """``sonicspec report DATASET``."""
+    p = sub.add_parser("report", help="write an HTML report of a dataset folder: spec, plan, "
+                       "build facts, distributions per split, scenes, groups, warnings")
+    p.add_argument("dataset", metavar="DATASET", help="a dataset folder (outputs.dir)")
+    p.add_argument("-o", "--output", metavar="REPORT.html",
+                   help="where to write it (default: DATASET/report.html); group pages go in "
+                   "the folder beside it named after it (report_files/)")
+    p.add_argument("--split", metavar="S", help="report this split only")
+    p.add_argument("--group-pages", type=int, metavar="N",
+                   help="at most N groups get a page (default: the spec's "
+                   "outputs.report.group_pages, 100)")
+    p.set_defaults(func=cmd_report)
+
+
+def add_evaluate(sub) -> None:
+    """``sonicspec evaluate DATASET``."""
+    from sonicspec.audio.metrics import METRICS
+
+    p = sub.add_parser("evaluate", help="score a model's outputs against a built dataset's "
+                       "targets (SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s)")
+    p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
+    p.add_argument("--split", required=True, help="the split to score (e.g. test)")
+    p.add_argument("--task", required=True, choices=("separation", "enhancement"))
+    p.add_argument("--estimates", metavar="DIR",
+                   help="<DIR>/<split>/<group>/<mixture name>.wav, one channel per target")
+    p.add_argument("--oracle", action="store_true",
+                   help="also score the mixture itself (the baseline) and the targets "
+                   "themselves (the ceiling) as estimates")
+    p.add_argument("--channel", type=int, default=0,
+                   help="the dataset's reference channel (default 0)")
+    p.add_argument("--metrics", nargs="+", metavar="NAME",
+                   help=f"a subset of {' '.join(METRICS)} (default: all)")
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="where scores.csv and summary.json go "
+                   "(default: evaluation-<split>-<task>)")
+    p.set_defaults(func=cmd_evaluate)
+
+
+def add_export(sub) -> None:
+    """``sonicspec export DATASET``."""
+    from sonicspec.dataload.hub import FORMATS
+
+    p = sub.add_parser("export", help="a built dataset as Hugging Face datasets (Parquet) or "
+                       "WebDataset (tar) shards; only changed shards are rewritten")
+    p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
+    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("-o", "--output", required=True, metavar="DIR",
+                   help="the export folder (outside the dataset folder)")
+    p.add_argument("--split", action="append", metavar="SPLIT",
+                   help="export this split (repeat; default: all)")
+    p.add_argument("--groups-per-shard", type=int, default=64, metavar="N",
+                   help="groups per shard (default 64)")
+    p.set_defaults(func=cmd_export)
