@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -384,3 +385,31 @@ def test_a_cap_below_the_decay_is_a_warning_in_the_rir_jobs_log(tmp_path: Path,
     assert record.levelname == "WARNING"
     assert record.getMessage().startswith("scene 'room' (")
     assert "cut at 0.2 s (acoustics.max_rir_cap_s)" in record.getMessage()
+
+
+def test_rirs_a_fixed_length_cuts_while_decaying_are_a_warning_in_the_log(tmp_path: Path,
+                                                                        caplog) -> None:
+    """Issue 28 item 8: a fixed ``max_rir_length_s`` below the room's decay is taken as asked,
+    but the rir job logs a WARNING (what the build summary collects) naming the scene, the
+    group, how many RIRs, the bands' levels and the field to raise."""
+    (tmp_path / "spec.yaml").write_text(SPEC.replace("max_rir_length_s: 0.3}",
+                                                     "max_rir_length_s: 0.05}"))
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    with caplog.at_level("WARNING", logger="sonicspec.stages.rir"):
+        for job in plan.jobs:
+            if job.step in ("mesh", "navigation", "placement", "rir"):
+                run_job(plan, job.key)
+    messages = [r.getMessage() for r in caplog.records if r.name == "sonicspec.stages.rir"]
+    assert messages, "no warning for RIRs cut at 0.05 s"
+    assert re.match(r"scene 'room', group train/000000: \d+ of \d+ RIRs cut at 0.05 s "
+                    r"\(acoustics.max_rir_length_s\) while still decaying \(125 Hz at -\d+ dB",
+                    messages[0]), messages[0]
+    assert messages[0].endswith("raise acoustics.max_rir_length_s or set it to auto")
+    # a decay 60 dB down within the length, or an `auto` cut (the engine's warning): none here
+    from sonicspec.stages.rir import fixed_cut_warning
+
+    done = {"rule": "fixed", "limit_s": 1.0, "level_at_limit_db": [None, None],
+            "fitted_t60_s": [None, None]}
+    assert fixed_cut_warning([{"tail": done}], (500.0, 1000.0), "x") is None
+    auto = {**done, "rule": "auto", "level_at_limit_db": [-20.0, None]}
+    assert fixed_cut_warning([{"tail": auto}], (500.0, 1000.0), "x") is None

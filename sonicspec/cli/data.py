@@ -9,6 +9,7 @@ from pathlib import Path
 
 from sonicspec import __version__
 from sonicspec.cli.common import (
+    EXIT_FAILURE,
     EXIT_INVALID,
     EXIT_OK,
     report_line,
@@ -38,6 +39,14 @@ def cmd_report(args: argparse.Namespace) -> int:
         print(f"sonicspec: error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     print(report_line(report))
+    if report.missing:
+        first = ", ".join(f"{m['path']} ({m['problem']})" for m in report.missing[:3])
+        more = f" and {len(report.missing) - 3} more" if len(report.missing) > 3 else ""
+        print(f"sonicspec: error: the report is incomplete: {len(report.missing)} file(s) of "
+              f"{folder} are missing or empty: {first}{more} (listed under Warnings in the "
+              "report); rebuild the dataset or check it with `sonicspec verify`",
+              file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
 
 
