@@ -75,6 +75,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     csv_path, json_path = write_results(out, rows, summary, settings)
     print(summary_table(summary, metrics))
     print(f"scores: {csv_path}\nsummary: {json_path}")
+    silent = [r for r in rows if r.get("silent_estimate")]
+    if silent:
+        first = silent[0]
+        print(f"sonicspec: warning: {len(silent)} estimate(s) are silent (all zeros) in some "
+              f"windows, {sum(r['silent_estimate'] for r in silent)} windows in all, which are "
+              "not scored (every metric is undefined for silence); first: group "
+              f"{first['group']} {first['mixture']} channel {first['estimate_channel']}, "
+              f"{first['silent_estimate']} of {first['scored']} windows", file=sys.stderr)
     return EXIT_OK
 
 

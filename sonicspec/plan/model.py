@@ -34,7 +34,7 @@ STEPS: tuple[Step, ...] = (
     Step("corpus", 2, 1, 2000, 60, "index (or generate) a corpus"),
     Step("mesh", 1, 1, 4000, 30, "build or import a scene, repair it"),
     Step("navigation", 1, 1, 4000, 30, "walkable area of each floor"),
-    Step("placement", 2, 1, 2000, 10, "mic, sources and trajectories per group"),
+    Step("placement", 3, 1, 2000, 10, "mic, sources and trajectories per group"),
     Step("arrange", 1, 1, 2000, 10, "utterances and clips per track"),
     Step("rir", 17, 1, 4000, 60, "room impulse responses along every trajectory"),
     Step("render", 3, 1, 4000, 30, "moving-source convolution of every track"),
