@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import resource
 import subprocess
 import sys
@@ -272,3 +273,32 @@ def test_plan_summary_needs_no_data_and_says_what_to_get(tmp_path: Path) -> None
             "matches is not taken by earlier splits (1 matched in all); add scenes or lower "
             "scene_count") in result.stderr, result.stderr
     assert "corpora.speech (librispeech): no folder" in result.stderr
+
+
+def test_help_says_what_each_command_does_and_hides_the_internal_one() -> None:
+    """Issue 28 item 14: `job` (the workflow's) was in the top-level help; `evaluate --task`
+    and `export --format` had no help; `init` promised a "commented starting spec" (it writes
+    a preset); `validate --check-files` said it checks that meshes exist (it loads them)."""
+    top = run_cli("--help").stdout
+    assert not re.search(r"^\s+job\b", top, re.M) and "SUPPRESS" not in top
+    assert run_cli("job", "--help").returncode == 0  # still there for the workflow
+    evaluate = run_cli("evaluate", "--help").stdout
+    assert re.search(r"--task \{separation,enhancement\}\s+which mixtures to score", evaluate)
+    export = run_cli("export", "--help").stdout
+    assert re.search(r"--format \{huggingface,webdataset\}\s+huggingface: Parquet", export)
+    assert "'validation'" in export
+    assert "write one of the preset specs" in top
+    assert "commented starting spec" not in top
+    validate = " ".join(run_cli("validate", "--help").stdout.split())
+    assert "load every referenced mesh through the build's reader" in validate
+
+
+def test_pyproject_license_is_an_spdx_expression() -> None:
+    """Issue 28 item 14: the TOML-table `project.license` printed setuptools' deprecation
+    (builds stop after 2027-02-18); PEP 639's SPDX string needs setuptools >= 77."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert project["project"]["license"] == "Apache-2.0"
+    assert project["build-system"]["requires"] == ["setuptools>=77"]
+    assert not any("License ::" in c for c in project["project"].get("classifiers", []))

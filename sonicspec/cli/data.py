@@ -124,7 +124,10 @@ def add_evaluate(sub) -> None:
                        "targets (SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s)")
     p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
     p.add_argument("--split", required=True, help="the split to score (e.g. test)")
-    p.add_argument("--task", required=True, choices=("separation", "enhancement"))
+    p.add_argument("--task", required=True, choices=("separation", "enhancement"),
+                   help="which mixtures to score: separation (one estimate channel per "
+                   "speaker, matched by the best permutation) or enhancement (one channel: "
+                   "the speech)")
     p.add_argument("--estimates", metavar="DIR",
                    help="<DIR>/<split>/<group>/<mixture name>.wav, one channel per target")
     p.add_argument("--oracle", action="store_true",
@@ -147,7 +150,10 @@ def add_export(sub) -> None:
     p = sub.add_parser("export", help="a built dataset as Hugging Face datasets (Parquet) or "
                        "WebDataset (tar) shards; only changed shards are rewritten")
     p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
-    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--format", required=True, choices=FORMATS,
+                   help="huggingface: Parquet shards, one split per file prefix "
+                   "(datasets.load_dataset(DIR) reads them, and names the split 'val' "
+                   "'validation'); webdataset: tar shards, a sample per group")
     p.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="the export folder (outside the dataset folder)")
     p.add_argument("--split", action="append", metavar="SPLIT",
