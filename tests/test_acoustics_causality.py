@@ -67,7 +67,8 @@ def band_gains(h: np.ndarray, delay_samples: float, bank: OctaveFilterBank) -> n
 def test_diffracted_and_reflected_paths_start_at_their_delay() -> None:
     """Behind a screen: the arrival over its top edge and the reflections, each alone through
     the RIR synthesis, have nothing before ``delay - DEFAULT_TAPS // 2`` samples (exactly
-    zero), nothing but the tap's sidelobes before the delay, and their band factors as magnitudes."""
+    zero), nothing but the tap's sidelobes before the delay, and their band factors as
+    magnitudes."""
     src, mic = np.array([2.5, 2.0, 1.0]), np.array([6.0, 2.0, 1.2])
     early = engine.early_arrivals(screen_room(), mic, src[None], settings())
     arrivals = early.at_mic[0]
