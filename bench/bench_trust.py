@@ -17,7 +17,11 @@ Rows:
 - five kills at random points, then a resume to the reference bytes;
 - two builds of one store at once;
 - bad inputs: a YAML alias bomb, a 50 MB spec, 10^6 groups, a 1e9 m room, 10^7 rays,
-  outputs in /etc and ../: each must exit 2 with a message, in bounded memory.
+  outputs in /etc and ../: each must exit 2 with a message, in bounded memory;
+- issue 28: truncated RIRs in the build summary; ``report`` on a deleted FLAC and an empty
+  metadata.json (exit 1, named); ``validate`` of a clip no utterance fits; ``plan --summary``
+  of the SonicSet preset without data; ``evaluate`` of a NaN and of an all-zero estimate; the
+  internal ``job`` command out of ``--help``.
 
 Reproduce:
     python bench/bench_trust.py            # ~6 min on 2 cores
@@ -248,6 +252,75 @@ def bad_input_rows(table: Table, base: Path) -> None:
     row("outputs-../../x", text.replace("dir: out/demo", "dir: ../../x"), command="build")
 
 
+def issue28_rows(table: Table, base: Path, work: Path, fresh: Run) -> None:
+    """Issue 28's faults of this helper's part (items 6, 8, 9, 11, 12, 14), on the built
+    cut-down demo and the presets."""
+    import numpy as np
+    import soundfile as sf
+
+    cut = "while still decaying" in fresh.err
+    table.add("RIRs cut at 0.4 s in a decaying room", "the build summary says so",
+              "summary names them" if cut else "not in the summary", cut, None)
+    built = work / "out" / "demo"
+    folder = base / "i28"
+    shutil.copytree(built, folder / "ds")
+    ds = folder / "ds"
+    flac = sorted(ds.glob("test/*/source1.flac"))[0]
+    flac.unlink()
+    r = sonicspec("report", str(ds), "-o", str(folder / "r1.html"))
+    table.add("report: a FLAC deleted", "exit 1 naming the file",
+              f"exit {r.code}: {first_line(r.err)}",
+              r.code == 1 and flac.relative_to(ds).as_posix() in r.err, r)
+    shutil.copy(built / flac.relative_to(ds), flac)
+    meta = sorted(ds.glob("train/*/metadata.json"))[0]
+    meta.write_text("{}")
+    r = sonicspec("report", str(ds), "-o", str(folder / "r2.html"))
+    table.add("report: an empty metadata.json", "exit 1 naming the file",
+              f"exit {r.code}: {first_line(r.err)}", r.code == 1 and "(empty)" in r.err, r)
+    spec = write_spec(folder)
+    short = folder / "short.yaml"
+    short.write_text(spec.read_text().replace("duration_s: 10.0", "duration_s: 6.0")
+                     .replace("utterance_gap_s: [0.0, 2.0]", "utterance_gap_s: [0.0, 8.0]"))
+    r = sonicspec("validate", str(short))
+    table.add("validate: a clip no utterance fits after the longest gap", "exit 2 (the build "
+              "failed 39 s in)", f"exit {r.code}: {first_line(r.out + r.err)}",
+              r.code == 2 and "utterance_gap_s" in r.out + r.err, r)
+    empty = base / "nodata"
+    empty.mkdir()
+    shutil.copy(ROOT / "specs" / "sonicset.yaml", empty / "sonicset.yaml")
+    r = sonicspec("plan", str(empty / "sonicset.yaml"), "--summary")
+    table.add("plan --summary of the SonicSet preset, no data", "exit 0, '?', what to get",
+              f"exit {r.code}; {'says what to download' if 'to build it, get:' in r.out else '-'}",
+              r.code == 0 and "to build it, get:" in r.out, r)
+    group = sorted(ds.glob("test/*/metadata.json"))[0].parent
+    m = json.loads((group / "metadata.json").read_text())
+    mixes = [x for x in m["mixtures"] if x["task"] == "enhancement"]
+    n, rate = m["num_samples"], m["sample_rate_hz"]
+    for name, fill in (("nan", np.nan), ("zeros", 0.0)):
+        est = folder / f"est_{name}" / group.relative_to(ds)
+        est.mkdir(parents=True)
+        for x in mixes:
+            data = np.zeros(n) if fill == 0.0 else np.full(n, 0.01)
+            if name == "nan":
+                data[n // 2] = fill
+            sf.write(str(est / f"{x['name']}.wav"), data, rate, subtype="FLOAT")
+        r = sonicspec("evaluate", str(ds), "--split", "test", "--task", "enhancement",
+                      "--estimates", str(folder / f"est_{name}"), "--metrics", "si_snr", "sdr",
+                      "pesq_wb", "-o", str(folder / f"scores_{name}"))
+        if name == "nan":
+            table.add("evaluate: an estimate with a NaN", "exit 2 naming the file",
+                      f"exit {r.code}: {first_line(r.err)}",
+                      r.code == 2 and "not finite" in r.err, r)
+        else:
+            warned = next((x for x in r.err.splitlines() if "are silent" in x), "")
+            table.add("evaluate: all-zero estimates", "scored as undefined, counted, exit 0",
+                      f"exit {r.code}: {warned[:110]}", r.code == 0 and bool(warned), r)
+    r = sonicspec("--help")
+    table.add("sonicspec --help", "no internal `job` command listed",
+              "job listed" if re.search(r"^\s+job\b", r.out, re.M) else "not listed",
+              not re.search(r"^\s+job\b", r.out, re.M), r)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="no kills, no edits table")
@@ -261,6 +334,7 @@ def main() -> None:
         b = sonicspec("build", str(spec), "--cores", "2")
         table.add("fresh build", "every job runs", f"exit {b.code}, {ran(b.err)} jobs run",
                   b.code == 0, b)
+        fresh = b
         reference = digest(work / "out")
         b = sonicspec("build", str(spec), "--cores", "2")
         checked = re.search(r"checked [^\n]*", b.err)
@@ -284,6 +358,7 @@ def main() -> None:
             kill_rows(table, base, reference)
         concurrent_row(table, base)
         bad_input_rows(table, base)
+        issue28_rows(table, base, work, fresh)
     print()
     print(table.markdown())
     print(f"\n$ python bench/bench_trust.py{' --quick' if args.quick else ''}   "

@@ -18,7 +18,7 @@ def write_spec(tmp: Path) -> Path:
     """The demo spec, smaller and with a cheaper tracer (the machinery, not the physics, is
     under test)."""
     text = (ROOT / "specs" / "demo.yaml").read_text()
-    for old, new in (("rays: 4000", "rays: 600"), ("max_rir_length_s: 1.0",
+    for old, new in (("rays: 4000", "rays: 600"), ("max_rir_length_s: auto",
                                                    "max_rir_length_s: 0.4"),
                      ("train: {groups: 4,", "train: {groups: 2,"),
                      ("speakers_per_split: 3, utterances_per_speaker: 4",

@@ -189,6 +189,9 @@ CASES = [
     ("diffraction-edge-budget", "image_source_order: 2",
      "image_source_order: 2\n  diffraction_max_edges: -1", "acoustics.diffraction_max_edges",
      33, True),
+    # issue 28 item 11: a clip no utterance fits after the longest gap (the build failed 39 s in)
+    ("clip-shorter-than-gap", "duration_s: 20", "duration_s: 6", "mixture.utterance_gap_s", 37,
+     False),
     ("band-above-nyquist", "sample_rate_hz: 16000", "sample_rate_hz: 16000",
      "acoustics.bands_hz[1]", 33, False),
     ("mic-above-ceiling", "radius_m: 0.05", "radius_m: 0.05\n  height_m: 3.5",

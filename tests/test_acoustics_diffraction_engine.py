@@ -157,11 +157,13 @@ def test_a_thin_thick_screen_heard_over_both_edges_is_the_half_plane() -> None:
 
 
 def walk_levels(scene, mic, points, diffraction=True) -> np.ndarray:
-    """Level (dB) of each position's early sound: the first 5 ms after the earliest path."""
+    """Level (dB) of each position's early sound: the first 5 ms after the earliest path
+    (-300 dB for silence: with causal band shaping nothing of a later path reaches back into
+    a blocked position's window)."""
     out, facts = rirs(scene, mic, points, diffraction)
     start = min(np.linalg.norm(points - mic, axis=1)) / C
-    return np.array([10 * np.log10(np.sum(r[0, int(start * FS) - 40:
-                                          int((start + 0.008) * FS)].astype(float) ** 2))
+    return np.array([10 * np.log10(1e-30 + np.sum(r[0, int(start * FS) - 40:
+                                                 int((start + 0.008) * FS)].astype(float) ** 2))
                      for r in out]), [f["direct"] for f in facts]
 
 

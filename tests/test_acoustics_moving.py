@@ -311,7 +311,7 @@ def test_directions_from_an_image_are_the_numpy_form() -> None:
 def test_a_path_valid_over_part_of_the_walk_renders_what_the_whole_would() -> None:
     """render_paths renders a path only over the emissions it is heard from (its band
     factors are zero elsewhere), a few silent ones kept each side: the same signal as the
-    whole walk rendered, the band factors interpolated between the points in numpy."""
+    whole walk rendered, the points' shaping filters interpolated between them in numpy."""
     from sonicspec.acoustics.moving.delays import render_paths
 
     n = 2 * FS
@@ -325,8 +325,11 @@ def test_a_path_valid_over_part_of_the_walk_renders_what_the_whole_would() -> No
     (ours,) = render_paths(dry, index, points, one.with_weights(weights), bank, n_out=n + 600,
                            speed_of_sound_m_s=C)
     at = np.arange(len(points), dtype=np.float64)
-    factors = np.stack([np.interp(index, at, weights[0, :, b]) for b in range(bank.n_bands)])
-    x = np.sum(factors * bank.split(dry), axis=0)
+    # each point's causal shaping filter on the dry signal, weighted linearly between points
+    x = np.zeros(n)
+    for p, h in enumerate(bank.shaping_filters(weights[0])):
+        hat = np.interp(index, at, np.eye(len(points))[p])
+        x += hat * np.convolve(dry, h)[:n]
     track = np.stack([np.interp(index, at, points[:, i]) for i in range(3)], axis=1)
     whole = render_path(x, track, one.images_m[0], FS, speed_of_sound_m_s=C, n_out=n + 600)
     assert np.count_nonzero(x) < n / 2  # the path is silent over most of the walk

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import resource
 import subprocess
 import sys
@@ -244,3 +245,60 @@ def test_plan_on_invalid_spec_exits_2(tmp_path: Path) -> None:
 def test_bad_arguments_exit_2() -> None:
     assert run_cli("validate").returncode == 2
     assert run_cli("init", "--preset", "nonsense").returncode == 2
+
+
+def test_plan_summary_needs_no_data_and_says_what_to_get(tmp_path: Path) -> None:
+    """Issue 28 item 12: `plan --summary` of the SonicSet preset without its data exited 2
+    ("glob 'data/mp3d/*/*.glb' matches no file") though its help says no data is needed."""
+    spec = write(tmp_path, "sonicset.yaml", (ROOT / "specs" / "sonicset.yaml").read_text())
+    result = run_cli("plan", "--summary", str(spec))
+    assert result.returncode == 0, result.stderr
+    rows = {line.split()[0]: line.split()[1:] for line in result.stdout.splitlines()
+            if line.split() and line.split()[0] in ("train", "val", "test")}
+    assert rows["train"][:3] == ["?", "?", "?"] and rows["test"][2] == "247"
+    assert "to build it, get:" in result.stdout
+    for needed in ("scenes[0] (mp3d): no file matches 'data/mp3d/*/*.glb'",
+                   "data/mp3d/<building id>/<building id>.glb",
+                   "corpora.speech (librispeech)", "train-clean-360",
+                   "<speaker>-<chapter>.trans.txt", "FSD50K.ground_truth/dev.csv",
+                   "fma_metadata/tracks.csv"):
+        assert needed in result.stdout, needed
+    # One fake scan: the plan's error is one clear sentence, then what to get.
+    scan = tmp_path / "data" / "mp3d" / "abc" / "abc.glb"
+    scan.parent.mkdir(parents=True)
+    scan.write_bytes(b"glTF")
+    result = run_cli("plan", str(spec))
+    assert result.returncode == 2
+    assert ("splits.train.scene_count: asks for 62 scenes, but only 1 of the scenes it "
+            "matches is not taken by earlier splits (1 matched in all); add scenes or lower "
+            "scene_count") in result.stderr, result.stderr
+    assert "corpora.speech (librispeech): no folder" in result.stderr
+
+
+def test_help_says_what_each_command_does_and_hides_the_internal_one() -> None:
+    """Issue 28 item 14: `job` (the workflow's) was in the top-level help; `evaluate --task`
+    and `export --format` had no help; `init` promised a "commented starting spec" (it writes
+    a preset); `validate --check-files` said it checks that meshes exist (it loads them)."""
+    top = run_cli("--help").stdout
+    assert not re.search(r"^\s+job\b", top, re.M) and "SUPPRESS" not in top
+    assert run_cli("job", "--help").returncode == 0  # still there for the workflow
+    evaluate = run_cli("evaluate", "--help").stdout
+    assert re.search(r"--task \{separation,enhancement\}\s+which mixtures to score", evaluate)
+    export = run_cli("export", "--help").stdout
+    assert re.search(r"--format \{huggingface,webdataset\}\s+huggingface: Parquet", export)
+    assert "'validation'" in export
+    assert "write one of the preset specs" in top
+    assert "commented starting spec" not in top
+    validate = " ".join(run_cli("validate", "--help").stdout.split())
+    assert "load every referenced mesh through the build's reader" in validate
+
+
+def test_pyproject_license_is_an_spdx_expression() -> None:
+    """Issue 28 item 14: the TOML-table `project.license` printed setuptools' deprecation
+    (builds stop after 2027-02-18); PEP 639's SPDX string needs setuptools >= 77."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert project["project"]["license"] == "Apache-2.0"
+    assert project["build-system"]["requires"] == ["setuptools>=77"]
+    assert not any("License ::" in c for c in project["project"].get("classifiers", []))

@@ -7,6 +7,7 @@ import io
 import json
 import math
 import multiprocessing
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -522,3 +523,51 @@ def _torch_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_an_estimate_with_nan_or_inf_is_named_not_a_crash(root: Path, tmp_path: Path,
+                                                          bad: float) -> None:
+    """Issue 28 item 9: 'matrix contains invalid numeric entries' was a traceback."""
+    _write_estimates(root, tmp_path, "separation", swap=False)
+    path = tmp_path / "test/000000/sep_s1s2_noise.wav"
+    data, _ = sf.read(str(path))
+    data[1234, 1] = bad
+    data[5000, 0] = bad
+    sf.write(str(path), data, 16000, subtype="FLOAT")
+    with pytest.raises(DatasetError, match=r"group test/000000: .*sep_s1s2_noise.wav: 2 "
+                       r"sample\(s\) are not finite \(NaN or Inf; the first at sample 1234 of "
+                       r"channel 1\)"):
+        evaluate(root, "test", "separation", estimates=tmp_path, metrics=["si_snr"])
+
+
+def test_a_silent_estimate_is_scored_as_undefined_and_counted(root: Path,
+                                                              tmp_path: Path) -> None:
+    """Issue 28 item 9: an all-zero estimate crashed PESQ ('cannot convert float NaN to
+    integer') and scored SDR 200 dB (the ceiling). Its windows are undefined for every
+    metric: left out of the means, counted in ``silent_estimate``; the CLI warns."""
+    _write_estimates(root, tmp_path, "enhancement", swap=False)
+    files = sorted((tmp_path / "test/000000").glob("*.wav"))
+    silent, partly = files[0], files[1]
+    data, _ = sf.read(str(silent))
+    sf.write(str(silent), np.zeros_like(data), 16000, subtype="FLOAT")
+    data, _ = sf.read(str(partly))
+    data[:16000 * 6] = 0.0  # the first window [0, 6 s) silent
+    sf.write(str(partly), data, 16000, subtype="FLOAT")
+    metrics = ["si_snr", "sdr", "pesq_nb", "pesq_wb", "stoi"]
+    rows = {r["mixture"]: r for r in evaluate(root, "test", "enhancement",
+                                              estimates=tmp_path, metrics=metrics)}
+    zero, some = rows[silent.stem], rows[partly.stem]
+    assert zero["silent_estimate"] == zero["scored"] > 0
+    assert all(np.isnan(zero[m]) for m in metrics)
+    assert some["silent_estimate"] == 1 and some["scored"] >= 2
+    assert all(np.isfinite(some[m]) for m in metrics)
+    out = tmp_path / "scores"
+    result = subprocess.run(
+        [sys.executable, "-m", "sonicspec.cli", "evaluate", str(root), "--split", "test",
+         "--task", "enhancement", "--estimates", str(tmp_path), "--metrics", "si_snr", "sdr",
+         "-o", str(out)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert re.search(r"warning: 2 estimate\(s\) are silent \(all zeros\) in some windows, "
+                     r"\d+ windows in all, which are not scored", result.stderr), result.stderr
+    assert "silent_estimate" in (out / "scores.csv").read_text().splitlines()[0]

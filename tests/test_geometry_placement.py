@@ -422,3 +422,43 @@ def test_polyline_distance():
     assert polyline_distance(path, [5, 1.5, 0]) == pytest.approx(1.0)
     assert polyline_distance(path, [-3, 4, 0]) == pytest.approx(5.0)
     assert polyline_distance(path[:1], [0, 0, 2]) == pytest.approx(2.0)
+
+
+def test_polylines_distance_is_exact_against_dense_sampling() -> None:
+    from sonicspec.geometry.placement import polylines_distance
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        a, b = rng.uniform(0, 5, (4, 3)), rng.uniform(0, 5, (3, 3))
+        t = np.linspace(0, 1, 801)[:, None]
+        dense = [np.concatenate([p + t * (q - p) for p, q in itertools.pairwise(x)])
+                 for x in (a, b)]
+        brute = min(np.linalg.norm(dense[0] - y, axis=1).min() for y in dense[1])
+        assert polylines_distance(a, b) <= brute + 1e-12
+        assert polylines_distance(a, b) == pytest.approx(brute, abs=5e-3)
+    crossing = polylines_distance(np.array([[0, 0, 0], [2, 0, 0.0]]),
+                                  np.array([[1, -1, 0.5], [1, 1, 0.5]]))
+    assert crossing == pytest.approx(0.5, abs=1e-12)  # the interior closest points
+
+
+def test_sources_keep_their_distance_from_a_moving_microphones_whole_walk(hall) -> None:
+    """Issue 28 item 11: placement drew sources around the walk's start only; one came
+    within 0.05 m of the walking microphone and the rir job refused it. Every source and
+    every path now keeps min_path_distance_m from the whole walk."""
+    from sonicspec.geometry.placement import polylines_distance
+
+    walk = ((1.0, 5.5, 1.5), (8.5, 5.5, 1.5), (8.5, 1.0, 1.5))
+    rules = dict(mic_position_m=walk[0], min_path_distance_m=0.6)
+    closest_before, closest_now = [], []
+    for seed in SEEDS:
+        for with_walk, out in ((False, closest_before), (True, closest_now)):
+            settings = PlacementSettings(**rules, mic_path_m=walk if with_walk else None)
+            p = sample_placement(hall, settings, scene_id="hall",
+                                 speech=["shortest_path", "line", "static"], noise=True,
+                                 music=True, rng=np.random.default_rng(seed))
+            gaps = [polylines_distance(s.path_m, np.asarray(walk)) for s in p.speech]
+            gaps += [polyline_distance(np.asarray(walk), s.start_m)
+                     for s in (p.noise, p.music)]
+            out.append(min(gaps))
+    assert min(closest_before) < 0.6  # the fault: the walk was not looked at
+    assert min(closest_now) >= 0.6 - 1e-9

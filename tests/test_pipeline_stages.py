@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -404,11 +405,42 @@ def test_the_rir_job_records_its_edges_and_image_source_order(tmp_path: Path, ca
     data = ArtifactStore(plan.store_dir).read_data("rir", rir_job.key)
     for group in data["groups"]:
         edges = group["diffraction_edges"]
-        assert (edges["found"], edges["kept"]) == (12, 2) and edges["near_points"] >= 2
+        # the box stands on the floor: its four bottom edges are buried, not in the air
+        assert (edges["found"], edges["kept"], edges["buried_left_out"]) == (8, 2, 4)
+        assert edges["near_points"] >= 2
         assert "distance to the nearest of" in edges["rule"]
         for source in group["sources"]:
             assert source["image_source_order"] == source["image_source_order_asked"] == 1
             assert source["image_source_order_stopped"] is None
     lines = [r.getMessage() for r in caplog.records if "diffraction keeps" in r.getMessage()]
     assert len(lines) == len(data["groups"])
-    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+    assert not [r for r in caplog.records if r.levelname == "WARNING"
+                and "image-source order" in r.getMessage()]
+
+
+def test_rirs_a_fixed_length_cuts_while_decaying_are_a_warning_in_the_log(tmp_path: Path,
+                                                                        caplog) -> None:
+    """Issue 28 item 8: a fixed ``max_rir_length_s`` below the room's decay is taken as asked,
+    but the rir job logs a WARNING (what the build summary collects) naming the scene, the
+    group, how many RIRs, the bands' levels and the field to raise."""
+    (tmp_path / "spec.yaml").write_text(SPEC.replace("max_rir_length_s: 0.3}",
+                                                     "max_rir_length_s: 0.05}"))
+    plan = compile_spec(load_spec(tmp_path / "spec.yaml"))
+    with caplog.at_level("WARNING", logger="sonicspec.stages.rir"):
+        for job in plan.jobs:
+            if job.step in ("mesh", "navigation", "placement", "rir"):
+                run_job(plan, job.key)
+    messages = [r.getMessage() for r in caplog.records if r.name == "sonicspec.stages.rir"]
+    assert messages, "no warning for RIRs cut at 0.05 s"
+    assert re.match(r"scene 'room', group train/000000: \d+ of \d+ RIRs cut at 0.05 s "
+                    r"\(acoustics.max_rir_length_s\) while still decaying \(125 Hz at -\d+ dB",
+                    messages[0]), messages[0]
+    assert messages[0].endswith("raise acoustics.max_rir_length_s or set it to auto")
+    # a decay 60 dB down within the length, or an `auto` cut (the engine's warning): none here
+    from sonicspec.stages.rir import fixed_cut_warning
+
+    done = {"rule": "fixed", "limit_s": 1.0, "level_at_limit_db": [None, None],
+            "fitted_t60_s": [None, None]}
+    assert fixed_cut_warning([{"tail": done}], (500.0, 1000.0), "x") is None
+    auto = {**done, "rule": "auto", "level_at_limit_db": [-20.0, None]}
+    assert fixed_cut_warning([{"tail": auto}], (500.0, 1000.0), "x") is None

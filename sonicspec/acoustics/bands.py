@@ -7,6 +7,13 @@ included) and the highest everything up to Nyquist. The band responses therefore
 at every frequency, so splitting a signal and summing the bands returns it to float precision —
 what RIR synthesis from per-band parts needs. Each response is real, non-negative and exactly 1
 at its band centre (transitions narrower than an octave never reach a centre).
+
+Splitting is for analysis (band figures of an RIR). A *path* shaped by per-band gains is not
+split and re-summed: zero-phase band filters ring before the path's delay (a diffracted arrival
+behind a screen rose up to 0.4 ms early, −40…−60 dB energy up to 6 ms early). Its filter is the
+minimum-phase one of the same magnitude ``|Σ_b g_b·R_b(f)|``
+(:meth:`OctaveFilterBank.shaping_filters`): causal, it starts at the path's delay, and a flat
+path (all gains equal) is a plain scaled impulse.
 """
 
 from __future__ import annotations
@@ -155,7 +162,102 @@ class OctaveFilterBank:
         bands = bands[..., pad:pad + n]
         return np.moveaxis(bands, -1, axis + 1 if axis >= 0 else axis)
 
+    def shaping_fft_size(self) -> int:
+        """FFT length of :meth:`shaping_spectra`: room for the shaping filters' ringing
+        (``2·padding()``) and a fractional tap after it."""
+        return 1 << math.ceil(math.log2(2 * self.padding() + 128))
+
+    def shaping_spectra(self, gains: np.ndarray, n_fft: int | None = None) -> np.ndarray:
+        """Spectra of the causal filters that shape a path by band gains, ``(N, n_fft//2+1)``.
+
+        Row ``n`` has the magnitude ``Π_b |g_b|^R_b(f)`` — each band's gain at its centre, the
+        gains interpolated in dB across the crossovers (the bands' responses sum to one) — and
+        minimum phase: ``exp(Σ_b log|g_b|·K_b(f))``, ``K_b`` the bank's responses made
+        analytic (their folded real cepstra), so its impulse response starts at t = 0 and
+        nothing of it comes earlier. A row of one sign throughout gets that sign; a row mixing
+        signs is shaped as its positive part minus its negative part (each minimum-phase).
+        Gains are floored at -100 dB of the row's largest.
+        """
+        g = np.atleast_2d(np.asarray(gains, dtype=np.float64))
+        if g.ndim != 2 or g.shape[1] != self.n_bands:
+            raise AcousticsError(f"shaping gains: expected (N, {self.n_bands}), got "
+                                 f"{g.shape}")
+        n_fft = int(n_fft or self.shaping_fft_size())
+        level_basis, phase_basis = _analytic_responses(self.sample_rate_hz, self.bands_hz,
+                                                       self.transition_octaves, n_fft)
+        out = np.zeros((g.shape[0], level_basis.shape[1]), dtype=np.complex128)
+        for sign in (1.0, -1.0):
+            part = np.maximum(sign * g, 0.0)
+            rows = np.flatnonzero(part.any(axis=1))
+            if rows.size:
+                part = part[rows]
+                floor = _SHAPING_FLOOR * part.max(axis=1, keepdims=True)
+                logs = np.log(np.maximum(part, floor))
+                # log-magnitude and phase, band by band (real arithmetic; no BLAS, whose
+                # threads fight the build's other jobs)
+                level = logs[:, :1] * level_basis[0]
+                phase = logs[:, :1] * phase_basis[0]
+                for b in range(1, self.n_bands):
+                    level += logs[:, b:b + 1] * level_basis[b]
+                    phase += logs[:, b:b + 1] * phase_basis[b]
+                np.exp(level, out=level)
+                spectra = np.empty(level.shape, dtype=np.complex128)
+                spectra.real = level * np.cos(phase)
+                spectra.imag = level * np.sin(phase)
+                out[rows] += sign * spectra
+        return out
+
+    def shaping_filters(self, gains: np.ndarray) -> list[np.ndarray]:
+        """Causal impulse responses of :meth:`shaping_spectra`, one per row of ``gains``,
+        cut where less than 1e-10 of its energy is left; a row of equal gains is the
+        one-sample filter ``[g]`` (exactly what it was)."""
+        g = np.atleast_2d(np.asarray(gains, dtype=np.float64))
+        flat = np.all(g == g[:, :1], axis=1)
+        out: list[np.ndarray] = [np.array([row[0]]) for row in g[:, :1]]
+        shaped = np.flatnonzero(~flat)
+        if shaped.size:
+            n_fft = self.shaping_fft_size()
+            h = np.fft.irfft(self.shaping_spectra(g[shaped], n_fft), n_fft, axis=-1)
+            for n, row in zip(shaped, h, strict=True):
+                out[n] = row[:_decayed_length(row, n_fft)]
+        return out
+
     @staticmethod
     def merge(bands: np.ndarray) -> np.ndarray:
         """Sum of the bands (the inverse of :meth:`split`)."""
         return np.asarray(bands).sum(axis=0)
+
+
+_SHAPING_FLOOR = 1e-5  # -100 dB of the largest magnitude: where the log stops following it
+_SHAPING_TAIL = 1e-10  # energy share left in a cut shaping filter
+
+
+@functools.lru_cache(maxsize=32)
+def _analytic_responses(sample_rate_hz: float, bands_hz: tuple[float, ...],
+                        transition_octaves: float, n_fft: int
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """``K_b(f)``: band ``b``'s response as the log-magnitude of a minimum-phase filter
+    (the causal part of its real cepstrum, doubled), on the rfft grid of ``n_fft``; computed
+    on a 16× finer grid so the cepstrum does not alias, read back every 16th bin. Its real
+    part (the response) and imaginary part (the phase it brings), each contiguous."""
+    fine = 16 * n_fft
+    resp = _responses(sample_rate_hz, bands_hz, transition_octaves, fine)
+    cep = np.fft.irfft(resp, fine, axis=-1)
+    half = fine // 2
+    cep[:, 1:half] *= 2.0
+    cep[:, half + 1:] = 0.0
+    spectrum = np.fft.rfft(cep, axis=-1)[:, ::16]
+    level, phase = np.ascontiguousarray(spectrum.real), np.ascontiguousarray(spectrum.imag)
+    level.flags.writeable = False
+    phase.flags.writeable = False
+    return level, phase
+
+
+def _decayed_length(h: np.ndarray, cap: int) -> int:
+    """Samples of ``h`` before all but ``_SHAPING_TAIL`` of its energy has come, capped."""
+    energy = h * h
+    tail = np.cumsum(energy[::-1])[::-1]
+    total = tail[0]
+    if total <= 0:
+        return 1
+    return int(min(cap, np.flatnonzero(tail > _SHAPING_TAIL * total)[-1] + 1))

@@ -51,13 +51,13 @@ def si_snr(estimate: np.ndarray, target: np.ndarray) -> float:
 def sdr(estimate: np.ndarray, target: np.ndarray, filter_length: int = 512) -> float:
     """BSS Eval SDR of ``estimate`` against ``target`` (1-D), dB, through fast_bss_eval.
 
-    A silent target has no SDR: NaN (the window is left out of the mean); an estimate that is
-    the target scaled scores ``SDR_MAX_DB``.
+    A silent target or a silent (all-zero) estimate has no SDR: NaN (the window is left out of
+    the mean); an estimate that is the target scaled scores ``SDR_MAX_DB``.
     """
     t = np.asarray(target, dtype=np.float64)
-    if not np.any(t):
-        return math.nan
     e = np.asarray(estimate, dtype=np.float64)
+    if not np.any(t) or not np.any(e):  # 0 / 0 either way (a silent estimate was "perfect")
+        return math.nan
     residual = e - (np.dot(e, t) / np.dot(t, t)) * t
     if np.dot(residual, residual) <= 1e-20 * np.dot(e, e):
         # A scaled copy of the target: no distortion to measure (fast_bss_eval 0.1.4 fails on
@@ -80,10 +80,12 @@ def _to_16k(x: np.ndarray, rate: int) -> np.ndarray:
 
 def pesq(estimate: np.ndarray, target: np.ndarray, sample_rate_hz: int, mode: str) -> float:
     """PESQ (``mode`` ``"nb"`` or ``"wb"``) through the ``pesq`` package; NaN when it finds no
-    speech in the window (its ``NoUtterancesError``)."""
+    speech in the window (its ``NoUtterancesError``) or the estimate is silent (all zeros)."""
     lib = _need("pesq")
     rate = int(sample_rate_hz)
     ref, deg = np.asarray(target, np.float64), np.asarray(estimate, np.float64)
+    if not np.any(deg):  # P.862 levels the signal first: a silent one has no level (it crashed)
+        return math.nan
     if rate not in (8000, 16000) or (mode == "wb" and rate != 16000):
         ref, deg, rate = _to_16k(ref, rate), _to_16k(deg, rate), 16000
     try:
@@ -160,19 +162,25 @@ def windowed_scores(estimate: np.ndarray, target: np.ndarray, mixture: np.ndarra
 
     A window where the target is silent (RMS below ``SILENT_TARGET_DB``: the speaker has not
     begun or has finished) scores nothing, as do windows where a metric is undefined (NaN):
-    they are left out of that mean. ``windows`` counts every window, ``scored`` those of a
-    heard target.
+    they are left out of that mean. A window where the *estimate* is silent (all zeros: a
+    model that output nothing there) has every metric undefined — SI-SNR and SDR are 0 / 0,
+    P.862 cannot level silence — so it scores nothing either, but it is counted:
+    ``silent_estimate`` (of the ``scored`` windows), which ``sonicspec evaluate`` reports.
+    ``windows`` counts every window, ``scored`` those of a heard target.
     """
     spans = windows(len(target), sample_rate_hz, window_s, hop_s)
+    heard = [_level_db(target[a:b]) >= SILENT_TARGET_DB for a, b in spans]
+    silent = [h and not np.any(estimate[a:b]) for h, (a, b) in zip(heard, spans, strict=True)]
     rows = [score_pair(estimate[a:b], target[a:b], mixture[a:b], sample_rate_hz, metrics)
-            if _level_db(target[a:b]) >= SILENT_TARGET_DB else dict.fromkeys(metrics, math.nan)
-            for a, b in spans]
+            if h and not quiet else dict.fromkeys(metrics, math.nan)
+            for h, quiet, (a, b) in zip(heard, silent, spans, strict=True)]
     out = {}
     for name in metrics:
         values = np.array([r[name] for r in rows], dtype=np.float64)
         out[name] = float(np.nanmean(values)) if np.any(np.isfinite(values)) else math.nan
     out["windows"] = len(spans)
-    out["scored"] = sum(_level_db(target[a:b]) >= SILENT_TARGET_DB for a, b in spans)
+    out["scored"] = sum(heard)
+    out["silent_estimate"] = sum(silent)
     return out
 
 

@@ -178,7 +178,10 @@ def add_build(sub) -> None:
 
 def add_job(sub) -> None:
     """``sonicspec job --plan PLAN KEY``."""
-    p = sub.add_parser("job", help="run one job of a compiled plan (used by the workflow)")
+    # Internal (the workflow's rules call it): no help= keeps it out of the command list
+    # (argparse.SUPPRESS there prints "==SUPPRESS==" before Python 3.13).
+    p = sub.add_parser("job", description="run one job of a compiled plan (used by the "
+                       "workflow; internal)")
     p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")
     p.add_argument("key", metavar="KEY", help="the job's content key")
     p.set_defaults(func=cmd_job)

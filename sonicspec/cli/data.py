@@ -9,6 +9,7 @@ from pathlib import Path
 
 from sonicspec import __version__
 from sonicspec.cli.common import (
+    EXIT_FAILURE,
     EXIT_INVALID,
     EXIT_OK,
     report_line,
@@ -38,6 +39,14 @@ def cmd_report(args: argparse.Namespace) -> int:
         print(f"sonicspec: error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     print(report_line(report))
+    if report.missing:
+        first = ", ".join(f"{m['path']} ({m['problem']})" for m in report.missing[:3])
+        more = f" and {len(report.missing) - 3} more" if len(report.missing) > 3 else ""
+        print(f"sonicspec: error: the report is incomplete: {len(report.missing)} file(s) of "
+              f"{folder} are missing or empty: {first}{more} (listed under Warnings in the "
+              "report); rebuild the dataset or check it with `sonicspec verify`",
+              file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
 
 
@@ -66,6 +75,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     csv_path, json_path = write_results(out, rows, summary, settings)
     print(summary_table(summary, metrics))
     print(f"scores: {csv_path}\nsummary: {json_path}")
+    silent = [r for r in rows if r.get("silent_estimate")]
+    if silent:
+        first = silent[0]
+        print(f"sonicspec: warning: {len(silent)} estimate(s) are silent (all zeros) in some "
+              f"windows, {sum(r['silent_estimate'] for r in silent)} windows in all, which are "
+              "not scored (every metric is undefined for silence); first: group "
+              f"{first['group']} {first['mixture']} channel {first['estimate_channel']}, "
+              f"{first['silent_estimate']} of {first['scored']} windows", file=sys.stderr)
     return EXIT_OK
 
 
@@ -107,7 +124,10 @@ def add_evaluate(sub) -> None:
                        "targets (SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s)")
     p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
     p.add_argument("--split", required=True, help="the split to score (e.g. test)")
-    p.add_argument("--task", required=True, choices=("separation", "enhancement"))
+    p.add_argument("--task", required=True, choices=("separation", "enhancement"),
+                   help="which mixtures to score: separation (one estimate channel per "
+                   "speaker, matched by the best permutation) or enhancement (one channel: "
+                   "the speech)")
     p.add_argument("--estimates", metavar="DIR",
                    help="<DIR>/<split>/<group>/<mixture name>.wav, one channel per target")
     p.add_argument("--oracle", action="store_true",
@@ -130,7 +150,10 @@ def add_export(sub) -> None:
     p = sub.add_parser("export", help="a built dataset as Hugging Face datasets (Parquet) or "
                        "WebDataset (tar) shards; only changed shards are rewritten")
     p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
-    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--format", required=True, choices=FORMATS,
+                   help="huggingface: Parquet shards, one split per file prefix "
+                   "(datasets.load_dataset(DIR) reads them, and names the split 'val' "
+                   "'validation'); webdataset: tar shards, a sample per group")
     p.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="the export folder (outside the dataset folder)")
     p.add_argument("--split", action="append", metavar="SPLIT",

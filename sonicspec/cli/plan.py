@@ -20,6 +20,7 @@ from sonicspec.cli.common import (
 def cmd_plan(args: argparse.Namespace) -> int:
     from sonicspec.errors import SonicspecError
     from sonicspec.plan.compile import layouts_of, plan_changes, recorded_keys
+    from sonicspec.plan.data_needs import missing_data
     from sonicspec.plan.summary import format_summary, summarize
     from sonicspec.spec.splits import EACH_SPEAKER_PER_SCENE
     from sonicspec.stages.workflow import progress
@@ -32,16 +33,26 @@ def cmd_plan(args: argparse.Namespace) -> int:
         layouts = layouts_of(loaded)
         unread = None
     except SonicspecError as err:
-        if any(s.groups == EACH_SPEAKER_PER_SCENE for s in loaded.spec.splits.values()):
+        per_speaker = any(s.groups == EACH_SPEAKER_PER_SCENE
+                          for s in loaded.spec.splits.values())
+        if per_speaker and not args.summary:
             print(f"sonicspec: error: {args.spec}: {err}", file=sys.stderr)
+            for line in missing_data(loaded.spec, loaded.base_dir.resolve()):
+                print(f"  {line}", file=sys.stderr)
             return EXIT_INVALID
-        # Fixed group counts: the numbers stand without the data; scenes and speakers do not.
+        # The summary needs no data: what the data decides (scenes, speakers, the groups of a
+        # split composed per speaker) is '?'.
         layouts, unread = None, str(err)
     summary = summarize(loaded.spec, layouts)
     if args.summary:
         print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
         if unread is not None and not args.json:
-            print(f"(scenes and speakers not counted: {unread})")
+            print(f"(? : counted from the data, which is not there: {unread})")
+            missing = missing_data(loaded.spec, loaded.base_dir.resolve())
+            if missing:
+                print("to build it, get:")
+                for line in missing:
+                    print(f"  {line}")
         return EXIT_OK
     if not preflight_or_exit(loaded, args.spec):
         return EXIT_INVALID

@@ -130,7 +130,9 @@ def add_validate(sub) -> None:
     p.add_argument(
         "--check-files",
         action="store_true",
-        help="also check that referenced meshes, SOFA files and corpus folders exist",
+        help="also check the data: load every referenced mesh through the build's reader, "
+        "probe the corpus folders' audio, check that SOFA files exist and that the optional "
+        "packages the spec needs are installed (slower: meshes are read)",
     )
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print only problems")
@@ -148,9 +150,12 @@ def add_init(sub) -> None:
     """``sonicspec init``."""
     from sonicspec.spec.templates import PRESETS
 
-    p = sub.add_parser("init", help="write a commented starting spec that validates as written")
+    p = sub.add_parser("init", help="write one of the preset specs (default: the demo, its "
+                       "comments included) to start from; it validates as written")
     p.add_argument(
-        "--preset", choices=sorted(PRESETS), default="demo", help="starting point (default: demo)"
+        "--preset", choices=sorted(PRESETS), default="demo",
+        help="which preset (default: demo, the embedded demo: procedural rooms and generated "
+        "corpora, no data to download)"
     )
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")

@@ -10,6 +10,13 @@ mean over 6 s windows every 3 s (:func:`sonicspec.audio.metrics.windows`).
 
 ``oracle``: the mixture itself as every estimate (SI-SNRi and SDRi are 0 by construction: the
 baseline) and the targets themselves (the ceiling).
+
+Bad estimates: a file with a NaN or an infinite sample is refused (naming the file, the first
+such sample and its channel). A silent (all-zero) estimate is scored, not a crash: in the
+windows where it is silent every metric is undefined (SI-SNR and SDR are 0 / 0, P.862 cannot
+level silence), so they are left out of the means like windows of a silent target, and
+counted per row (``silent_estimate``); ``sonicspec evaluate`` warns with the count, and a
+target whose estimate is silent throughout has no scores ("-" in the table).
 """
 
 from __future__ import annotations
@@ -62,7 +69,16 @@ def read_estimate(path: Path, group: Group, mixture: dict[str, Any]) -> np.ndarr
     if info.frames != group.num_samples:
         raise DatasetError(f"group {group.id}: {path}: expected {group.num_samples} samples "
                            f"(the mixture's length), got {info.frames}")
-    return read_audio(path).astype(np.float64)
+    audio = read_audio(path).astype(np.float64)
+    bad = ~np.isfinite(audio)
+    if np.any(bad):
+        chans, samples = np.nonzero(bad)
+        first = int(np.argmin(samples))
+        sample, chan = int(samples[first]), int(chans[first])
+        raise DatasetError(f"group {group.id}: {path}: {int(bad.sum())} sample(s) are not "
+                           f"finite (NaN or Inf; the first at sample {sample} of channel "
+                           f"{chan}); expected finite audio (a model's output that diverged?)")
+    return audio
 
 
 def score_mixture(estimates: np.ndarray, targets: np.ndarray, mixture: np.ndarray,

@@ -17,7 +17,7 @@ import json
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -47,6 +47,8 @@ class ReportResult:
     seconds: float
     page_bytes: int
     total_bytes: int
+    missing: list = field(default_factory=list)
+    """Files the report lacks (``{"path", "problem"}``): it is incomplete when not empty."""
 
 
 def files_dir_of(path: Path) -> Path:
@@ -64,6 +66,7 @@ def _environment():
                              undefined=jinja2.StrictUndefined, trim_blocks=True,
                              lstrip_blocks=True)
     env.filters["num"] = _fmt_num
+    env.globals["zip"] = zip
     env.filters["tojson_script"] = _json_script
     return env
 
@@ -145,8 +148,12 @@ def _distributions(spec, groups, splits) -> list[dict[str, Any]]:
         per_split = {s: rd.values_of(q, [g for g in groups if g["split"] == s]) for s in splits}
         if not any(v.size for v in per_split.values()):
             continue
+        missing = {s: rd.missing_of(q, [g for g in groups if g["split"] == s])
+                   for s in splits}
         out.append({"key": q.key, "label": q.label, "unit": q.unit,
                     "stats": {s: rd.stats(v) for s, v in per_split.items()},
+                    "missing": missing, "missing_total": sum(missing.values()),
+                    "per": "group" if q.per == "group" else "source",
                     "marks": [{"label": m, "value": v} for m, v in q.marks],
                     "ranges": [{"label": m, "lo": lo, "hi": hi} for m, lo, hi in q.ranges],
                     "plot": plots.histogram(per_split, q.label, q.unit, marks=q.marks,
@@ -167,6 +174,12 @@ def _walls(mesh, z_floor: float) -> list[np.ndarray]:
     low, ids = slice_segments(mesh, z_floor + OBJECT_CUT_M)
     objects = low[mesh.face_object[ids] >= 0] if mesh.face_object is not None else low[:0]
     return [walls, objects]
+
+
+def _mic_paths(groups: Sequence[dict[str, Any]]) -> list[np.ndarray]:
+    """The walks of the groups' moving microphones (none for a static one)."""
+    return [np.asarray(g["mic_path_m"], dtype=np.float64) for g in groups
+            if g.get("mic_path_m")]
 
 
 def _paths(g: dict[str, Any]) -> list[np.ndarray]:
@@ -215,7 +228,7 @@ def _scenes(groups, view, warnings: rd.Warnings) -> tuple[list[dict[str, Any]], 
             title = f"{scene_id}, floor {floor}: {len(on)} groups, {len(paths)} paths"
             entry["plans"].append(plots.floor_plan(walls, paths, mics.reshape(-1, 3),
                                                    statics.reshape(-1, 3), title=title,
-                                                   bounds=bounds))
+                                                   bounds=bounds, mic_paths=_mic_paths(on)))
         out.append(entry)
     return out, geometry
 
@@ -299,6 +312,8 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
     splits = _split_order(info, groups)
     view = rd.open_store(info)
     warnings = rd.Warnings()
+    warnings.missing = [m for m in rd.missing_files(info)
+                        if split is None or m["path"].startswith(f"{split}/")]
     rd.group_warnings(groups, warnings)
 
     distributions = _distributions(spec, groups, splits)
@@ -381,7 +396,8 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
     page_bytes = path.stat().st_size
     return ReportResult(path=path, files_dir=files_dir, groups=len(groups),
                         group_pages=len(pages_written), seconds=time.perf_counter() - start,
-                        page_bytes=page_bytes, total_bytes=page_bytes + total)
+                        page_bytes=page_bytes, total_bytes=page_bytes + total,
+                        missing=warnings.missing)
 
 
 def remove_stale_pages(pages_dir: Path, keep: Sequence[Path]) -> None:
@@ -409,7 +425,7 @@ def _group_page(env, info: rd.DatasetInfo, view, g: dict[str, Any], pages_dir: P
     mic = np.asarray([g["mic_m"]] if g["mic_m"] else [], dtype=np.float64).reshape(-1, 3)
     statics = np.asarray(_statics(g), dtype=np.float64).reshape(-1, 3)
     plan = plots.floor_plan(walls, paths, mic, statics, title=f"{g['group']} in {g['scene_id']}",
-                            bounds=bounds, labels=labels)
+                            bounds=bounds, labels=labels, mic_paths=_mic_paths([g]))
     found = _rirs_of(info, view, g)
     rir_plot, bands, figures = None, None, {}
     if found is not None:

@@ -23,6 +23,7 @@ import numpy as np
 from sonicspec.errors import SonicspecError
 from sonicspec.export.checksums import DATASET_MARKER
 from sonicspec.hashing import rng_for
+from sonicspec.units import OCTAVE_BANDS_HZ, bands_below_nyquist
 
 # The SonicSim paper's recipe where it states one (as the `sonicset` preset writes it:
 # specs/sonicset.yaml, "the paper's rules: 1-8 m"; spec.mixture.LOUDNESS_PRESETS
@@ -104,6 +105,8 @@ def _read_json(path: Path) -> Any:
 
 
 _TRACK = b'track": {'
+# Only a moving microphone's track has a heading (stages.export.microphone_track).
+_MOVING_MIC = b'"yaw_deg"'
 
 
 def read_metadata(path: Path) -> dict[str, Any]:
@@ -111,11 +114,17 @@ def read_metadata(path: Path) -> dict[str, Any]:
     number every 10 ms, 90 % of a 60 s group's 3 MB, which the report does not use): they
     are cut from the bytes before parsing, 15x faster than parsing them. A track holds no
     nested object, so it ends at the first ``}``; if another ``{`` comes first, the file is
-    parsed whole."""
+    parsed whole. So is the metadata of a moving microphone (its track has a heading): its
+    distances are read from the tracks."""
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise ReportError(f"{path}: unreadable ({exc.strerror or exc})") from None
+    if _MOVING_MIC in data:  # a moving microphone: distances need the tracks (issue 28)
+        try:
+            return json.loads(data)
+        except ValueError as exc:
+            raise ReportError(f"{path}: unreadable JSON ({exc})") from None
     parts, pos = [], 0
     while True:
         j = data.find(_TRACK, pos)
@@ -209,6 +218,61 @@ def _distances(entry: dict[str, Any], mic: np.ndarray | None) -> tuple[float, ..
     return float(ends[0]), float(ends[1]), float(segment_distances(p, mic).min())
 
 
+def track_values(entry: Any, root: Path | None) -> dict[str, np.ndarray]:
+    """A position track's arrays (float64): the inline lists, or a reference into the
+    group's ``tracks.npz`` (``file`` relative to the dataset folder ``root``, each array
+    ``stored / scale``). Empty when there is none."""
+    if not isinstance(entry, dict):
+        return {}
+    if "file" in entry and "arrays" in entry:
+        if root is None:
+            return {}
+        path = root / entry["file"]
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return {q: np.asarray(z[name], dtype=np.float64)
+                        / float((entry.get("scale") or {}).get(q, 1))
+                        for q, name in entry["arrays"].items() if name in z.files}
+        except (OSError, ValueError) as exc:
+            raise ReportError(f"{path}: cannot read the tracks ({exc})") from None
+    return {k: np.asarray(v, dtype=np.float64) for k, v in entry.items()
+            if isinstance(v, list)}
+
+
+def microphone_path(meta: dict[str, Any], root: Path | None = None) -> np.ndarray | None:
+    """Where a moving microphone is every 10 ms, ``(frames, 3)`` (``microphone_track``);
+    None when it stands still."""
+    pos = track_values(meta.get("microphone_track"), root).get("positions_m")
+    if pos is None or pos.size < 6:
+        return None
+    pos = pos.reshape(-1, 3)
+    return pos if np.ptp(pos, axis=0).max() > 0 else None
+
+
+def _moving_distances(entry: dict[str, Any], mic_path: np.ndarray, root: Path | None
+                      ) -> tuple[float, ...] | None:
+    """Source–microphone distance at the first and last frame and its minimum, both moving:
+    the source's own track (its ``distance_m`` from the microphone, frame by frame), or its
+    positions against the microphone's at the same frames; without a track, its path against
+    every place the microphone passes (the minimum is then a lower bound)."""
+    values = track_values(entry.get("track"), root)
+    d = values.get("distance_m")
+    if d is None and values.get("positions_m") is not None:
+        pos = values["positions_m"].reshape(-1, 3)
+        if len(pos) == len(mic_path):
+            d = np.linalg.norm(pos - mic_path, axis=1)
+    if d is not None and d.size:
+        return float(d[0]), float(d[-1]), float(d.min())
+    points = entry.get("trajectory_m") or ([entry["position_m"]] if entry.get("position_m")
+                                           else None)
+    if points is None:
+        return None
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nearest = min(float(segment_distances(p, m).min()) for m in mic_path)
+    return (float(np.linalg.norm(p[0] - mic_path[0])),
+            float(np.linalg.norm(p[-1] - mic_path[-1])), nearest)
+
+
 def _speed(entry: dict[str, Any], rate: float | None, speed_m_s: float | None,
            span: str = "speech", clip_samples: int | None = None) -> float | None:
     """Walking speed: the spec's, or (null there) the path over the time the walk spans, as
@@ -228,6 +292,26 @@ def _speed(entry: dict[str, Any], rate: float | None, speed_m_s: float | None,
     return length / duration if duration > 0 else None
 
 
+def rir_cut(tail: Any, rate: float | None = None) -> dict[str, Any] | None:
+    """A source's RIRs cut while still decaying (its metadata's ``rir_tail``: bands whose
+    decay the length limit cut before it was 60 dB down): the limit, the bands, the level
+    each had reached and the longest fitted T60; None when nothing was cut."""
+    if not isinstance(tail, dict):
+        return None
+    levels = tail.get("level_at_limit_db") or []
+    bands = list(tail.get("bands_hz") or (bands_below_nyquist(rate, OCTAVE_BANDS_HZ) if rate
+                                          else ()))
+    if len(bands) != len(levels):  # bands set in the spec: not in the metadata
+        bands = [None] * len(levels)
+    cut = [(b, v) for b, v in zip(bands, levels, strict=False) if v is not None]
+    if not cut:
+        return None
+    t60 = [v for v in tail.get("fitted_t60_s") or [] if v is not None]
+    return {"limit_s": _num(tail.get("limit_s")), "field": tail.get("limit_field"),
+            "levels_db": [v for _, v in cut], "bands_hz": [b for b, _ in cut],
+            "fitted_t60_s": max(t60) if t60 else None}
+
+
 def _num(x: Any) -> float | None:
     return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
 
@@ -239,11 +323,14 @@ def source_names(meta: dict[str, Any]) -> list[str]:
 
 
 def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
-                span: str = "speech") -> dict[str, Any]:
+                span: str = "speech", root: Path | None = None) -> dict[str, Any]:
     """One group's figures for the report: per source and per group (see the module doc).
     ``speed_m_s``: the spec's walking speed (None: the walk spans ``span``, the spec's
-    ``trajectory.span``)."""
+    ``trajectory.span``). A moving microphone's distances come from the tracks (``root``:
+    the dataset folder the tracks' files are relative to), never from ``mic_m``, where it
+    starts."""
     mic = np.asarray(meta["mic_m"], dtype=np.float64) if meta.get("mic_m") else None
+    mic_path = microphone_path(meta, root)
     n = meta.get("num_samples")
     rate = meta.get("sample_rate_hz")
     sources = []
@@ -251,7 +338,8 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
         e = meta[name]
         role = "speech" if name.startswith("source") else name
         loud = e.get("loudness") or {}
-        dist = _distances(e, mic)
+        dist = (_moving_distances(e, mic_path, root) if mic_path is not None
+                else _distances(e, mic))
         s: dict[str, Any] = {
             "name": name, "role": role,
             "t30_s": _num(e.get("t30_s")), "drr_db": _num(e.get("drr_db")),
@@ -264,6 +352,7 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
             "distance_min_m": dist[2] if dist is not None else None,
             "intervals": [list(p) for p in e.get("start_end_points") or []],
             "position_m": e.get("position_m"), "file": e.get("file"),
+            "rir_cut": rir_cut(e.get("rir_tail"), rate),
         }
         if role == "speech":
             s.update(path_length_m=_num(e.get("path_length_m")),
@@ -274,6 +363,10 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
     facts: dict[str, Any] = {
         "group": meta.get("group"), "split": meta.get("split"), "scene_id": meta.get("scene_id"),
         "floor": meta.get("floor"), "mic_m": meta.get("mic_m"),
+        # a moving microphone's walk, every 10th frame (10 ms each) and its last, to draw
+        "mic_path_m": (None if mic_path is None else
+                       np.concatenate([mic_path[::10], mic_path[-1:]]).tolist()),
+        "empty": not source_names(meta) and meta.get("num_samples") is None,
         "group_gain_db": _num(meta.get("group_gain_db")),
         "overlap_ratio": overlap_ratio([s["intervals"] for s in speech]),
         "sources": sources,
@@ -300,7 +393,9 @@ def read_group_facts(info: DatasetInfo, split: str | None = None) -> list[dict[s
         if path is None or not path.is_file():
             continue
         meta = read_metadata(path)
-        facts = group_facts(meta, speed_m_s, span)
+        facts = group_facts(meta, speed_m_s, span, info.root)
+        if facts["empty"]:  # `{}`: listed by missing_files
+            continue
         facts["group"] = facts["group"] or g["group"]
         facts["split"] = facts["split"] or g["split"]
         facts["scene_id"] = facts["scene_id"] or g["scene_id"] or "unknown"
@@ -401,6 +496,47 @@ def values_of(q: Quantity, groups: Sequence[dict[str, Any]]) -> np.ndarray:
                       dtype=np.float64)
 
 
+def missing_of(q: Quantity, groups: Sequence[dict[str, Any]]) -> int:
+    """How many of ``q``'s values ``groups`` lack (null in the metadata: a T30 that the
+    decay did not allow to measure, a field a plainer metadata does not have)."""
+    if q.per == "group":
+        vals = [g.get(q.field) for g in groups]
+    else:
+        vals = [s.get(q.field) for g in groups for s in g["sources"]
+                if q.per == "any" or s["role"] == q.per]
+    return sum(1 for v in vals if v is None or not math.isfinite(v))
+
+
+def missing_files(info: DatasetInfo) -> list[dict[str, Any]]:
+    """What the report would silently lack: groups whose ``metadata.json`` is missing or
+    empty, and (a sonicspec build: ``checksums.sha256`` lists its files) listed files that
+    are gone. ``{"path", "problem"}`` each, paths relative to the dataset folder."""
+    from sonicspec.export.checksums import CHECKSUMS_NAME
+
+    out: list[dict[str, Any]] = []
+    for g in info.groups:
+        path = g["metadata_path"]
+        if path is None or not path.is_file():
+            rel = (Path(os.path.relpath(path, info.root)).as_posix() if path is not None
+                   else f"{g['group']}/metadata.json")
+            out.append({"path": rel, "problem": "missing"})
+        elif path.stat().st_size < 16 and path.read_bytes().strip() in (b"{}", b""):
+            out.append({"path": Path(os.path.relpath(path, info.root)).as_posix(),
+                        "problem": "empty"})
+    listing = info.root / CHECKSUMS_NAME
+    if listing.is_file():
+        try:
+            lines = listing.read_text(encoding="utf-8").splitlines()
+        except OSError as exc:
+            raise ReportError(f"{listing}: unreadable ({exc.strerror or exc})") from None
+        for line in lines:
+            _, _, rel = line.partition("  ")
+            rel = rel.strip()
+            if rel and not (info.root / rel).is_file():
+                out.append({"path": rel, "problem": "missing"})
+    return out
+
+
 def stats(values: np.ndarray) -> dict[str, float | int | None]:
     """Count, median, 5th and 95th percentile, mean, min and max (None when empty)."""
     if values.size == 0:
@@ -450,16 +586,25 @@ class Warnings:
     guard_cut: list[dict[str, Any]] = field(default_factory=list)
     close_sources: list[dict[str, Any]] = field(default_factory=list)
     default_materials: list[dict[str, Any]] = field(default_factory=list)
+    truncated_rirs: list[dict[str, Any]] = field(default_factory=list)
+    missing: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def count(self) -> int:
         return (len(self.leaked_scenes) + len(self.guard_cut) + len(self.close_sources)
-                + len(self.default_materials))
+                + len(self.default_materials) + len(self.truncated_rirs) + len(self.missing))
 
 
 def group_warnings(groups: Sequence[dict[str, Any]], warnings: Warnings) -> None:
-    """Groups the guard cut more than 3 dB and sources closer than 0.5 m, into ``warnings``."""
+    """Groups the guard cut more than 3 dB, sources closer than 0.5 m (a moving microphone's
+    distances from its track) and sources whose RIRs were cut while still decaying, into
+    ``warnings``."""
     for g in groups:
+        for s in g["sources"]:
+            cut = s.get("rir_cut")
+            if cut is not None:
+                warnings.truncated_rirs.append({"group": g["group"], "source": s["name"],
+                                                **cut})
         gain = g["group_gain_db"]
         if gain is not None and gain < GUARD_CUT_DB:
             warnings.guard_cut.append({"group": g["group"], "gain_db": gain})

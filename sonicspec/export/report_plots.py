@@ -128,9 +128,11 @@ def per_band(per_split: Mapping[str, np.ndarray], bands_hz: Sequence[float], lab
 def floor_plan(walls: Sequence[np.ndarray], paths: Sequence[np.ndarray],
                mics: np.ndarray, statics: np.ndarray, *, title: str,
                bounds: tuple[np.ndarray, np.ndarray] | None = None,
-               labels: Sequence[str] | None = None) -> str:
-    """Walls (segments cut from the mesh), every path (start o, end ■), microphones (▲) and
-    static sources (x). With many paths they are drawn as one raster layer inside the SVG."""
+               labels: Sequence[str] | None = None,
+               mic_paths: Sequence[np.ndarray] = ()) -> str:
+    """Walls (segments cut from the mesh), every path (start o, end ■), microphones (▲ where
+    they start, a moving one's walk dashed to its end ▼) and static sources (x). With many
+    paths they are drawn as one raster layer inside the SVG."""
     from matplotlib.collections import LineCollection
 
     fig = _figure(5.0, 4.2, (0.12, 0.98, 0.11, 0.93))
@@ -161,7 +163,11 @@ def floor_plan(walls: Sequence[np.ndarray], paths: Sequence[np.ndarray],
     if len(mics):
         ax.plot(mics[:, 0], mics[:, 1], "^", color="crimson", ms=8 if len(mics) < 20 else 4,
                 ls="none", label="microphone", rasterized=raster)
-    points = [a for a in (wall_segments.reshape(-1, 2),
+    for k, walk in enumerate(mic_paths):
+        ax.plot(walk[:, 0], walk[:, 1], "--", color="crimson", lw=1.2, rasterized=raster,
+                label="microphone's walk" if k == 0 else None)
+        ax.plot(walk[-1, 0], walk[-1, 1], "v", color="crimson", ms=6, rasterized=raster)
+    points = [a for a in (wall_segments.reshape(-1, 2), *(w[:, :2] for w in mic_paths),
                           *(p[:, :2] for p in paths), mics[:, :2] if len(mics) else None,
                           statics[:, :2] if len(statics) else None) if a is not None and len(a)]
     if bounds is not None:

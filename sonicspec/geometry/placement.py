@@ -100,6 +100,7 @@ class PlacementSettings:
     source_height_m: tuple[float, float] = (1.5, 1.8)
     noise_height_m: tuple[float, float] = (0.3, 1.8)
     mic_position_m: tuple[float, float, float] | None = None
+    mic_path_m: tuple[tuple[float, float, float], ...] | None = None
     max_tries: int = 2000
     walker_radius_m: float = 0.25
     walker_height_m: float = 1.8
@@ -147,6 +148,16 @@ class PlacementSettings:
                     f"got {self.mic_position_m!r}"
                 )
             object.__setattr__(self, "mic_position_m", tuple(float(v) for v in mic))
+        if self.mic_path_m is not None:
+            walk = np.asarray(self.mic_path_m, dtype=np.float64)
+            if walk.ndim != 2 or walk.shape[1] != 3 or len(walk) < 1 or not np.all(
+                    np.isfinite(walk)):
+                raise PlacementError(
+                    f"PlacementSettings.mic_path_m: expected [[x, y, z], ...] in metres or "
+                    f"None, got {self.mic_path_m!r}"
+                )
+            object.__setattr__(self, "mic_path_m", tuple(tuple(float(v) for v in p)
+                                                         for p in walk))
 
     def navigation_settings(self, cell_m: float = 0.05) -> NavigationSettings:
         """Navigation settings for the walker these rules assume."""
@@ -290,6 +301,31 @@ def polyline_distance(path: np.ndarray, point: np.ndarray) -> float:
     length2 = np.einsum("ij,ij->i", ab, ab)
     t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(length2 > 0, length2, 1.0), 0, 1)
     return float(np.min(np.linalg.norm(a + t[:, None] * ab - q, axis=1)))
+
+
+def polylines_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest 3-D distance between two polylines ``(N, 3)`` and ``(M, 3)``, metres (exact:
+    over every pair of segments, the interior closest points where both lie inside their
+    segments, else the endpoints against the other segment)."""
+    p = np.asarray(a, dtype=np.float64).reshape(-1, 3)
+    q = np.asarray(b, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 1 or len(q) == 1:
+        return polyline_distance(q, p[0]) if len(p) == 1 else polyline_distance(p, q[0])
+    ends = min(min(polyline_distance(q, x) for x in p), min(polyline_distance(p, y) for y in q))
+    p0, u = p[:-1, None, :], (p[1:] - p[:-1])[:, None, :]
+    q0, v = q[None, :-1, :], (q[1:] - q[:-1])[None, :, :]
+    w = p0 - q0
+    uu, uv, vv = (u * u).sum(-1), (u * v).sum(-1), (v * v).sum(-1)
+    uw, vw = (u * w).sum(-1), (v * w).sum(-1)
+    denom = uu * vv - uv**2
+    ok = denom > 1e-12 * np.maximum(uu * vv, 1e-30)
+    safe = np.where(ok, denom, 1.0)
+    sp, tq = (uv * vw - vv * uw) / safe, (uu * vw - uv * uw) / safe
+    inside = ok & (sp >= 0) & (sp <= 1) & (tq >= 0) & (tq <= 1)
+    if not np.any(inside):
+        return float(ends)
+    gap = w + sp[..., None] * u - tq[..., None] * v
+    return float(min(ends, np.linalg.norm(gap, axis=-1)[inside].min()))
 
 
 def _fmt_range(low: float, high: float) -> str:
@@ -440,6 +476,9 @@ class _Sampler:
         s = self.s
         same = s.same_floor
         items: dict[str, _Item] = {"mic": _Item("the microphone")}
+        # A moving microphone: every source keeps min_path_distance_m from its whole walk
+        # (where it will be when is the arrangement's, later: the walk bounds it).
+        walk = None if s.mic_path_m is None else np.asarray(s.mic_path_m, dtype=np.float64)
         restarts = -1
         while self.tries < s.max_tries:
             restarts += 1
@@ -472,6 +511,12 @@ class _Sampler:
                     failed = True
                     break
                 start, start_floor, start_comp, height = got
+                if walk is not None and polyline_distance(walk, start) < (
+                        s.min_path_distance_m - 1e-9):
+                    item.failures[f"closer than {s.min_path_distance_m:g} m to the "
+                                  "microphone's walk"] += 1
+                    failed = True
+                    break
                 if motion == "static":
                     speech.append(
                         SourcePlacement(motion, start, start, start[None], 0.0, start_floor, height)
@@ -522,6 +567,13 @@ class _Sampler:
                         f"a path closer than {s.min_path_distance_m:g} m to the mic"] += 1
                     failed = True
                     break
+                if walk is not None and polylines_distance(path, walk) < (
+                        s.min_path_distance_m - 1e-9):
+                    items[f"end{i}"].failures[
+                        f"a path closer than {s.min_path_distance_m:g} m to the "
+                        "microphone's walk"] += 1
+                    failed = True
+                    break
                 speech.append(
                     SourcePlacement(motion, start, end, path, length, start_floor, height)
                 )
@@ -542,6 +594,12 @@ class _Sampler:
                     failed = True
                     break
                 point, point_floor, _, height = got
+                if walk is not None and polyline_distance(walk, point) < (
+                        s.min_path_distance_m - 1e-9):
+                    item.failures[f"closer than {s.min_path_distance_m:g} m to the "
+                                  "microphone's walk"] += 1
+                    failed = True
+                    break
                 statics[name] = SourcePlacement(
                     "static", point, point, point[None], 0.0, point_floor, height
                 )

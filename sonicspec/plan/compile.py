@@ -138,9 +138,13 @@ def assign_split_scenes(spec: DatasetSpec, entries: list[SceneEntry]) -> dict[st
         if split.scene_count is not None:
             pool = sorted(m for m in matched if m not in taken)
             if len(pool) < split.scene_count:
+                verb = "is" if len(pool) == 1 else "are"
+                left = (f"only {len(pool)} of the scenes it matches {verb} not taken by "
+                        "earlier splits")
                 raise CompileError(
-                    f"splits.{name}.scene_count: asks for {split.scene_count} scenes but only "
-                    f"{len(pool)} matched scenes are not used by earlier splits"
+                    f"splits.{name}.scene_count: asks for {split.scene_count} scenes, but "
+                    f"{left} ({len(matched)} matched in all); add scenes or lower "
+                    f"scene_count"
                 )
             order = rng_for(spec.seed, "split-scenes", name).permutation(len(pool))
             chosen = sorted(pool[i] for i in order[: split.scene_count])

@@ -464,6 +464,16 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             f"{m.utterance_gap_s[0]:g} s of silence each cannot fit in "
             f"{m.duration_s:g} s",
         )
+    if m.utterance_gap_s[1] >= m.duration_s:
+        # arrange_speech draws a gap before each speaker's first utterance too: one drawn this
+        # long leaves no room for any utterance, and the arrange step fails (issue 28 item 11)
+        yield _err(
+            ("mixture", "utterance_gap_s"),
+            f"a gap drawn up to {m.utterance_gap_s[1]:g} s before a speaker's first utterance "
+            f"leaves no room for it in the {m.duration_s:g} s clip (the build's arrange step "
+            f"fails on such a draw); expected an upper bound below mixture.duration_s minus "
+            f"the shortest utterance, got {list(m.utterance_gap_s)}",
+        )
     if m.interpolation not in ("auto", "sample_crossfade") and isinstance(
             spec.trajectory, StaticTrajectorySpec):
         yield _warn(

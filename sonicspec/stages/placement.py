@@ -38,6 +38,7 @@ def settings_from(params: PlacementParams) -> PlacementSettings:
     if mic_path is not None and rules.get("mic_position_m") is None:
         rules["mic_position_m"] = mic_path[0]  # a moving microphone starts its walk there
     return PlacementSettings(**{name: rules[name] for name in names},
+                             mic_path_m=None if mic_path is None else tuple(map(tuple, mic_path)),
                              mic_height_m=params.microphone.height_m,
                              smooth_paths=getattr(params.trajectory, "smooth", True))
 

@@ -335,6 +335,10 @@ def run(ctx) -> None:
                 **_order_reached(facts, settings.image_source_order)))
         groups.append(RirGroup(group=placement.group, sources=entries,
                                diffraction_edges=choice))
+        cut = fixed_cut_warning([f for r in results for f in r[1]], settings.bands_hz,
+                                f"{scene_name}, group {placement.group}")
+        if cut:
+            log.warning("%s", cut)
     ctx.write(arrays, artifacts.encode("rir", RirData(
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
 
@@ -361,6 +365,26 @@ def _warn_lower_order(scene_name: str, group: str, asked: int,
                 "(acoustics.simplify_tolerance_m)", scene_name, group, asked,
                 worst["image_source_order"], len(low), len(facts),
                 worst.get("image_source_order_stopped") or "the candidate limit")
+
+
+def fixed_cut_warning(facts: list[dict], bands_hz, where: str) -> str | None:
+    """The job log's warning for RIRs a fixed ``max_rir_length_s`` cut while still decaying
+    (the library reports such a cut in the facts only: the length was asked for; ``auto``
+    cuts warn there). A dataset of such RIRs understates its reverberation, so the build
+    summary and the report say so (issue 28 item 8)."""
+    tails = [f["tail"] for f in facts if f["tail"]["rule"] == "fixed"
+             and any(v is not None for v in f["tail"]["level_at_limit_db"])]
+    if not tails:
+        return None
+    worst = max(tails, key=lambda t: max(v for v in t["level_at_limit_db"] if v is not None))
+    levels = ", ".join(f"{b:g} Hz at {v:.0f} dB" for b, v in
+                       zip(bands_hz, worst["level_at_limit_db"], strict=True) if v is not None)
+    t60 = [v for t in tails for v in t["fitted_t60_s"] if v is not None]
+    needs = f"; its decay needs about {max(t60):.1f} s" if t60 else ""
+    return (f"{where}: {len(tails)} of {len(facts)} RIRs cut at {worst['limit_s']:g} s "
+            f"(acoustics.max_rir_length_s) while still decaying ({levels}, 60 dB down is the "
+            f"end){needs}; T30 and the band figures understate it: raise "
+            "acoustics.max_rir_length_s or set it to auto")
 
 
 def _finite(value: float) -> float | None:

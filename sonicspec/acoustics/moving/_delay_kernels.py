@@ -147,20 +147,6 @@ def gradient_inverse(tau: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True, nogil=True)
-def weighted_bands(bands: np.ndarray, weights: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                   frac: np.ndarray, out: np.ndarray) -> None:
-    """``out[t] = Σ_b (weights[lo[t], b]·(1 − frac[t]) + weights[hi[t], b]·frac[t]) ·
-    bands[b, t]``: a path's band factors, linear between RIR points, applied at emission."""
-    n_bands = bands.shape[0]
-    for t in range(out.size):
-        f = frac[t]
-        acc = 0.0
-        for b in range(n_bands):
-            acc += (weights[lo[t], b] * (1.0 - f) + weights[hi[t], b] * f) * bands[b, t]
-        out[t] = acc
-
-
-@njit(cache=True, nogil=True)
 def image_directions(track: np.ndarray, image: np.ndarray, mirror: np.ndarray,
                      out: np.ndarray) -> None:
     """``out[k] = (track[k] − image) / |track[k] − image| @ mirror``: a path's direction of

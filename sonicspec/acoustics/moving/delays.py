@@ -36,7 +36,6 @@ from sonicspec.acoustics.moving._delay_kernels import (
     fixed_receiver_arrivals,
     gradient_inverse,
     image_directions,
-    weighted_bands,
 )
 from sonicspec.acoustics.theory import moving_arrival_times, windowed_sinc
 from sonicspec.errors import AcousticsError
@@ -510,6 +509,51 @@ def matched_paths(from_mic: Arrivals, at_mic: Arrivals, tolerance_m: float = 1e-
     return np.asarray(pairs_i, dtype=np.int64), np.asarray(pairs_m, dtype=np.int64)
 
 
+def shaped_emission(s: np.ndarray, index: np.ndarray, weights: np.ndarray, bank,
+                    start: int, stop: int, monotonic: bool,
+                    points_at: np.ndarray | None = None) -> np.ndarray:
+    """A path's emitted signal over ``s[start:stop]``: at each emission the dry signal through
+    the causal shaping filter of the path's band factors
+    (:meth:`~sonicspec.acoustics.bands.OctaveFilterBank.shaping_filters`, minimum phase:
+    nothing of the path comes before its delay), the filters of the points either side
+    weighted linearly by the fractional ``index`` (the band factors were linear between
+    points before; a path of equal band factors is exactly ``g(t)·s``, as before).
+
+    ``weights`` is ``(N, B)``, row ``p`` the factors at point ``points_at[p]`` (default
+    ``p``); ``monotonic`` says ``index`` never decreases (each point's stretch is then found
+    by bisection).
+    """
+    from scipy import signal
+
+    n = stop - start
+    x = np.zeros(n)
+    at = np.arange(len(weights), dtype=np.float64) if points_at is None else points_at
+    idx = index[start:stop] if index.size == s.size else np.broadcast_to(index[0], (n,))
+    live = np.flatnonzero(np.any(weights != 0, axis=1))
+    if live.size == 0 or n <= 0:
+        return x
+    filters = bank.shaping_filters(weights[live])
+    for p, h in zip(live, filters, strict=True):
+        if monotonic:
+            a = int(np.searchsorted(idx, at[p] - 1.0, side="right"))
+            b = int(np.searchsorted(idx, at[p] + 1.0, side="left"))
+        else:
+            near = np.flatnonzero(np.abs(idx - at[p]) < 1.0)
+            if near.size == 0:
+                continue
+            a, b = int(near[0]), int(near[-1]) + 1
+        if a >= b:
+            continue
+        hat = np.maximum(0.0, 1.0 - np.abs(idx[a:b] - at[p]))  # this point's share
+        lo = max(0, start + a - (h.size - 1))  # the dry samples the filter reaches back to
+        if h.size == 1:
+            y = h[0] * s[start + a:start + b]
+        else:
+            y = signal.oaconvolve(s[lo:start + b], h)[start + a - lo:start + b - lo]
+        x[a:b] += hat * y
+    return x
+
+
 def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int,
                  speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                  receiver: Receiver | None = None) -> np.ndarray:
@@ -522,7 +566,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     image of the microphone: the delay, the ``1/(4πL)`` level and the Doppler shift are exact
     at every sample. Its band factors are read at the same fractional index (a
     path that becomes invalid between two points fades over that stretch) and applied to the
-    dry signal's octave bands (``bank.split``, which sums back to the signal) at emission.
+    dry signal through the path's causal shaping filter at emission (:func:`shaped_emission`).
     A directional ``receiver`` needs each path's direction of arrival at the microphone: from
     the path's mirrors (:func:`_image_map`: the direction from the image to the source,
     mapped back, exact at every emission), or where those cannot be told from the data (a
@@ -583,7 +627,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         return out
     track = read_at(points, index)
     static = len(points) == 1 or np.ptp(index) == 0
-    band_dry = bank.split(s)
+    monotonic = bool(np.all(np.diff(index) >= 0))
     lo, hi = np.floor(index).astype(np.int64), np.ceil(index).astype(np.int64)
     frac = index - lo
     for k in range(len(paths)):
@@ -598,11 +642,10 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         part = slice(start, stop)
         if static:
             at_point = int(np.rint(index[0]))
-            x = w[at_point] @ band_dry
-        else:  # band factors at each emission, linear between points
-            x = np.empty(stop - start)
-            weighted_bands(band_dry[:, part], np.ascontiguousarray(w), lo[part], hi[part],
-                           frac[part], x)
+            x = shaped_emission(s, np.zeros(1), w[at_point:at_point + 1],
+                                bank, 0, s.size, True, points_at=np.zeros(1))
+        else:  # each point's causal filter, weighted linearly between points
+            x = shaped_emission(s, index, w, bank, start, stop, monotonic)
         source = track[0] if static else track[part]
         edge = paths.lengths_m is not None and bool(np.isnan(paths.images_m[k, 0]))
         length = _length_at(paths.lengths_m[k], index[part]) if edge else None
@@ -864,15 +907,14 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         frames[:, 1, 0], frames[:, 1, 1] = sy, cy
         frames[:, 2, 2] = 1.0
         frames = frames @ pitch
-    band_dry = bank.split(s)
+    monotonic = bool(np.all(np.diff(index) >= 0))
     lo, hi = np.floor(index).astype(np.int64), np.ceil(index).astype(np.int64)
     frac = index - lo
     for k in range(len(paths)):
         w = paths.weights[k]
         if not np.any(w):
             continue
-        x = np.empty(s.size)
-        weighted_bands(band_dry, np.ascontiguousarray(w), lo, hi, frac, x)
+        x = shaped_emission(s, index, w, bank, 0, s.size, monotonic)
         m, b = paths.isometries[k, :, :3], paths.isometries[k, :, 3]
         edge = paths.lengths_m is not None and bool(np.isnan(m[0, 0]))
         length = _length_at(paths.lengths_m[k], index) if edge else None

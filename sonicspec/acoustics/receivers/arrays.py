@@ -33,6 +33,8 @@ from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
+    _fractional_taps,
+    _place_kernels,
     rir_length_samples,
     synthesize_early,
     synthesize_late,
@@ -139,11 +141,16 @@ def ambisonic_early(arrivals: Arrivals, order: int, bank: OctaveFilterBank, n_sa
     local = arrivals.directions @ rotation(yaw_deg, pitch_deg)
     gains = sh_sn3d(order, local) if len(arrivals) else np.zeros(
         (0, (order + 1) ** 2))
-    out = np.zeros(((order + 1) ** 2, n_samples))
-    for ch in range(out.shape[0]):
-        out[ch] = synthesize_early(_scaled(arrivals, gains[:, ch], np.zeros(len(arrivals))),
-                                   bank, n_samples, taps)
-    return out
+    if not len(arrivals):
+        return np.zeros(((order + 1) ** 2, n_samples))
+    if arrivals.n_bands != bank.n_bands:
+        raise AcousticsError(f"arrivals: expected {bank.n_bands} bands like the filter bank, "
+                             f"got {arrivals.n_bands}")
+    # One shaping filter per arrival, weighted per channel (it is linear in the weight).
+    idx, w = _fractional_taps(arrivals.times_s, bank.sample_rate_hz, taps)
+    amplitudes = arrivals.amplitudes
+    flat = np.all(amplitudes == amplitudes[:, :1], axis=1)
+    return _place_kernels(idx, w, amplitudes, flat, gains[:, :, None], bank, n_samples)
 
 
 def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,

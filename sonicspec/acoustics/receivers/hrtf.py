@@ -53,8 +53,8 @@ from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.acoustics.receivers.arrays import mix_per_frequency, rotation
 from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
-    _filter_bands,
     _fractional_taps,
+    _place_kernels,
     rir_length_samples,
     synthesize_early,
     synthesize_late,
@@ -284,33 +284,19 @@ def hrir_binaural_early(arrivals: Arrivals, hrirs: HrirSet, bank: OctaveFilterBa
     """The early part of a binaural RIR through measured HRIRs, ``(2, n_samples)``: each
     arrival through the HRIR pair of the nearest measured direction (``hrirs`` at the bank's
     rate)."""
-    out = np.zeros((2, n_samples))
     if not len(arrivals):
-        return out
+        return np.zeros((2, n_samples))
     if arrivals.n_bands != bank.n_bands:
         raise AcousticsError(f"arrivals: expected {bank.n_bands} bands like the filter "
                              f"bank, got {arrivals.n_bands}")
-    h_len = hrirs.hrirs.shape[-1]
     # Directions into the head frame, then the nearest measured direction (max cosine).
     local = arrivals.directions @ rotation(yaw_deg, pitch_deg)
     nearest = np.argmax(local @ hrirs.directions.T, axis=1)
     idx, w = _fractional_taps(arrivals.times_s, bank.sample_rate_hz, taps)
-    # Each arrival's kernel: its fractional-delay tap convolved with its HRIR pair (FFT,
-    # all arrivals at once); kernels start at the tap's first sample.
-    k_len = taps + h_len - 1
-    n_fft = 1 << math.ceil(math.log2(k_len))
-    kernels = np.fft.irfft(np.fft.rfft(w, n_fft)[:, None, :]
-                           * np.fft.rfft(hrirs.hrirs[nearest], n_fft, axis=-1),
-                           n_fft, axis=-1)[..., :k_len]
-    pos = idx[:, :1] + np.arange(k_len)[None, :]
-    keep = (pos >= 0) & (pos < n_samples)
-    for ear in range(2):
-        trains = np.zeros((bank.n_bands, n_samples))
-        for b in range(bank.n_bands):
-            np.add.at(trains[b], pos[keep],
-                      (kernels[:, ear] * arrivals.amplitudes[:, b][:, None])[keep])
-        out[ear] = _filter_bands(trains, bank)
-    return out
+    # Each arrival: its fractional-delay tap ⊛ its HRIR pair ⊛ its causal shaping filter.
+    amplitudes = arrivals.amplitudes
+    flat = np.all(amplitudes == amplitudes[:, :1], axis=1)
+    return _place_kernels(idx, w, amplitudes, flat, hrirs.hrirs[nearest], bank, n_samples)
 
 
 def covering_angle_rad(hrirs: HrirSet, n_points: int = 1 << 14) -> float:

@@ -1,11 +1,13 @@
 """RIR synthesis for an omnidirectional receiver: discrete early arrivals plus a late tail.
 
-* **Early part** (direct sound, image sources): each arrival is a fractional-delay tap (a
-  Hann-windowed sinc, ``taps`` long, so the peak sits at the exact arrival time, not the nearest
-  sample) with its per-band amplitude. The taps of each band are summed into one impulse train,
-  and the trains are filtered once each by the octave bank of
-  :class:`~sonicspec.acoustics.bands.OctaveFilterBank` and summed; as the bank's bands add up
-  to one, an arrival with equal amplitude in every band comes out as a clean, flat tap.
+* **Early part** (direct sound, image sources, diffracted paths): each arrival is a
+  fractional-delay tap (a Hann-windowed sinc, ``taps`` long, so the peak sits at the exact
+  arrival time, not the nearest sample). An arrival with the same amplitude in every band is
+  that tap, scaled; any other goes through its own minimum-phase shaping filter, whose
+  magnitude is the octave bank's bands weighted by its amplitudes
+  (:meth:`~sonicspec.acoustics.bands.OctaveFilterBank.shaping_spectra`). The filter is
+  causal, so nothing of an arrival precedes its delay by more than the tap's half-width
+  (``taps // 2`` samples); zero-phase band filters rang before it (issue 28).
 * **Late part** (the ray tracer's energy histogram): independent white Gaussian noise per band,
   band-filtered by the same bank (drawn directly in the frequency domain, where white Gaussian
   noise is white complex Gaussian noise, over the band's support only: the same random
@@ -21,7 +23,7 @@
   sources do not render (late and diffuse energy), its first bins are weak, which limits the
   effect of this approximation. The histogram and the arrivals never hold the same energy (the
   tracer counts it once), so the two parts simply add: no crossfade is needed between them.
-* **Length**: past the last arrival (with the band filters' ringing) and the last bin holding
+* **Length**: past the last arrival (with its shaping filter's ringing) and the last bin holding
   energy, capped at ``max_length_s``.
 
 Amplitudes are sound pressure for a unit point source: the free-field direct sound is
@@ -45,6 +47,8 @@ DEFAULT_TAPS = 65
 _SUPPORT_FLOOR = 1e-12
 # Rows per matrix-vector product of the per-bin sums (BLAS would thread larger ones).
 _GEMV_ROWS = 1 << 14
+# Shaped arrivals per batch of FFTs (bounds the memory: rows × the shaping FFT's length).
+_SHAPED_CHUNK = 64
 
 
 def _fractional_taps(times_s: np.ndarray, sample_rate_hz: float, taps: int
@@ -64,9 +68,12 @@ def synthesize_early(arrivals: Arrivals, bank: OctaveFilterBank, n_samples: int,
                      taps: int = DEFAULT_TAPS) -> np.ndarray:
     """The early part (discrete arrivals), ``(n_samples,)``.
 
-    The trains are filtered over the span the arrivals and the bank's ringing cover
-    (``bank.padding()`` after the last tap, where the bank's impulse responses have decayed
-    below -84 dB in energy), not over the whole RIR: the rest of it is zero.
+    An arrival with the same amplitude in every band is its fractional-delay tap, scaled.
+    Any other is that tap through its minimum-phase shaping filter
+    (:meth:`~sonicspec.acoustics.bands.OctaveFilterBank.shaping_spectra`: the magnitude of
+    the bank's bands weighted by its amplitudes), so nothing of it comes before its delay
+    by more than the tap's half-width (``taps // 2`` samples) — zero-phase band filters rang
+    up to 6 ms early.
     """
     if len(arrivals) == 0:
         return np.zeros(n_samples)
@@ -74,20 +81,60 @@ def synthesize_early(arrivals: Arrivals, bank: OctaveFilterBank, n_samples: int,
         raise AcousticsError(f"arrivals: expected {bank.n_bands} bands like the filter bank, "
                              f"got {arrivals.n_bands}")
     idx, w = _fractional_taps(arrivals.times_s, bank.sample_rate_hz, taps)
-    keep = (idx >= 0) & (idx < n_samples)
-    out = np.zeros(n_samples)
-    if not np.any(keep):
-        return out
-    kept = np.flatnonzero(keep)
-    arrival = kept // keep.shape[1]
-    idx, w = idx.ravel()[kept], w.ravel()[kept]
-    span = min(n_samples, int(idx.max()) + 1 + bank.padding())
-    # Every band's train in one bincount: band b's taps go to b·span + sample.
-    weights = arrivals.amplitudes[arrival].T * w  # (n_bands, kept taps)
-    flat = (np.arange(bank.n_bands)[:, None] * span + idx).ravel()
-    trains = np.bincount(flat, weights=weights.ravel(), minlength=bank.n_bands * span)
-    out[:span] = _filter_bands(trains.reshape(bank.n_bands, span), bank)
+    amplitudes = arrivals.amplitudes
+    flat = np.all(amplitudes == amplitudes[:, :1], axis=1)
+    kernels = np.ones((len(arrivals), 1))  # a flat arrival's kernel is its tap
+    return _place_kernels(idx, w, amplitudes, flat, kernels, bank, n_samples)[0]
+
+
+def _place_kernels(idx: np.ndarray, w: np.ndarray, amplitudes: np.ndarray, flat: np.ndarray,
+                   kernels: np.ndarray, bank: OctaveFilterBank, n_samples: int) -> np.ndarray:
+    """``(channels, n_samples)``: each arrival's fractional tap ``w`` (from sample
+    ``idx[:, 0]``) convolved with its kernel per channel (``kernels`` ``(n, channels, K)``, or
+    ``(n, K)`` for one) and scaled by its amplitude — the flat arrivals' one amplitude, the
+    others' minimum-phase shaping filter — added into the output (causal: from the tap's
+    first sample on)."""
+    kernels = kernels[:, None, :] if kernels.ndim == 2 else kernels
+    _, channels, k_len = kernels.shape
+    taps = w.shape[1]
+    out = np.zeros((channels, n_samples))
+    # Flat arrivals: tap ⊛ kernel, all at once.
+    rows = np.flatnonzero(flat)
+    if rows.size:
+        span = taps + k_len - 1
+        if k_len == 1:
+            shaped = w[rows, None, :] * kernels[rows]
+        else:
+            n_fft = 1 << math.ceil(math.log2(span))
+            shaped = np.fft.irfft(np.fft.rfft(w[rows], n_fft)[:, None, :]
+                                  * np.fft.rfft(kernels[rows], n_fft, axis=-1),
+                                  n_fft, axis=-1)[..., :span]
+        _add_at(out, idx[rows, 0], shaped * amplitudes[rows, :1, None])
+    rows = np.flatnonzero(~flat)
+    if rows.size:
+        n_fft = bank.shaping_fft_size()
+        while n_fft < 2 * bank.padding() + taps + k_len:
+            n_fft *= 2
+        span = 2 * bank.padding() + taps + k_len - 2
+        for chunk in np.array_split(rows, max(1, math.ceil(rows.size / _SHAPED_CHUNK))):
+            spectra = bank.shaping_spectra(amplitudes[chunk], n_fft) * np.fft.rfft(
+                w[chunk], n_fft)
+            if k_len > 1:
+                spectra = spectra[:, None, :] * np.fft.rfft(kernels[chunk], n_fft, axis=-1)
+            else:
+                spectra = spectra[:, None, :] * kernels[chunk, :, :1]
+            _add_at(out, idx[chunk, 0], np.fft.irfft(spectra, n_fft, axis=-1)[..., :span])
     return out
+
+
+def _add_at(out: np.ndarray, start: np.ndarray, pieces: np.ndarray) -> None:
+    """``out[c, start[n] + j] += pieces[n, c, j]`` where that lies inside ``out``."""
+    n_samples = out.shape[1]
+    length = pieces.shape[-1]
+    for n, s0 in enumerate(start.tolist()):
+        lo, hi = max(0, -s0), min(length, n_samples - s0)
+        if lo < hi:
+            out[:, s0 + lo:s0 + hi] += pieces[n, :, lo:hi]
 
 
 def _fft_size(n: int) -> int:
@@ -98,21 +145,6 @@ def _fft_size(n: int) -> int:
         size = odd << max(0, math.ceil(math.log2(max(n, 1) / odd)))
         best = min(best, size)
     return best
-
-
-def _filter_bands(trains: np.ndarray, bank: OctaveFilterBank) -> np.ndarray:
-    """Σ_b band_b(trains[b]): each band's signal through its own filter, summed.
-
-    The filters reach ``pad`` samples either way, so a frame of ``n + pad`` keeps the output
-    window ``[pad, pad + n)`` free of wrap-around: what wraps lands in the leading ``pad``.
-    """
-    n = trains.shape[-1]
-    pad = bank.padding()
-    n_fft = _fft_size(n + pad)
-    frame = np.zeros((bank.n_bands, n_fft))
-    frame[:, pad:pad + n] = trains
-    spectrum = np.fft.rfft(frame, axis=-1) * bank.responses(n_fft)
-    return np.fft.irfft(spectrum.sum(axis=0), n=n_fft)[pad:pad + n]
 
 
 @functools.lru_cache(maxsize=32)
