@@ -165,7 +165,8 @@ def test_stems_carry_their_speakers_gain_and_labels_follow_the_crop(root: Path) 
         direct = read(root, f"{d.group.id}/{name}_direct.flac")[:, d.start:d.start + d.length]
         np.testing.assert_allclose(item["direct"][k], d.gains[name] * direct, rtol=1e-6,
                                    atol=1e-7)
-        track = d.group.metadata[name]["track"]
+        track = d.group.track(name)
+        assert d.group.metadata[name]["track"]["file"] == f"{d.group.id}/tracks.npz"
         first = d.start // 160
         assert item["positions_m"].shape == (2, 300, 3)
         assert item["azimuth_deg"][k, 0] == track["azimuth_deg"][first]

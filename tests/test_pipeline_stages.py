@@ -19,6 +19,7 @@ import soundfile as sf
 
 from sonicspec.audio.mix import integrated_loudness
 from sonicspec.errors import StageError
+from sonicspec.export.tracks import read_track
 from sonicspec.plan.compile import compile_spec
 from sonicspec.plan.model import Plan
 from sonicspec.spec import load_spec
@@ -337,8 +338,9 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
     clip = meta["num_samples"]
     mic = np.asarray(meta["mic_m"])
     hops = -(-clip // 160)
+    out = Path(built.output_dir)
     for name in ("source1", "source2", "noise", "music"):
-        track = meta[name]["track"]
+        track = read_track(out, meta[name]["track"])
         assert track["hop_s"] == 0.01 and len(track["positions_m"]) == hops
         geometry = (placement["speech"][int(name[6:]) - 1] if name.startswith("source")
                     else placement[name])
@@ -358,9 +360,10 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
         # The mono microphone faces +x (yaw 0): azimuth is the bearing from +x.
         np.testing.assert_allclose(track["azimuth_deg"],
                                    np.degrees(np.arctan2(offset[:, 1], offset[:, 0])), atol=0.02)
-    np.testing.assert_allclose(meta["microphone_track"]["positions_m"], [meta["mic_m"]] * hops,
+    mic_track = read_track(out, meta["microphone_track"])
+    np.testing.assert_allclose(mic_track["positions_m"], [meta["mic_m"]] * hops,
                                atol=1e-4)  # labels to 0.1 mm, as the sources'
-    assert "yaw_deg" not in meta["microphone_track"]  # a static microphone: no heading
+    assert "yaw_deg" not in mic_track  # a static microphone: no heading
     recordings = {json.loads(x)["id"]: json.loads(x) for x in
                   (Path(built.output_dir) / "manifests" / "train_recordings.jsonl")
                   .read_text().splitlines()}

@@ -2,7 +2,8 @@
 
 A folder is what ``sonicspec build`` writes (README, "What a build writes"): ``dataset.json``
 lists the groups; each group's ``metadata.json`` (SonicSet form) names its tracks
-(``source1``…, ``noise``, ``music``, each with ``file``), the stems beside them
+(``source1``…, ``noise``, ``music``, each with ``file`` and its position ``track`` in the
+group's ``tracks.npz``), the stems beside them
 (``source1_dry``…, found by name) and its ``mixtures`` (``name``, ``task``, ``components``,
 ``targets``, ``file``). Nothing here writes.
 """
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec.errors import SonicspecError
+from sonicspec.export.tracks import TrackError, read_track
 
 STEMS = ("dry", "direct", "early")
 BACKGROUNDS = {"noise": ("noise",), "music": ("music",), "both": ("noise", "music"), "none": ()}
@@ -34,6 +36,7 @@ class Group:
     root: Path
     id: str
     metadata: dict[str, Any] = field(repr=False)
+    _tracks: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def split(self) -> str:
@@ -77,6 +80,19 @@ class Group:
                                f"without mixture.targets: [{stem}]")
         raise DatasetError(f"{self.root / self.id}/metadata.json: no audio file for {name!r} "
                            "(outputs.sources / outputs.background off?)")
+
+    def track(self, name: str) -> dict[str, Any]:
+        """The position track of ``name`` (a source, or ``microphone``) as
+        ``{"hop_s", "positions_m", ...}`` float64 arrays, read from the group's
+        ``tracks.npz`` (or from the lists of a dataset built before it)."""
+        entry = (self.metadata.get("microphone_track") if name == "microphone"
+                 else (self.metadata.get(name) or {}).get("track"))
+        if entry is None:
+            raise DatasetError(f"{self.root / self.id}/metadata.json: no track for {name!r}")
+        try:
+            return read_track(self.root, entry, self._tracks)
+        except TrackError as exc:
+            raise DatasetError(str(exc)) from None
 
     def read(self, name_or_path: str | Path, start: int = 0, stop: int | None = None,
              channels: tuple[int, ...] | None = None) -> np.ndarray:
