@@ -371,6 +371,38 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
     assert "custom" not in recordings["train_000000_mixtures_sep_s1s2_music"]
 
 
+def test_metadata_validates_and_the_tracks_are_stored_once(built: Plan) -> None:
+    """Issue 27: metadata.json follows its schema (and model), is compact JSON, and holds
+    references to tracks.npz, not the 10 ms numbers; the non-audio bytes stay within 20 kB
+    per group-second."""
+    import jsonschema
+
+    from sonicspec.export.metadata import GroupMetadata, metadata_schema
+
+    path = group_folder(built) / "metadata.json"
+    text = path.read_text()
+    meta = json.loads(text)
+    jsonschema.Draft202012Validator(metadata_schema()).validate(meta)
+    assert GroupMetadata.model_validate(meta).to_json() == text  # the model wrote it
+    assert meta["version"] == 2 and "\n " not in text
+    refs = [meta[n]["track"] for n in ("source1", "source2", "noise", "music")]
+    assert {r["file"] for r in [*refs, meta["microphone_track"]]} == {"train/000000/tracks.npz"}
+    with np.load(group_folder(built) / "tracks.npz") as z:
+        assert sorted(z.files) == sorted(
+            [f"{n}.{q}" for n in ("source1", "source2", "noise", "music")
+             for q in ("positions_m", "azimuth_deg", "elevation_deg", "distance_m")]
+            + ["microphone.positions_m"])
+    seconds = meta["num_samples"] / meta["sample_rate_hz"]
+    non_audio = sum(p.stat().st_size for p in group_folder(built).iterdir()
+                    if p.is_file() and p.suffix in (".json", ".npz"))
+    assert non_audio / seconds <= 20_000, non_audio / seconds
+    # The export record references the tracks too (it held a third copy of the numbers).
+    record = ArtifactStore(built.store_dir).read_data(
+        "export", built.by_step()["export"][0].key)["groups"][0]
+    tracked = [r["custom"]["track"] for r in record["recordings"] if "custom" in r]
+    assert tracked == refs and all(len(json.dumps(r)) < 1000 for r in record["recordings"])
+
+
 def test_a_cap_below_the_decay_is_a_warning_in_the_rir_jobs_log(tmp_path: Path,
                                                                 caplog) -> None:
     """Issue 19: with `max_rir_length_s: auto` a cap below the room's decay is logged by the
