@@ -107,11 +107,15 @@ _TRACK = b'track": {'
 
 
 def read_metadata(path: Path) -> dict[str, Any]:
-    """A group's metadata without its position tracks (``track``, ``microphone_track``: a
+    """A group's metadata, read fast in either form.
+
+    Since metadata version 2 the position tracks are references to ``tracks.npz`` and the
+    file is compact JSON (a few kB), parsed whole (``read_track`` reads the tracks). The
+    older form held the tracks inline in indented JSON (``track``, ``microphone_track``: a
     number every 10 ms, 90 % of a 60 s group's 3 MB, which the report does not use): they
-    are cut from the bytes before parsing, 15x faster than parsing them. A track holds no
-    nested object, so it ends at the first ``}``; if another ``{`` comes first, the file is
-    parsed whole."""
+    are cut from the bytes before parsing, 15x faster than parsing them. Such a track holds
+    no nested object, so it ends at the first ``}``; if another ``{`` comes first, the file
+    is parsed whole."""
     try:
         data = path.read_bytes()
     except OSError as exc:

@@ -1,0 +1,208 @@
+"""Benchmark (issue 27): what a build costs per group, and whether it stays flat as groups grow.
+
+One function per measurement; ``--only NAME`` runs one (others may add sections: each takes
+the parsed arguments and returns the lines it printed, for RESULTS.md).
+
+* ``dataset`` — the dataset step on synthetic store contents of 10^2, 10^3 and 10^4 groups
+  (:mod:`sonicspec.testing.scale`: export records of SonicSet-preset groups, 60 s, 3 talkers,
+  3 mixtures, no audio rendered): the peak RSS of the ``sonicspec job`` process
+  (``getrusage`` in a fresh subprocess, plan excerpt read as a job reads it), the RSS once the
+  plan is read, wall and CPU per group, and the bytes of the outputs.
+* ``bytes`` — a real build of the tests' cut-down demo (``tests/build_cases.py``: 4 train,
+  1 val, 1 test group, ``--duration`` seconds each) and its bytes per group by file kind in
+  the dataset folder and by step in the store, per group-second against the issue's
+  non-audio target (20 kB per group-second); and the position tracks of one group encoded
+  as they were (JSON lists in metadata.json, indented) against float32 ``.npy`` and the
+  int32 ``tracks.npz`` written now.
+
+Reproduce:
+    python bench/bench_scale.py                      # both (~10 min on 2 cores)
+    python bench/bench_scale.py --only dataset --sizes 100 1000 10000
+    python bench/bench_scale.py --only bytes --duration 60
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from build_cases import plan_for, write_spec  # noqa: E402  (the tests' cut-down demo)
+
+from sonicspec.export.tracks import read_track  # noqa: E402
+from sonicspec.testing.scale import measure_dataset_job, write_dataset_inputs  # noqa: E402
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    return env
+
+
+def _tree_bytes(root: Path) -> int:
+    return sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+
+
+def bench_dataset(args: argparse.Namespace) -> list[str]:
+    """Peak RSS, wall and CPU of the dataset job at each size (see the module docstring)."""
+    lines = ["| groups | write inputs s | peak RSS MB | RSS after plan MB | wall s | CPU s | "
+             "CPU ms/group | outputs MB |", "|---|---|---|---|---|---|---|---|"]
+    print(lines[0])
+    print(lines[1])
+    for n in args.sizes:
+        with tempfile.TemporaryDirectory(prefix="bench-scale-") as tmp:
+            t0 = time.perf_counter()
+            plan_file, key = write_dataset_inputs(Path(tmp), n)
+            made = time.perf_counter() - t0
+            m = measure_dataset_job(plan_file, key, env=_env())
+            out_mb = _tree_bytes(Path(tmp) / "out") / 2**20
+        line = (f"| {n} | {made:.1f} | {m['peak_rss_mb']:.0f} | {m['plan_rss_mb']:.0f} | "
+                f"{m['wall_s']:.2f} | {m['cpu_s']:.2f} | {1000 * m['cpu_s'] / n:.2f} | "
+                f"{out_mb:.1f} |")
+        print(line, flush=True)
+        lines.append(line)
+    return lines
+
+
+def _kind(rel: str) -> str:
+    name = rel.rsplit("/", 1)[-1]
+    if "/rirs/" in rel:
+        return "RIR wav"
+    if "/mixtures/" in rel:
+        return "mixture audio"
+    if name in ("metadata.json", "tracks.npz"):
+        return name
+    stem = name.rsplit(".", 1)[0]
+    if stem.endswith(("_dry", "_direct", "_early")):
+        return "target audio"
+    return "track audio"
+
+
+def _old_json_tracks(out: Path, meta: dict) -> bytes:
+    """The tracks as metadata.json held them before (lists, indented like the file)."""
+    tracks = {}
+    for name in [k for k in meta if k.startswith("source") or k in ("noise", "music")]:
+        t = read_track(out, meta[name]["track"])
+        tracks[name] = {"hop_s": t["hop_s"], **{q: v.tolist() for q, v in t.items()
+                                                if q != "hop_s"}}
+    mic = read_track(out, meta["microphone_track"])
+    tracks["microphone_track"] = {q: (v if q == "hop_s" else v.tolist()) for q, v in mic.items()}
+    return json.dumps(tracks, indent=2, sort_keys=True).encode()
+
+
+def _float32_npy(out: Path, meta: dict) -> int:
+    """Bytes of the same tracks as an uncompressed float32 ``.npz``."""
+    with np.load(out / meta["microphone_track"]["file"]) as z:
+        arrays = {n: z[n].astype(np.float32) for n in z.files}
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return len(buf.getvalue())
+
+
+def bench_bytes(args: argparse.Namespace) -> list[str]:
+    """Bytes per group by kind of a real cut-down demo build (see the module docstring)."""
+    from sonicspec.stages.workflow import run_build
+
+    with tempfile.TemporaryDirectory(prefix="bench-bytes-") as tmp:
+        folder = Path(tmp)
+        spec = write_spec(folder)
+        text = spec.read_text().replace("duration_s: 10.0", f"duration_s: {args.duration}")
+        spec.write_text(text)
+        plan = plan_for(spec)
+        t0 = time.perf_counter()
+        code = run_build(plan, cores=2)
+        built_s = time.perf_counter() - t0
+        if code != 0:
+            raise SystemExit(f"the demo build failed (exit {code})")
+        out, store = Path(plan.output_dir), Path(plan.store_dir)
+        groups = sorted(p.parent for p in out.glob("*/*/metadata.json"))
+        seconds = args.duration
+        by_kind: dict[str, int] = {}
+        for g in groups:
+            for p in g.rglob("*"):
+                if p.is_file():
+                    k = _kind(p.relative_to(out).as_posix())
+                    by_kind[k] = by_kind.get(k, 0) + p.stat().st_size
+        n = len(groups)
+        lines = [f"cut-down demo, {n} groups of {seconds:g} s, built in {built_s:.0f} s",
+                 "", "| dataset file kind | bytes per group | bytes per group-second |",
+                 "|---|---|---|"]
+        for k, b in sorted(by_kind.items()):
+            lines.append(f"| {k} | {b / n:,.0f} | {b / n / seconds:,.0f} |")
+        non_audio = sum(b for k, b in by_kind.items() if k in ("metadata.json", "tracks.npz"))
+        shared = _tree_bytes(out / "manifests") + sum(
+            (out / f).stat().st_size for f in ("dataset.json", "checksums.sha256"))
+        lines.append(f"| (dataset.json, manifests, checksums: shared) | {shared / n:,.0f} | "
+                     f"{shared / n / seconds:,.0f} |")
+        lines.append(f"\nnon-audio per group-second (metadata.json + tracks.npz + the group's "
+                     f"share of the shared files): {(non_audio + shared) / n / seconds:,.0f} B "
+                     "(target <= 20,000 B)")
+        lines += ["", "| store step | bytes per group | files per group |", "|---|---|---|"]
+        for step_dir in sorted(p for p in store.iterdir() if p.is_dir()):
+            if step_dir.name in ("logs", "benchmarks", "plans", "cache", ".snakemake"):
+                continue
+            files = [p for p in step_dir.rglob("*") if p.is_file()]
+            lines.append(f"| {step_dir.name} | {sum(p.stat().st_size for p in files) / n:,.0f} "
+                         f"| {len(files) / n:.1f} |")
+        meta_path = groups[0] / "metadata.json"
+        meta = json.loads(meta_path.read_text())
+        old = _old_json_tracks(out, meta)
+        npz = (groups[0] / "tracks.npz").stat().st_size
+        f32 = _float32_npy(out, meta)
+        with zipfile.ZipFile(groups[0] / "tracks.npz") as zf:
+            raw = sum(i.file_size for i in zf.infolist())
+        compact = len(json.dumps(json.loads(old), separators=(",", ":")))
+        lines += ["", f"tracks of one {seconds:g} s group ({groups[0].relative_to(out)}):",
+                  "", "| encoding | bytes | vs int32 tracks.npz |", "|---|---|---|",
+                  f"| JSON lists in metadata.json (before, indented) | {len(old):,} | "
+                  f"{len(old) / npz:.1f}x |",
+                  f"| JSON lists, compact | {compact:,} | {compact / npz:.1f}x |",
+                  f"| float32 .npz, uncompressed | {f32:,} | {f32 / npz:.1f}x |",
+                  f"| int32 .npz, uncompressed | {raw:,} | {raw / npz:.1f}x |",
+                  f"| int32 .npz, deflate (tracks.npz, now) | {npz:,} | 1.0x |",
+                  f"\nmetadata.json of that group now: {meta_path.stat().st_size:,} B"]
+        for line in lines:
+            print(line)
+        if args.keep:
+            shutil.copytree(folder, args.keep, dirs_exist_ok=True)
+        return lines
+
+
+BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
+    "dataset": bench_dataset,
+    "bytes": bench_bytes,
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", choices=sorted(BENCHES), action="append",
+                        help="run only this measurement (repeatable)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000],
+                        help="groups for the dataset step (default: 100 1000 10000)")
+    parser.add_argument("--duration", type=float, default=10.0,
+                        help="seconds per group of the demo build for 'bytes' (default: 10)")
+    parser.add_argument("--keep", type=Path, help="copy the demo build here ('bytes')")
+    args = parser.parse_args()
+    argv = " ".join(sys.argv[1:])
+    print(f"# python bench/bench_scale.py {argv}".rstrip())
+    for name in args.only or list(BENCHES):
+        print(f"\n## {name}")
+        BENCHES[name](args)
+
+
+if __name__ == "__main__":
+    main()
