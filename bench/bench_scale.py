@@ -14,11 +14,16 @@ the parsed arguments and returns the lines it printed, for RESULTS.md).
   non-audio target (20 kB per group-second); and the position tracks of one group encoded
   as they were (JSON lists in metadata.json, indented) against float32 ``.npy`` and the
   int32 ``tracks.npz`` written now.
+* ``compare`` (with ``--against CHECKOUT``) — the pipeline tests' one-group spec built by an
+  older checkout and by this one, file by file: what the format changes touched, and that
+  everything else (audio, supervisions, the recordings apart from ``custom``, the track
+  numbers) is the same.
 
 Reproduce:
     python bench/bench_scale.py                      # both (~10 min on 2 cores)
     python bench/bench_scale.py --only dataset --sizes 100 1000 10000
     python bench/bench_scale.py --only bytes --duration 60
+    python bench/bench_scale.py --only compare --against /path/to/checkout/at/346f31f
 """
 
 from __future__ import annotations
@@ -103,12 +108,13 @@ def _old_json_tracks(out: Path, meta: dict) -> bytes:
     return json.dumps(tracks, indent=2, sort_keys=True).encode()
 
 
-def _float32_npy(out: Path, meta: dict) -> int:
-    """Bytes of the same tracks as an uncompressed float32 ``.npz``."""
+def _float32_npz(out: Path, meta: dict, compressed: bool) -> int:
+    """Bytes of the same tracks as a float32 ``.npz`` (in metres and degrees)."""
     with np.load(out / meta["microphone_track"]["file"]) as z:
-        arrays = {n: z[n].astype(np.float32) for n in z.files}
+        arrays = {n: (z[n] / (10_000 if n.endswith("_m") else 100)).astype(np.float32)
+                  for n in z.files}
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    (np.savez_compressed if compressed else np.savez)(buf, **arrays)
     return len(buf.getvalue())
 
 
@@ -161,7 +167,7 @@ def bench_bytes(args: argparse.Namespace) -> list[str]:
         meta = json.loads(meta_path.read_text())
         old = _old_json_tracks(out, meta)
         npz = (groups[0] / "tracks.npz").stat().st_size
-        f32 = _float32_npy(out, meta)
+        f32, f32z = _float32_npz(out, meta, False), _float32_npz(out, meta, True)
         with zipfile.ZipFile(groups[0] / "tracks.npz") as zf:
             raw = sum(i.file_size for i in zf.infolist())
         compact = len(json.dumps(json.loads(old), separators=(",", ":")))
@@ -171,6 +177,7 @@ def bench_bytes(args: argparse.Namespace) -> list[str]:
                   f"{len(old) / npz:.1f}x |",
                   f"| JSON lists, compact | {compact:,} | {compact / npz:.1f}x |",
                   f"| float32 .npz, uncompressed | {f32:,} | {f32 / npz:.1f}x |",
+                  f"| float32 .npz, deflate | {f32z:,} | {f32z / npz:.1f}x |",
                   f"| int32 .npz, uncompressed | {raw:,} | {raw / npz:.1f}x |",
                   f"| int32 .npz, deflate (tracks.npz, now) | {npz:,} | 1.0x |",
                   f"\nmetadata.json of that group now: {meta_path.stat().st_size:,} B"]
@@ -181,9 +188,69 @@ def bench_bytes(args: argparse.Namespace) -> list[str]:
         return lines
 
 
+_BUILD_TINY = """
+import sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[2] + "/tests")
+from test_pipeline_stages import build
+build(Path(sys.argv[1]))
+"""
+
+
+def bench_compare(args: argparse.Namespace) -> list[str]:
+    """The outputs of the pipeline tests' one-group spec built by this checkout and by
+    ``--against`` (an older checkout), compared file by file: what changed, and that the rest
+    is the same."""
+    import hashlib
+    import subprocess
+
+    if args.against is None:
+        raise SystemExit("--only compare needs --against /path/to/an/older/checkout")
+    with tempfile.TemporaryDirectory(prefix="bench-compare-") as tmp:
+        outs = {}
+        for name, checkout in (("old", args.against.resolve()), ("new", ROOT)):
+            folder = Path(tmp) / name
+            folder.mkdir()
+            env = dict(os.environ, PYTHONPATH=str(checkout))
+            subprocess.run([sys.executable, "-c", _BUILD_TINY, str(folder), str(checkout)],
+                           check=True, env=env, capture_output=True, cwd=checkout)
+            outs[name] = folder / "out"
+        old, new = outs["old"], outs["new"]
+
+        def digests(root: Path) -> dict[str, str]:
+            return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+                    for p in root.rglob("*") if p.is_file()}
+
+        a, b = digests(old), digests(new)
+        same = sorted(k for k in a if b.get(k) == a[k])
+        lines = [f"files the same: {len(same)} ({sum(k.endswith(('.flac', '.wav')) for k in same)}"
+                 " audio)", f"only in the new: {sorted(set(b) - set(a))}",
+                 f"only in the old: {sorted(set(a) - set(b))}",
+                 f"differ: {sorted(k for k in a if k in b and a[k] != b[k])}"]
+        ra = [json.loads(x) for x in (old / "manifests/train_recordings.jsonl").open()]
+        rb = [json.loads(x) for x in (new / "manifests/train_recordings.jsonl").open()]
+        same_numbers = all(
+            np.array_equal(np.asarray(x["custom"]["track"][q]),
+                           read_track(new, y["custom"]["track"])[q])
+            for x, y in zip(ra, rb, strict=True) if "custom" in x
+            for q in x["custom"]["track"])
+        strip = [{k: v for k, v in r.items() if k != "custom"} for r in ra] == [
+            {k: v for k, v in r.items() if k != "custom"} for r in rb]
+        lines.append(f"recordings: the same apart from custom.track: {strip}; the tracks' "
+                     f"numbers read from tracks.npz equal the old lists: {same_numbers}")
+        meta_old = (old / "train/000000/metadata.json").stat().st_size
+        meta_new = (new / "train/000000/metadata.json").stat().st_size
+        tracks = (new / "train/000000/tracks.npz").stat().st_size
+        lines.append(f"metadata.json {meta_old:,} B -> {meta_new:,} B + tracks.npz {tracks:,} B")
+    for line in lines:
+        print(line)
+    return lines
+
+
 BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "dataset": bench_dataset,
     "bytes": bench_bytes,
+    "compare": bench_compare,
 }
 
 
@@ -196,10 +263,12 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0,
                         help="seconds per group of the demo build for 'bytes' (default: 10)")
     parser.add_argument("--keep", type=Path, help="copy the demo build here ('bytes')")
+    parser.add_argument("--against", type=Path,
+                        help="an older checkout to compare outputs with ('compare')")
     args = parser.parse_args()
     argv = " ".join(sys.argv[1:])
     print(f"# python bench/bench_scale.py {argv}".rstrip())
-    for name in args.only or list(BENCHES):
+    for name in args.only or [n for n in BENCHES if n != "compare" or args.against]:
         print(f"\n## {name}")
         BENCHES[name](args)
 
