@@ -14,6 +14,9 @@ the parsed arguments and returns the lines it printed, for RESULTS.md).
   non-audio target (20 kB per group-second); and the position tracks of one group encoded
   as they were (JSON lists in metadata.json, indented) against float32 ``.npy`` and the
   int32 ``tracks.npz`` written now.
+* ``tracks`` — a SonicSet-like 60 s group's tracks (three talkers walking the whole clip)
+  in candidate encodings: JSON (as before), float32 and int32 ``.npz``, raw and deflated, and
+  frame differences.
 * ``compare`` (with ``--against CHECKOUT``) — the pipeline tests' one-group spec built by an
   older checkout and by this one, file by file: what the format changes touched, and that
   everything else (audio, supervisions, the recordings apart from ``custom``, the track
@@ -23,6 +26,7 @@ Reproduce:
     python bench/bench_scale.py                      # both (~10 min on 2 cores)
     python bench/bench_scale.py --only dataset --sizes 100 1000 10000
     python bench/bench_scale.py --only bytes --duration 60
+    python bench/bench_scale.py --only tracks
     python bench/bench_scale.py --only compare --against /path/to/checkout/at/346f31f
 """
 
@@ -47,7 +51,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from build_cases import plan_for, write_spec  # noqa: E402  (the tests' cut-down demo)
 
-from sonicspec.export.tracks import read_track  # noqa: E402
+from sonicspec.export.tracks import TrackFile, read_track  # noqa: E402
 from sonicspec.testing.scale import measure_dataset_job, write_dataset_inputs  # noqa: E402
 
 
@@ -188,6 +192,69 @@ def bench_bytes(args: argparse.Namespace) -> list[str]:
         return lines
 
 
+def _walking_group_tracks(folder: Path, seconds: float) -> TrackFile:
+    """A SonicSet-like group's tracks: 3 talkers walking two legs over the whole clip
+    (``span: clip``), static noise, music and microphone."""
+    rng = np.random.default_rng(0)
+    n = round(seconds / 0.01)
+    files = TrackFile(folder, folder)
+    mic = np.array([4.0, 3.0, 1.5])
+
+    def labels(pos: np.ndarray) -> dict[str, np.ndarray]:
+        rel = pos - mic
+        dist = np.linalg.norm(rel, axis=1)
+        return {"positions_m": pos, "azimuth_deg": np.degrees(np.arctan2(rel[:, 1], rel[:, 0])),
+                "elevation_deg": np.degrees(np.arcsin(rel[:, 2] / dist)), "distance_m": dist}
+
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    for k in range(3):
+        a, b, c = (np.array([*rng.uniform(0, 10, 2), 1.7]) for _ in range(3))
+        walk = np.where(t < 0.5, a + (b - a) * 2 * t, b + (c - b) * (2 * t - 1))
+        files.add(f"source{k + 1}", 0.01, labels(walk))
+    for name in ("noise", "music"):
+        files.add(name, 0.01, labels(np.repeat([[*rng.uniform(0, 10, 2), 1.6]], n, axis=0)))
+    files.add("microphone", 0.01, {"positions_m": np.repeat([mic], n, axis=0)})
+    files.write()
+    return files
+
+
+def bench_tracks(args: argparse.Namespace) -> list[str]:
+    """Encodings of a SonicSet-like 60 s group's tracks (walking over the whole clip), to
+    choose the stored form with numbers."""
+    def npz(arrays: dict[str, np.ndarray], compressed: bool) -> int:
+        buf = io.BytesIO()
+        (np.savez_compressed if compressed else np.savez)(buf, **arrays)
+        return len(buf.getvalue())
+
+    with tempfile.TemporaryDirectory(prefix="bench-tracks-") as tmp:
+        files = _walking_group_tracks(Path(tmp), args.track_seconds)
+        now = files.path.stat().st_size
+        stored = files.arrays
+        values = {k: v / (10_000 if k.endswith("_m") else 100) for k, v in stored.items()}
+        rows = [
+            ("JSON lists, indented (metadata.json before; 3 copies were kept)",
+             len(json.dumps({k: v.tolist() for k, v in values.items()}, indent=2))),
+            ("JSON lists, compact",
+             len(json.dumps({k: v.tolist() for k, v in values.items()},
+                            separators=(",", ":")))),
+            ("float32 .npz", npz({k: v.astype(np.float32) for k, v in values.items()}, False)),
+            ("float32 .npz, deflate",
+             npz({k: v.astype(np.float32) for k, v in values.items()}, True)),
+            ("int32 .npz", npz(stored, False)),
+            ("int32 .npz, deflate (tracks.npz, now)", now),
+            ("int32 frame-to-frame differences, deflate (needs a cumsum to read)",
+             npz({k: np.diff(v, axis=0, prepend=0) for k, v in stored.items()}, True)),
+        ]
+    lines = [f"tracks of a {args.track_seconds:g} s group, 3 talkers walking the whole clip:",
+             "", "| encoding | bytes | bytes per group-second | vs tracks.npz |",
+             "|---|---|---|---|"]
+    lines += [f"| {name} | {b:,} | {b / args.track_seconds:,.0f} | {b / now:.2f}x |"
+              for name, b in rows]
+    for line in lines:
+        print(line)
+    return lines
+
+
 _BUILD_TINY = """
 import sys
 from pathlib import Path
@@ -251,6 +318,7 @@ BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "dataset": bench_dataset,
     "bytes": bench_bytes,
     "compare": bench_compare,
+    "tracks": bench_tracks,
 }
 
 
@@ -262,6 +330,8 @@ def main() -> None:
                         help="groups for the dataset step (default: 100 1000 10000)")
     parser.add_argument("--duration", type=float, default=10.0,
                         help="seconds per group of the demo build for 'bytes' (default: 10)")
+    parser.add_argument("--track-seconds", type=float, default=60.0,
+                        help="group length for 'tracks' (default: 60)")
     parser.add_argument("--keep", type=Path, help="copy the demo build here ('bytes')")
     parser.add_argument("--against", type=Path,
                         help="an older checkout to compare outputs with ('compare')")
