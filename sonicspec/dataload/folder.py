@@ -36,7 +36,6 @@ class Group:
     root: Path
     id: str
     metadata: dict[str, Any] = field(repr=False)
-    _tracks: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def split(self) -> str:
@@ -85,14 +84,24 @@ class Group:
         """The position track of ``name`` (a source, or ``microphone``) as
         ``{"hop_s", "positions_m", ...}`` float64 arrays, read from the group's
         ``tracks.npz`` (or from the lists of a dataset built before it)."""
-        entry = (self.metadata.get("microphone_track") if name == "microphone"
-                 else (self.metadata.get(name) or {}).get("track"))
-        if entry is None:
-            raise DatasetError(f"{self.root / self.id}/metadata.json: no track for {name!r}")
-        try:
-            return read_track(self.root, entry, self._tracks)
-        except TrackError as exc:
-            raise DatasetError(str(exc)) from None
+        return self.tracks((name,))[name]
+
+    def tracks(self, names: tuple[str, ...] | list[str]) -> dict[str, dict[str, Any]]:
+        """:meth:`track` of several names, opening the group's ``tracks.npz`` once (nothing
+        is kept after: a loader visits every group)."""
+        archives: dict[str, Any] = {}
+        out = {}
+        for name in names:
+            entry = (self.metadata.get("microphone_track") if name == "microphone"
+                     else (self.metadata.get(name) or {}).get("track"))
+            if entry is None:
+                raise DatasetError(f"{self.root / self.id}/metadata.json: no track for "
+                                   f"{name!r}")
+            try:
+                out[name] = read_track(self.root, entry, archives)
+            except TrackError as exc:
+                raise DatasetError(str(exc)) from None
+        return out
 
     def read(self, name_or_path: str | Path, start: int = 0, stop: int | None = None,
              channels: tuple[int, ...] | None = None) -> np.ndarray:

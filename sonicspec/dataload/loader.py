@@ -389,7 +389,8 @@ class SonicspecDataset:
 
     def _labels(self, group: Group, targets: list[str], start: int,
                 length: int) -> dict[str, np.ndarray]:
-        tracks = [group.track(n) for n in targets]
+        by_name = group.tracks(targets)
+        tracks = [by_name[n] for n in targets]
         hop = round(tracks[0]["hop_s"] * group.sample_rate_hz)
         first, count = start // hop, -(-length // hop)
         out = {}
