@@ -95,6 +95,7 @@ def _shards(folder: DatasetFolder, split: str, per_shard: int,
 def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
     meta = group.metadata
     speakers = group.speakers
+    tracks = group_extras(group).get("tracks")
     row: dict[str, Any] = {
         "group": group.id, "split": group.split, "scene_id": meta.get("scene_id"),
         "sample_rate_hz": group.sample_rate_hz, "num_samples": group.num_samples,
@@ -103,8 +104,7 @@ def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
         "t30_s": [meta[s].get("t30_s") for s in speakers],
         "drr_db": [meta[s].get("drr_db") for s in speakers],
         "metadata": json.dumps(meta, sort_keys=True),
-        "tracks": ((group.root / group_extras(group)["tracks"]).read_bytes()
-                   if "tracks" in group_extras(group) else None),
+        "tracks": (group.root / tracks).read_bytes() if tracks else None,
     }
     for name, rel in files.items():
         row[name] = {"bytes": (group.root / rel).read_bytes(), "path": rel}
