@@ -19,6 +19,7 @@ import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import IO, Any
 
 from sonicspec.errors import StoreError
 
@@ -56,3 +57,20 @@ def write_text(path: str | Path, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return path
+
+
+@contextmanager
+def open_atomic(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
+    """An open file for a writer that streams: written under a temporary name beside ``path``
+    and renamed over it when the ``with`` block ends without an error (a kill or an error
+    leaves the old file, or none, and no half file under the final name).
+
+    ``mode`` is ``"w"`` (UTF-8 text, ``\\n`` line ends) or ``"wb"``.
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"open_atomic: mode must be 'w' or 'wb', got {mode!r}")
+    with atomic_path(path) as tmp:
+        fh = (open(tmp, "w", encoding="utf-8", newline="\n") if mode == "w"
+              else open(tmp, "wb"))
+        with fh:
+            yield fh

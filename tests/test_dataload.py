@@ -166,7 +166,8 @@ def test_stems_carry_their_speakers_gain_and_labels_follow_the_crop(root: Path) 
         direct = read(root, f"{d.group.id}/{name}_direct.flac")[:, d.start:d.start + d.length]
         np.testing.assert_allclose(item["direct"][k], d.gains[name] * direct, rtol=1e-6,
                                    atol=1e-7)
-        track = d.group.metadata[name]["track"]
+        track = d.group.track(name)
+        assert d.group.metadata[name]["track"]["file"] == f"{d.group.id}/tracks.npz"
         first = d.start // 160
         assert item["positions_m"].shape == (2, 300, 3)
         assert item["azimuth_deg"][k, 0] == track["azimuth_deg"][first]
@@ -369,6 +370,9 @@ def test_huggingface_export_loads_with_datasets(root: Path, tmp_path: Path) -> N
         assert row["scene_id"] == m["scene_id"] and row["num_samples"] == m["num_samples"]
         assert row["speakers"] == [m[f"source{k}"]["speaker"] for k in (1, 2, 3)]
         assert row["transcripts"][0] == " ".join(m["source1"]["words"])
+        tracks = np.load(io.BytesIO(row["tracks"]))  # the group's tracks.npz, as written
+        assert row["tracks"] == (root / m["source1"]["track"]["file"]).read_bytes()
+        assert tracks["source1.positions_m"].shape == (m["source1"]["track"]["frames"], 3)
         for name, rel in _group_audio(root, row["group"]).items():
             assert row[name]["path"] == rel
             assert row[name]["bytes"] == (root / rel).read_bytes()
@@ -386,6 +390,7 @@ def test_webdataset_export_reads_with_webdataset(root: Path, tmp_path: Path) -> 
     assert [s["__key__"] for s in samples] == ["train/000000", "train/000001"]
     for s in samples:
         assert json.loads(s["metadata.json"]) == meta(root, s["__key__"])
+        assert s["tracks.npz"] == (root / s["__key__"] / "tracks.npz").read_bytes()
         for name, rel in _group_audio(root, s["__key__"]).items():
             data = s[f"{name}.flac"]
             assert data == (root / rel).read_bytes()

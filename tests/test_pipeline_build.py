@@ -37,9 +37,9 @@ def test_two_builds_from_empty_stores_are_byte_identical(reference, tmp_path: Pa
     digest = build_digest(plan)
     assert digest == reference[1]
     out = [k for k in digest if k.startswith("out/")]
-    # 4 groups x (2 sources, noise, music, 3 mixtures, metadata), dataset.json, 6 manifests,
-    # checksums.sha256 and the folder's marker.
-    assert len(out) == 4 * 8 + 1 + 6 + 2, out
+    # 4 groups x (2 sources, noise, music, 3 mixtures, metadata, tracks), dataset.json,
+    # 6 manifests, checksums.sha256 and the folder's marker.
+    assert len(out) == 4 * 9 + 1 + 6 + 2, out
 
 
 def test_verify_command_catches_a_damaged_artifact(reference, tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ from sonicspec.acoustics.receivers.arrays import sh_sn3d
 from sonicspec.acoustics.theory import moving_point_source
 from sonicspec.audio.fidelity import dip_figures, spectral_deviation_db
 from sonicspec.cli import main
+from sonicspec.export.tracks import read_track
 
 FS = 16000
 
@@ -69,7 +70,7 @@ def _figures(method: str, folder: Path, microphone: str = "mono", channel: int =
     direct, _ = sf.read(group / "source1_direct.wav", always_2d=True)
     direct = direct[:, channel]
     assert fs == FS
-    track = meta["track"]
+    track = read_track(folder / "out", meta["track"])
     hop = round(track["hop_s"] * FS)
     pos = np.asarray(track["positions_m"])
     t = np.arange(dry.size)
@@ -136,7 +137,7 @@ def test_a_walk_can_span_the_whole_clip(tmp_path: Path) -> None:
                                                  "utterance_gap_s: [0.5, 0.5]"))
     assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) == 0
     meta = json.loads((folder / "out" / "train" / "000000" / "metadata.json").read_text())
-    track = meta["source1"]["track"]
+    track = read_track(folder / "out", meta["source1"]["track"])
     pos = np.asarray(track["positions_m"])
     step = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     assert meta["source1"]["start_end_points"][0][0] >= 0.5 * FS  # speech starts later ...
@@ -178,7 +179,7 @@ def test_a_moving_microphone_builds_and_hears_the_exact_relative_motion(kind: st
     assert main(["build", str(folder / "spec.yaml"), "--cores", "2"]) == 0
     group = folder / "out" / "train" / "000000"
     meta = json.loads((group / "metadata.json").read_text())
-    mic_track = meta["microphone_track"]
+    mic_track = read_track(folder / "out", meta["microphone_track"])
     mic_pos = np.asarray(mic_track["positions_m"])
     assert np.allclose(mic_pos[0], [4.5, 5.0, 1.5], atol=1e-3)
     assert np.allclose(mic_pos[-1], [7.5, 5.4, 1.5], atol=0.01)
@@ -189,7 +190,7 @@ def test_a_moving_microphone_builds_and_hears_the_exact_relative_motion(kind: st
     direct, _ = sf.read(group / "source1_direct.wav", always_2d=True)
     channels = {"mono": 1, "ambisonics": 4, "circular_array": 4, "binaural": 2}[kind]
     assert direct.shape[1] == channels
-    src = meta["source1"]["track"]
+    src = read_track(folder / "out", meta["source1"]["track"])
     hop = round(src["hop_s"] * FS)
     t = np.arange(dry.size)
 

@@ -20,6 +20,7 @@ import soundfile as sf
 
 from sonicspec.audio.mix import integrated_loudness
 from sonicspec.errors import StageError
+from sonicspec.export.tracks import read_track
 from sonicspec.plan.compile import compile_spec
 from sonicspec.plan.model import Plan
 from sonicspec.spec import load_spec
@@ -338,8 +339,9 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
     clip = meta["num_samples"]
     mic = np.asarray(meta["mic_m"])
     hops = -(-clip // 160)
+    out = Path(built.output_dir)
     for name in ("source1", "source2", "noise", "music"):
-        track = meta[name]["track"]
+        track = read_track(out, meta[name]["track"])
         assert track["hop_s"] == 0.01 and len(track["positions_m"]) == hops
         geometry = (placement["speech"][int(name[6:]) - 1] if name.startswith("source")
                     else placement[name])
@@ -359,14 +361,47 @@ def test_metadata_tracks_are_the_positions_the_renderer_used(built: Plan) -> Non
         # The mono microphone faces +x (yaw 0): azimuth is the bearing from +x.
         np.testing.assert_allclose(track["azimuth_deg"],
                                    np.degrees(np.arctan2(offset[:, 1], offset[:, 0])), atol=0.02)
-    np.testing.assert_allclose(meta["microphone_track"]["positions_m"], [meta["mic_m"]] * hops,
+    mic_track = read_track(out, meta["microphone_track"])
+    np.testing.assert_allclose(mic_track["positions_m"], [meta["mic_m"]] * hops,
                                atol=1e-4)  # labels to 0.1 mm, as the sources'
-    assert "yaw_deg" not in meta["microphone_track"]  # a static microphone: no heading
+    assert "yaw_deg" not in mic_track  # a static microphone: no heading
     recordings = {json.loads(x)["id"]: json.loads(x) for x in
                   (Path(built.output_dir) / "manifests" / "train_recordings.jsonl")
                   .read_text().splitlines()}
     assert recordings["train_000000_source1"]["custom"]["track"] == meta["source1"]["track"]
     assert "custom" not in recordings["train_000000_mixtures_sep_s1s2_music"]
+
+
+def test_metadata_validates_and_the_tracks_are_stored_once(built: Plan) -> None:
+    """Issue 27: metadata.json follows its schema (and model), is compact JSON, and holds
+    references to tracks.npz, not the 10 ms numbers; the non-audio bytes stay within 20 kB
+    per group-second."""
+    import jsonschema
+
+    from sonicspec.export.metadata import GroupMetadata, metadata_schema
+
+    path = group_folder(built) / "metadata.json"
+    text = path.read_text()
+    meta = json.loads(text)
+    jsonschema.Draft202012Validator(metadata_schema()).validate(meta)
+    assert GroupMetadata.model_validate(meta).to_json() == text  # the model wrote it
+    assert meta["version"] == 2 and "\n " not in text
+    refs = [meta[n]["track"] for n in ("source1", "source2", "noise", "music")]
+    assert {r["file"] for r in [*refs, meta["microphone_track"]]} == {"train/000000/tracks.npz"}
+    with np.load(group_folder(built) / "tracks.npz") as z:
+        assert sorted(z.files) == sorted(
+            [f"{n}.{q}" for n in ("source1", "source2", "noise", "music")
+             for q in ("positions_m", "azimuth_deg", "elevation_deg", "distance_m")]
+            + ["microphone.positions_m"])
+    seconds = meta["num_samples"] / meta["sample_rate_hz"]
+    non_audio = sum(p.stat().st_size for p in group_folder(built).iterdir()
+                    if p.is_file() and p.suffix in (".json", ".npz"))
+    assert non_audio / seconds <= 20_000, non_audio / seconds
+    # The export record references the tracks too (it held a third copy of the numbers).
+    record = ArtifactStore(built.store_dir).read_data(
+        "export", built.by_step()["export"][0].key)["groups"][0]
+    tracked = [r["custom"]["track"] for r in record["recordings"] if "custom" in r]
+    assert tracked == refs and all(len(json.dumps(r)) < 1000 for r in record["recordings"])
 
 
 def test_a_cap_below_the_decay_is_a_warning_in_the_rir_jobs_log(tmp_path: Path,

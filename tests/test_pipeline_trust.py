@@ -101,7 +101,22 @@ def _flip_byte(path: Path, at: float = 0.5) -> None:
     path.write_bytes(bytes(data))
 
 
-@pytest.mark.parametrize("target", ["store chunk", "flac", "metadata", "manifest"])
+def _edit_first_text(node) -> bool:
+    """Change the first transcript (``text``) found in an artifact's data, in place."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            if k == "text" and isinstance(v, str):
+                node[k] = v + " EDITED"
+                return True
+            if _edit_first_text(v):
+                return True
+    elif isinstance(node, list):
+        return any(_edit_first_text(v) for v in node)
+    return False
+
+
+@pytest.mark.parametrize("target", ["store chunk", "store data", "flac", "metadata",
+                                    "manifest"])
 def test_damage_is_named_by_verify_and_repaired_by_build(copy, target: str) -> None:
     _folder, plan, expected = copy
     store, out = Path(plan.store_dir), Path(plan.output_dir)
@@ -114,6 +129,16 @@ def test_damage_is_named_by_verify_and_repaired_by_build(copy, target: str) -> N
         found = cli("verify", str(store))
         assert found.returncode == 1
         assert f"render {job.key}" in found.stderr
+    elif target == "store data":  # issue 28 item 1: a transcript edited in arrange's data
+        job = next(j for j in plan.jobs if j.step == "arrange")
+        meta = ArtifactStore(store).path("arrange", job.key) / "zarr.json"
+        doc = json.loads(meta.read_text())
+        assert _edit_first_text(doc["attributes"]["data"])
+        meta.write_text(json.dumps(doc))
+        found = cli("verify", str(store))
+        assert found.returncode == 1
+        assert re.search(rf"arrange {job.key}: data .* does not match", found.stderr), \
+            found.stderr
     else:
         damaged = {"flac": lambda: _first_file(out / "train", "source1.flac"),
                    "metadata": lambda: _first_file(out / "val", "metadata.json"),

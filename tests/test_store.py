@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import hashlib
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +96,38 @@ def test_verify_catches_truncated_and_edited_artifacts(tmp_path: Path) -> None:
     zarr.open_group(str(store.path("rir", key)), mode="r+")["points"][0, 0] = 42.0
     (problem,) = store.verify()
     assert "digest" in problem.problem
+
+
+def test_verify_finds_an_edit_inside_the_data(tmp_path: Path) -> None:
+    """Issue 28 item 1: the digest covers the data, not only the arrays."""
+    store = ArtifactStore(tmp_path)
+    key = _write_example(store)
+    meta = store.path("rir", key) / "zarr.json"
+    text = meta.read_text()
+    assert '"hall"' in text and "\n " not in text  # compact JSON, not indented
+    meta.write_text(text.replace('"hall"', '"hail"'))
+    (problem,) = store.verify()
+    assert problem.key == key and "data" in problem.problem and "digest" in problem.problem
+    meta.write_text(text.replace("0.51", "NaN"))  # not even canonical JSON any more
+    (problem,) = store.verify()
+    assert "data" in problem.problem
+    meta.write_text(text)
+    assert store.verify() == []
+
+
+def test_an_artifact_of_the_older_format_is_read_but_not_passed(tmp_path: Path) -> None:
+    import json
+
+    store = ArtifactStore(tmp_path)
+    key = _write_example(store)
+    meta = store.path("rir", key) / "zarr.json"
+    doc = json.loads(meta.read_text())
+    del doc["attributes"]["sonicspec"]["data_digest"], doc["attributes"]["sonicspec"]["format"]
+    meta.write_text(json.dumps(doc, indent=2))
+    assert store.read_data("rir", key)["scene"] == "hall"
+    (problem,) = store.verify()
+    assert re.search(r"store format 1, before 2\).*sonicspec build` makes it again",
+                     problem.problem), problem.problem
 
 
 def test_verify_reports_missing_and_leftover_temp(tmp_path: Path) -> None:

@@ -2,7 +2,8 @@
 
 A folder is what ``sonicspec build`` writes (docs/reference/dataset.md): ``dataset.json``
 lists the groups; each group's ``metadata.json`` (SonicSet form) names its tracks
-(``source1``…, ``noise``, ``music``, each with ``file``), the stems beside them
+(``source1``…, ``noise``, ``music``, each with ``file`` and its position ``track`` in the
+group's ``tracks.npz``), the stems beside them
 (``source1_dry``…, found by name) and its ``mixtures`` (``name``, ``task``, ``components``,
 ``targets``, ``file``). A dataset built with ``outputs.scale: per_file`` also has
 ``audio_scales`` (file relative to the group's folder -> scale): its PCM files peak just under
@@ -23,6 +24,7 @@ import numpy as np
 
 from sonicspec.errors import SonicspecError
 from sonicspec.export.files import SCALE_TAG, check_scale, read_scale_tag, scale_from_comment
+from sonicspec.export.tracks import TrackError, read_track
 
 STEMS = ("dry", "direct", "early")
 BACKGROUNDS = {"noise": ("noise",), "music": ("music",), "both": ("noise", "music"), "none": ()}
@@ -82,6 +84,29 @@ class Group:
                                f"without mixture.targets: [{stem}]")
         raise DatasetError(f"{self.root / self.id}/metadata.json: no audio file for {name!r} "
                            "(outputs.sources / outputs.background off?)")
+
+    def track(self, name: str) -> dict[str, Any]:
+        """The position track of ``name`` (a source, or ``microphone``) as
+        ``{"hop_s", "positions_m", ...}`` float64 arrays, read from the group's
+        ``tracks.npz`` (or from the lists of a dataset built before it)."""
+        return self.tracks((name,))[name]
+
+    def tracks(self, names: tuple[str, ...] | list[str]) -> dict[str, dict[str, Any]]:
+        """:meth:`track` of several names, opening the group's ``tracks.npz`` once (nothing
+        is kept after: a loader visits every group)."""
+        archives: dict[str, Any] = {}
+        out = {}
+        for name in names:
+            entry = (self.metadata.get("microphone_track") if name == "microphone"
+                     else (self.metadata.get(name) or {}).get("track"))
+            if entry is None:
+                raise DatasetError(f"{self.root / self.id}/metadata.json: no track for "
+                                   f"{name!r}")
+            try:
+                out[name] = read_track(self.root, entry, archives)
+            except TrackError as exc:
+                raise DatasetError(str(exc)) from None
+        return out
 
     def read(self, name_or_path: str | Path, start: int = 0, stop: int | None = None,
              channels: tuple[int, ...] | None = None) -> np.ndarray:

@@ -11,10 +11,12 @@ shards nothing refers to any more.
   dataset with one split per file prefix: ``datasets.load_dataset("<out>")``. Audio columns
   are ``datasets.Audio`` features (``{"bytes", "path"}``); the metadata is in columns
   (``group``, ``split``, ``scene_id``, ``sample_rate_hz``, ``num_samples``, ``speakers``,
-  ``transcripts``, ``t30_s``, ``drr_db``) and whole as JSON (``metadata``).
+  ``transcripts``, ``t30_s``, ``drr_db``), whole as JSON (``metadata``) and the group's
+  ``tracks.npz`` as bytes (``tracks``; ``numpy.load(io.BytesIO(row["tracks"]))``).
 * ``webdataset``: ``<out>/<split>-<key>.tar``; each group a sample keyed by its id
   (``train/000000``) with members ``<key>.<track>.flac`` (``source1``, ``noise``,
-  ``source1_dry``, a mixture's name such as ``sep_s1s2_noise``) and ``<key>.metadata.json``.
+  ``source1_dry``, a mixture's name such as ``sep_s1s2_noise``), ``<key>.metadata.json`` and
+  ``<key>.tracks.npz``.
   Tar members carry no time or owner, so the same groups give the same bytes.
 
 A dataset built with ``outputs.scale: per_file`` keeps each file's scale with it: the audio
@@ -35,12 +37,14 @@ from typing import Any
 from sonicspec.atomic import atomic_path, write_text
 from sonicspec.dataload.folder import DatasetError, DatasetFolder, Group
 from sonicspec.export.checksums import read_checksums
+from sonicspec.export.tracks import is_reference
 from sonicspec.hashing import canonical_json, sha256_hex
 
 FORMATS = ("huggingface", "webdataset")
 REQUIRES = {"huggingface": ("datasets", "pyarrow"), "webdataset": ("webdataset",)}
 """The modules each export needs (to write it, or for a reader to read it)."""
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""2: the group's ``tracks.npz`` is in each record (metadata version 2 references it)."""
 STATE_NAME = ".sonicspec-export.json"
 _INSTALL = {"huggingface": "pip install 'sonicspec[export]' (datasets)",
             "webdataset": "pip install 'sonicspec[export]' (webdataset)"}
@@ -65,6 +69,16 @@ def group_files(group: Group) -> dict[str, str]:
     return out
 
 
+def group_extras(group: Group) -> dict[str, str]:
+    """``record name -> path`` of a group's non-audio files: ``metadata`` and, for a dataset
+    whose metadata references it, ``tracks`` (the ``tracks.npz``)."""
+    out = {"metadata": f"{group.id}/metadata.json"}
+    ref = group.metadata.get("microphone_track")
+    if is_reference(ref):
+        out["tracks"] = ref["file"]
+    return out
+
+
 def _shards(folder: DatasetFolder, split: str, per_shard: int,
             sums: dict[str, str]) -> Iterator[tuple[str, list[Group]]]:
     groups = folder.groups(split)
@@ -72,7 +86,7 @@ def _shards(folder: DatasetFolder, split: str, per_shard: int,
         chunk = groups[i:i + per_shard]
         content = []
         for g in chunk:
-            files = {**group_files(g), "metadata": f"{g.id}/metadata.json"}
+            files = {**group_files(g), **group_extras(g)}
             missing = [rel for rel in files.values() if rel not in sums]
             if missing:
                 raise DatasetError(f"{folder.root}: {missing[0]} is not in checksums.sha256 "
@@ -86,6 +100,7 @@ def _shards(folder: DatasetFolder, split: str, per_shard: int,
 def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
     meta = group.metadata
     speakers = group.speakers
+    tracks = group_extras(group).get("tracks")
     row: dict[str, Any] = {
         "group": group.id, "split": group.split, "scene_id": meta.get("scene_id"),
         "sample_rate_hz": group.sample_rate_hz, "num_samples": group.num_samples,
@@ -94,6 +109,7 @@ def _row(group: Group, files: dict[str, str]) -> dict[str, Any]:
         "t30_s": [meta[s].get("t30_s") for s in speakers],
         "drr_db": [meta[s].get("drr_db") for s in speakers],
         "metadata": json.dumps(meta, sort_keys=True),
+        "tracks": (group.root / tracks).read_bytes() if tracks else None,
     }
     for name, rel in files.items():
         row[name] = {"bytes": (group.root / rel).read_bytes(), "path": rel}
@@ -139,6 +155,7 @@ def _write_parquet(path: Path, groups: list[Group]) -> None:
         "t30_s": datasets.Sequence(datasets.Value("float64")),
         "drr_db": datasets.Sequence(datasets.Value("float64")),
         "metadata": datasets.Value("string"),
+        "tracks": datasets.Value("binary"),
         **{n: datasets.Audio(sampling_rate=groups[0].sample_rate_hz, decode=True)
            for n in names},
         **({"audio_scales": {n: datasets.Value("float64") for n in names}} if scaled else {})})
@@ -158,7 +175,8 @@ def _write_tar(path: Path, groups: list[Group]) -> None:
         for g in groups:
             members = [(f"{name}{Path(rel).suffix}", (g.root / rel).read_bytes())
                        for name, rel in group_files(g).items()]
-            members.append(("metadata.json", (g.root / g.id / "metadata.json").read_bytes()))
+            members += [(Path(rel).name, (g.root / rel).read_bytes())
+                        for rel in group_extras(g).values()]
             scales = audio_scales(g, group_files(g))
             if scales is not None:
                 members.append(("scales.json", (json.dumps(scales, sort_keys=True)

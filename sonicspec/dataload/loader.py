@@ -393,14 +393,15 @@ class SonicspecDataset:
 
     def _labels(self, group: Group, targets: list[str], start: int,
                 length: int) -> dict[str, np.ndarray]:
-        tracks = [group.metadata[n]["track"] for n in targets]
+        by_name = group.tracks(targets)
+        tracks = [by_name[n] for n in targets]
         hop = round(tracks[0]["hop_s"] * group.sample_rate_hz)
         first, count = start // hop, -(-length // hop)
         out = {}
         for key in ("positions_m", "azimuth_deg", "elevation_deg", "distance_m"):
             rows = []
             for t in tracks:
-                values = np.asarray(t[key], dtype=np.float64)
+                values = t[key]
                 idx = np.minimum(np.arange(first, first + count), len(values) - 1)
                 rows.append(values[idx])
             out[key] = np.stack(rows)

@@ -13,13 +13,15 @@ own and ``verify`` knows what it is pointed at: ``.sonicspec-dataset.json`` in a
 from __future__ import annotations
 
 import contextlib
+import heapq
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sonicspec.atomic import write_text
+from sonicspec.atomic import open_atomic, write_text
 from sonicspec.errors import SpecError, StoreError
 from sonicspec.export.files import write_json
 from sonicspec.hashing import file_sha256
@@ -39,13 +41,31 @@ def file_record(out: Path, path: Path) -> dict[str, Any]:
             "bytes": path.stat().st_size}
 
 
+def checksum_line(record: dict[str, Any]) -> str:
+    """One line of ``checksums.sha256`` (``<sha256>  <path>`` and a newline)."""
+    return f"{record['sha256']}  {record['path']}\n"
+
+
 def checksums_text(records: list[dict[str, Any]]) -> str:
-    lines = [f"{r['sha256']}  {r['path']}" for r in sorted(records, key=lambda r: r["path"])]
-    return "".join(line + "\n" for line in lines)
+    return "".join(checksum_line(r) for r in sorted(records, key=lambda r: r["path"]))
 
 
 def write_checksums(out: Path, records: list[dict[str, Any]]) -> Path:
     return write_text(out / CHECKSUMS_NAME, checksums_text(records))
+
+
+def write_checksums_merged(out: Path, lines: Iterable[str], records: list[dict[str, Any]]
+                           ) -> Path:
+    """``checksums.sha256`` from ``lines`` already sorted by path (streamed, e.g. from a
+    spool file) and a few more ``records``, merged in path order without holding the lines.
+    """
+    def path_of(line: str) -> str:
+        return line[66:-1]
+
+    extra = [checksum_line(r) for r in sorted(records, key=lambda r: r["path"])]
+    with open_atomic(out / CHECKSUMS_NAME) as fh:
+        fh.writelines(heapq.merge(lines, extra, key=path_of))
+    return out / CHECKSUMS_NAME
 
 
 def read_checksums(out: Path) -> dict[str, str]:

@@ -5,7 +5,9 @@ its ``to_dict`` writes; sonicspec writes that shape without importing Lhotse:
 
 * recording: ``{id, sources: [{type: "file", channels: [0..C-1], source: path}],
   sampling_rate, num_samples, duration, channel_ids}``, and for a source's own file
-  ``custom: {track: {hop_s, positions_m, azimuth_deg, elevation_deg, distance_m}}``, and for
+  ``custom: {track: {file, frames, hop_s, arrays, scale}}``: a reference to the source's
+  position track in the group's ``tracks.npz`` (:mod:`sonicspec.export.tracks`; before
+  metadata version 2 the lists themselves), and for
   a scaled file (``outputs.scale: per_file``) ``transforms: [{name: "Volume", kwargs:
   {factor: <scale>}}]``, which Lhotse applies on load
 * supervision: ``{id, recording_id, start, duration, channel, text, speaker}``
@@ -18,7 +20,7 @@ import io
 import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import IO, Any
 
 
 @dataclass(frozen=True)
@@ -76,9 +78,23 @@ class SupervisionEntry:
         }
 
 
+def jsonl_line(item: Mapping[str, Any]) -> str:
+    """One JSON object on one line (keys sorted) and a newline."""
+    return json.dumps(item, sort_keys=True, ensure_ascii=False) + "\n"
+
+
 def jsonl(items: Iterable[Mapping[str, Any]]) -> str:
     """One compact JSON object per line, keys sorted."""
-    return "".join(json.dumps(item, sort_keys=True, ensure_ascii=False) + "\n" for item in items)
+    return "".join(jsonl_line(item) for item in items)
+
+
+def csv_writer(fh: IO[str], columns: Sequence[str]) -> csv.DictWriter:
+    """A CSV writer on ``fh`` whose header is written; missing cells are empty
+    (``restval``), cells it has no column for are left out."""
+    writer = csv.DictWriter(fh, fieldnames=list(columns), lineterminator="\n", restval="",
+                            extrasaction="ignore")
+    writer.writeheader()
+    return writer
 
 
 def csv_text(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> str:

@@ -22,6 +22,7 @@ import numpy as np
 
 from sonicspec.errors import SonicspecError
 from sonicspec.export.checksums import DATASET_MARKER
+from sonicspec.export.tracks import TrackError, is_reference, read_track
 from sonicspec.hashing import rng_for
 from sonicspec.units import OCTAVE_BANDS_HZ, bands_below_nyquist
 
@@ -110,12 +111,15 @@ _MOVING_MIC = b'"yaw_deg"'
 
 
 def read_metadata(path: Path) -> dict[str, Any]:
-    """A group's metadata without its position tracks (``track``, ``microphone_track``: a
+    """A group's metadata, read fast in either form.
+
+    Since metadata version 2 the position tracks are references to ``tracks.npz`` and the
+    file is compact JSON (a few kB), parsed whole (``read_track`` reads the tracks). The
+    older form held the tracks inline in indented JSON (``track``, ``microphone_track``: a
     number every 10 ms, 90 % of a 60 s group's 3 MB, which the report does not use): they
-    are cut from the bytes before parsing, 15x faster than parsing them. A track holds no
-    nested object, so it ends at the first ``}``; if another ``{`` comes first, the file is
-    parsed whole. So is the metadata of a moving microphone (its track has a heading): its
-    distances are read from the tracks."""
+    are cut from the bytes before parsing, 15x faster than parsing them. Such a track holds
+    no nested object, so it ends at the first ``}``; if another ``{`` comes first, the file
+    is parsed whole."""
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -219,24 +223,16 @@ def _distances(entry: dict[str, Any], mic: np.ndarray | None) -> tuple[float, ..
 
 
 def track_values(entry: Any, root: Path | None) -> dict[str, np.ndarray]:
-    """A position track's arrays (float64): the inline lists, or a reference into the
-    group's ``tracks.npz`` (``file`` relative to the dataset folder ``root``, each array
-    ``stored / scale``). Empty when there is none."""
-    if not isinstance(entry, dict):
-        return {}
-    if "file" in entry and "arrays" in entry:
-        if root is None:
-            return {}
-        path = root / entry["file"]
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                return {q: np.asarray(z[name], dtype=np.float64)
-                        / float((entry.get("scale") or {}).get(q, 1))
-                        for q, name in entry["arrays"].items() if name in z.files}
-        except (OSError, ValueError) as exc:
-            raise ReportError(f"{path}: cannot read the tracks ({exc})") from None
-    return {k: np.asarray(v, dtype=np.float64) for k, v in entry.items()
-            if isinstance(v, list)}
+    """A position track's arrays (float64, :func:`sonicspec.export.tracks.read_track`): the
+    inline lists, or a reference into the group's ``tracks.npz`` (``file`` relative to the
+    dataset folder ``root``). Empty when there is none."""
+    if not isinstance(entry, dict) or not entry or (is_reference(entry) and root is None):
+        return {}  # none, or cut by read_metadata (the report reads inline tracks seldom)
+    try:
+        track = read_track(root or Path("."), entry)
+    except TrackError as exc:
+        raise ReportError(str(exc)) from None
+    return {k: v for k, v in track.items() if k != "hop_s"}
 
 
 def microphone_path(meta: dict[str, Any], root: Path | None = None) -> np.ndarray | None:

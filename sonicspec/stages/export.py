@@ -5,7 +5,10 @@ Per group, under ``<output dir>/<split>/<index>/``: each reverberant source (``s
 (``mixtures/sep_s1s2_noise``…), the RIRs if asked (``rirs/<track>/<point>.wav``, float32) and
 ``metadata.json`` in the SonicSet form — ``source1..N: {audio, start_end_points, words}``,
 ``noise``, ``music`` — extended with the speaker, trajectory, RIR points, microphone, gains,
-acoustic figures and the content keys; with ``outputs.scale: per_file`` also ``audio_scales``
+acoustic figures and the content keys (typed:
+:class:`~sonicspec.export.metadata.GroupMetadata`), and ``tracks.npz``, the 10 ms position
+tracks that the metadata, the Lhotse manifests and the record reference
+(:mod:`sonicspec.export.tracks`); with ``outputs.scale: per_file`` also ``audio_scales``
 (each audio file, relative to the group's folder -> its scale: the signal is the decoded samples
 times it). Every file is written atomically. The artifact records
 the files (each with the SHA-256 of the bytes written, which ``checksums.sha256``, ``verify`` and
@@ -29,8 +32,17 @@ from sonicspec.artifacts import (
     RirGroup,
 )
 from sonicspec.export.checksums import file_record
-from sonicspec.export.files import peak_scale, write_audio, write_json
+from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
+from sonicspec.export.metadata import (
+    BackgroundTrack,
+    GroupMetadata,
+    Loudness,
+    MixtureRecord,
+    SpeechTrack,
+    TrackReference,
+)
+from sonicspec.export.tracks import TrackFile
 from sonicspec.plan.params import ExportParams
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
@@ -82,34 +94,31 @@ class _GroupWriter:
 TRACK_HOP_S = 0.01
 
 
-def position_track(line: Timeline, rate: int) -> dict[str, Any]:
+def position_track(line: Timeline, rate: int) -> tuple[float, dict[str, np.ndarray]]:
     """Where a source is every ``TRACK_HOP_S`` from t = 0 over the whole clip (held before and
     after its walk), read from the same timeline the renderer used, with its azimuth,
     elevation and distance in the microphone's frame (where the microphone is and faces
-    then)."""
+    then): the hop (s) and the arrays (:class:`~sonicspec.export.tracks.TrackFile` rounds
+    them to 0.1 mm and 0.01°)."""
     hop = max(1, round(TRACK_HOP_S * rate))
     index = line.index[::hop]
     positions = line.at(line.source_m, index)
     mic = line.at(line.mic_m, index)
     yaw = line.at(line.yaw_deg, index) if line.mic_moves else float(line.yaw_deg[0])
     azimuth, elevation, distance = local_directions(positions - mic, yaw, line.pitch_deg)
-    return {"hop_s": hop / rate, "positions_m": np.round(positions, 4).tolist(),
-            "azimuth_deg": np.round(azimuth, 2).tolist(),
-            "elevation_deg": np.round(elevation, 2).tolist(),
-            "distance_m": np.round(distance, 4).tolist()}
+    return hop / rate, {"positions_m": positions, "azimuth_deg": azimuth,
+                        "elevation_deg": elevation, "distance_m": distance}
 
 
-def microphone_track(line: Timeline, rate: int) -> dict[str, Any]:
+def microphone_track(line: Timeline, rate: int) -> tuple[float, dict[str, np.ndarray]]:
     """Where the microphone is (and faces) every ``TRACK_HOP_S``, from any source's
     timeline of its group (they share the microphone's walk)."""
     hop = max(1, round(TRACK_HOP_S * rate))
     index = line.index[::hop]
-    track = {"hop_s": hop / rate,
-             "positions_m": np.round(line.at(line.mic_m, index), 4).tolist()}
+    track = {"positions_m": line.at(line.mic_m, index)}
     if line.mic_moves:
-        yaw = (line.at(line.yaw_deg, index) + 180.0) % 360.0 - 180.0
-        track["yaw_deg"] = np.round(yaw, 2).tolist()
-    return track
+        track["yaw_deg"] = (line.at(line.yaw_deg, index) + 180.0) % 360.0 - 180.0
+    return hop / rate, track
 
 
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
@@ -124,7 +133,8 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     gains = mix.gains
     tracks = {t.name: t for t in render.tracks}
     arranged = {t.name: t for t in arrange.tracks}
-    metadata: dict[str, Any] = {}
+    track_file = TrackFile(out, w.folder)
+    entries: dict[str, SpeechTrack | BackgroundTrack] = {}
     spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
     speech = group_speech(arrange.tracks)
     for name, track in tracks.items():
@@ -135,7 +145,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         geometry = placement.source(name)
         line = timeline(geometry, a.segment_list(), placement, walk, speech,
                         render.clip_samples, w.rate)
-        track_labels = position_track(line, w.rate)
+        track_labels = track_file.add(name, *position_track(line, w.rate))
         if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
             audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
         else:
@@ -150,25 +160,25 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             for j in range(stack.shape[0]):
                 w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
         segs = a.segments
-        entry: dict[str, Any] = {
+        common: dict[str, Any] = {
             "audio": [a.files[s["id"]].path for s in segs],
-            "start_end_points": [[s["start"], s["end"]] for s in segs],
+            "start_end_points": [(s["start"], s["end"]) for s in segs],
             "file": audio_rel,
-            "rir_points_m": [list(p) for p in geometry.rir_points_m],
+            "rir_points_m": [tuple(p) for p in geometry.rir_points_m],
             "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
             "direct_path": rir_source.direct,
             "rir_tail": rir_source.tail,
-            "loudness": mix.components[name].model_dump(mode="json"),
-            "track": track_labels,
+            "loudness": Loudness(**mix.components[name].model_dump()),
+            "track": TrackReference(**track_labels),
         }
         if role == "speech":
-            entry.update(words=[s["text"] for s in segs], speaker=a.speaker,
-                         trajectory_m=[list(p) for p in geometry.path_m],
-                         path_length_m=geometry.path_length_m)
+            entries[name] = SpeechTrack(
+                **common, words=[s["text"] for s in segs], speaker=a.speaker,
+                trajectory_m=[tuple(p) for p in geometry.path_m],
+                path_length_m=geometry.path_length_m)
             spoken[name] = (a.speaker, segs)
         else:
-            entry["position_m"] = list(geometry.rir_points_m[0])
-        metadata[name] = entry
+            entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]))
     mixtures = []
     if outputs.mixtures:
         for m in mix.mixtures:
@@ -176,16 +186,19 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                                               dtype=np.float64) for c in m.components)
             rel = w.audio("mixture", f"mixtures/{m.name}", total)
             mixtures.append({**m.model_dump(mode="json"), "file": rel})
-    metadata.update(
-        group=group, split=split, scene_id=params.scene_id, mic_m=list(placement.mic_m),
+    mic_ref = TrackReference(**track_file.add("microphone", *microphone_track(line, w.rate)))
+    track_file.write()
+    w.files.append({"kind": "tracks", "name": "tracks", **file_record(out, track_file.path)})
+    speech_entries = {n: e for n, e in entries.items() if isinstance(e, SpeechTrack)}
+    metadata = GroupMetadata(
+        group=group, split=split, scene_id=params.scene_id, mic_m=tuple(placement.mic_m),
         floor=placement.floor_index, sample_rate_hz=w.rate,
-        num_samples=render.clip_samples, mixtures=mixtures,
-        group_gain_db=mix.group_gain_db, keys=keys,
-        microphone_track=microphone_track(line, w.rate))
-    if w.scales:
-        metadata["audio_scales"] = w.scales
+        num_samples=render.clip_samples, mixtures=[MixtureRecord(**m) for m in mixtures],
+        group_gain_db=mix.group_gain_db, keys=keys, microphone_track=mic_ref,
+        noise=entries.get("noise"), music=entries.get("music"), **speech_entries,
+        audio_scales=w.scales or None)
     if outputs.metadata:
-        write_json(w.folder / "metadata.json", metadata)
+        metadata.write(w.folder / "metadata.json")
         w.files.append({"kind": "metadata", "name": "metadata",
                         **file_record(out, w.folder / "metadata.json")})
     # A supervision per utterance on every recording it is heard in: its source's own file

@@ -3,9 +3,16 @@
 Layout: ``<root>/<stage>/<key[:2]>/<key>.zarr``. An artifact is written into a temporary
 folder beside its final place and renamed into place, so a reader (or a build resumed after a
 crash) sees either the whole artifact or none. Its attributes hold provenance under
-``"sonicspec"`` (stage, key, parameters, input keys, package version, array digest) and the
-stage's own JSON-able result under ``"data"``. Because the key is the content hash of what the
-job computes, two writers racing on one key write the same thing, and the loser discards its copy.
+``"sonicspec"`` (stage, key, parameters, input keys, package version, the digest of its arrays
+and the digest of its data) and the stage's own JSON-able result under ``"data"``, written as
+compact JSON (zarr's default indents it: 4.5x the bytes). Because the key is the content hash
+of what the job computes, two writers racing on one key write the same thing, and the loser
+discards its copy.
+
+Store format (``"format"`` in the provenance): 2 since the data digest (``data_digest``, the
+SHA-256 of the data's canonical JSON) came in, so that ``verify`` finds an edit inside the
+data as it finds one in an array. An artifact of format 1 (no data digest) is still read, but
+``verify`` reports it as not checkable and a build makes it again.
 """
 
 from __future__ import annotations
@@ -25,10 +32,12 @@ from typing import Any
 import numpy as np
 
 from sonicspec import __version__
-from sonicspec.errors import StoreError
+from sonicspec.errors import CompileError, StoreError
 from sonicspec.hashing import KEY_LENGTH, array_digest, canonical_json, sha256_hex
 
 TEMP_PREFIX = ".tmp-"
+STORE_FORMAT = 2
+"""The layout of an artifact's attributes (see the module docstring)."""
 _ONE_CHUNK_BYTES = 64 * 2**20
 
 
@@ -51,6 +60,28 @@ class VerifyProblem:
 
     def format(self) -> str:
         return f"{self.stage} {self.key}: {self.problem}"
+
+
+def _write_group(path: Path, arrays: Mapping[str, np.ndarray], attrs: dict[str, Any]) -> None:
+    """A Zarr v3 group at ``path`` with ``arrays`` (zstd) and ``attrs``, written once each."""
+    import zarr
+
+    group = zarr.create_group(store=str(path), zarr_format=3, attributes=attrs, overwrite=True)
+    for name in sorted(arrays):
+        a = arrays[name]
+        chunks = a.shape if a.nbytes <= _ONE_CHUNK_BYTES and a.size else "auto"
+        if a.size == 0:
+            chunks = tuple(max(1, s) for s in a.shape) or ()
+        arr = group.create_array(
+            name,
+            shape=a.shape,
+            dtype=a.dtype,
+            chunks=chunks,
+            compressors=zarr.codecs.ZstdCodec(level=3),
+            fill_value=0,
+        )
+        if a.size:
+            arr[...] = a
 
 
 def _check_key(key: str) -> None:
@@ -144,7 +175,9 @@ class ArtifactStore:
                     f"{stage} {key[:12]}: array {name!r} has dtype {a.dtype}; "
                     "store text in data, numbers in arrays"
                 )
+        data_text = canonical_json(data)
         provenance = {
+            "format": STORE_FORMAT,
             "stage": stage,
             "key": key,
             "stage_version": stage_version,
@@ -152,33 +185,19 @@ class ArtifactStore:
             "input_keys": list(input_keys),
             "package_version": __version__,
             "digest": array_digest(arrays),
+            "data_digest": sha256_hex(data_text),
             "arrays": {
                 n: {"dtype": a.dtype.str, "shape": list(a.shape)} for n, a in sorted(arrays.items())
             },
         }
-        attrs = json.loads(canonical_json({"sonicspec": provenance, "data": data}))
+        attrs = {"sonicspec": json.loads(canonical_json(provenance)), "data": json.loads(data_text)}
         final.parent.mkdir(parents=True, exist_ok=True)
         tmp = final.parent / (
             f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}@{socket.gethostname()}.zarr"
         )
         try:
-            group = zarr.open_group(store=str(tmp), mode="w", zarr_format=3)
-            for name in sorted(arrays):
-                a = arrays[name]
-                chunks = a.shape if a.nbytes <= _ONE_CHUNK_BYTES and a.size else "auto"
-                if a.size == 0:
-                    chunks = tuple(max(1, s) for s in a.shape) or ()
-                arr = group.create_array(
-                    name,
-                    shape=a.shape,
-                    dtype=a.dtype,
-                    chunks=chunks,
-                    compressors=zarr.codecs.ZstdCodec(level=3),
-                    fill_value=0,
-                )
-                if a.size:
-                    arr[...] = a
-            group.attrs.update(attrs)
+            with zarr.config.set({"json_indent": None}):  # compact zarr.json: bytes are data
+                _write_group(tmp, arrays, attrs)
             if final.exists() and not self.exists(stage, key):
                 shutil.rmtree(final)  # a damaged leftover (e.g. its zarr.json was deleted)
             try:
@@ -310,6 +329,17 @@ class ArtifactStore:
             )
         if array_digest(art.arrays) != prov.get("digest"):
             return VerifyProblem(stage, key, "array contents do not match the recorded digest")
+        if "data_digest" not in prov:
+            return VerifyProblem(stage, key, f"written by an older sonicspec (store format "
+                                 f"{prov.get('format', 1)}, before {STORE_FORMAT}): its data "
+                                 "has no digest to check; `sonicspec build` makes it again")
+        try:
+            data_text = canonical_json(art.data)
+        except CompileError:  # a non-finite number or a non-text key: edited by hand
+            data_text = ""
+        if sha256_hex(data_text) != prov["data_digest"]:
+            return VerifyProblem(stage, key, "data (the JSON in zarr.json's attributes) does "
+                                 "not match the recorded digest")
         return None
 
     def verify(self, expected: Mapping[str, str] | None = None) -> list[VerifyProblem]:

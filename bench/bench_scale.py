@@ -1,0 +1,347 @@
+"""Benchmark (issue 27): what a build costs per group, and whether it stays flat as groups grow.
+
+One function per measurement; ``--only NAME`` runs one (others may add sections: each takes
+the parsed arguments and returns the lines it printed, for RESULTS.md).
+
+* ``dataset`` — the dataset step on synthetic store contents of 10^2, 10^3 and 10^4 groups
+  (:mod:`sonicspec.testing.scale`: export records of SonicSet-preset groups, 60 s, 3 talkers,
+  3 mixtures, no audio rendered): the peak RSS of the ``sonicspec job`` process
+  (``getrusage`` in a fresh subprocess, plan excerpt read as a job reads it), the RSS once the
+  plan is read, wall and CPU per group, and the bytes of the outputs.
+* ``bytes`` — a real build of the tests' cut-down demo (``tests/build_cases.py``: 4 train,
+  1 val, 1 test group, ``--duration`` seconds each) and its bytes per group by file kind in
+  the dataset folder and by step in the store, per group-second against the issue's
+  non-audio target (20 kB per group-second); and the position tracks of one group encoded
+  as they were (JSON lists in metadata.json, indented) against float32 ``.npy`` and the
+  int32 ``tracks.npz`` written now.
+* ``tracks`` — a SonicSet-like 60 s group's tracks (three talkers walking the whole clip)
+  in candidate encodings: JSON (as before), float32 and int32 ``.npz``, raw and deflated, and
+  frame differences.
+* ``compare`` (with ``--against CHECKOUT``) — the pipeline tests' one-group spec built by an
+  older checkout and by this one, file by file: what the format changes touched, and that
+  everything else (audio, supervisions, the recordings apart from ``custom``, the track
+  numbers) is the same.
+
+Reproduce:
+    python bench/bench_scale.py                      # both (~10 min on 2 cores)
+    python bench/bench_scale.py --only dataset --sizes 100 1000 10000
+    python bench/bench_scale.py --only bytes --duration 60
+    python bench/bench_scale.py --only tracks
+    python bench/bench_scale.py --only compare --against /path/to/checkout/at/346f31f
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from build_cases import plan_for, write_spec  # noqa: E402  (the tests' cut-down demo)
+
+from sonicspec.export.tracks import TrackFile, read_track  # noqa: E402
+from sonicspec.testing.scale import measure_dataset_job, write_dataset_inputs  # noqa: E402
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    return env
+
+
+def _tree_bytes(root: Path) -> int:
+    return sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+
+
+def bench_dataset(args: argparse.Namespace) -> list[str]:
+    """Peak RSS, wall and CPU of the dataset job at each size (see the module docstring)."""
+    lines = ["| groups | write inputs s | peak RSS MB | RSS after plan MB | wall s | CPU s | "
+             "CPU ms/group | outputs MB |", "|---|---|---|---|---|---|---|---|"]
+    print(lines[0])
+    print(lines[1])
+    for n in args.sizes:
+        with tempfile.TemporaryDirectory(prefix="bench-scale-") as tmp:
+            t0 = time.perf_counter()
+            plan_file, key = write_dataset_inputs(Path(tmp), n)
+            made = time.perf_counter() - t0
+            m = measure_dataset_job(plan_file, key, env=_env())
+            out_mb = _tree_bytes(Path(tmp) / "out") / 2**20
+        line = (f"| {n} | {made:.1f} | {m['peak_rss_mb']:.0f} | {m['plan_rss_mb']:.0f} | "
+                f"{m['wall_s']:.2f} | {m['cpu_s']:.2f} | {1000 * m['cpu_s'] / n:.2f} | "
+                f"{out_mb:.1f} |")
+        print(line, flush=True)
+        lines.append(line)
+    return lines
+
+
+def _kind(rel: str) -> str:
+    name = rel.rsplit("/", 1)[-1]
+    if "/rirs/" in rel:
+        return "RIR wav"
+    if "/mixtures/" in rel:
+        return "mixture audio"
+    if name in ("metadata.json", "tracks.npz"):
+        return name
+    stem = name.rsplit(".", 1)[0]
+    if stem.endswith(("_dry", "_direct", "_early")):
+        return "target audio"
+    return "track audio"
+
+
+def _old_json_tracks(out: Path, meta: dict) -> bytes:
+    """The tracks as metadata.json held them before (lists, indented like the file)."""
+    tracks = {}
+    for name in [k for k in meta if k.startswith("source") or k in ("noise", "music")]:
+        t = read_track(out, meta[name]["track"])
+        tracks[name] = {"hop_s": t["hop_s"], **{q: v.tolist() for q, v in t.items()
+                                                if q != "hop_s"}}
+    mic = read_track(out, meta["microphone_track"])
+    tracks["microphone_track"] = {q: (v if q == "hop_s" else v.tolist()) for q, v in mic.items()}
+    return json.dumps(tracks, indent=2, sort_keys=True).encode()
+
+
+def _float32_npz(out: Path, meta: dict, compressed: bool) -> int:
+    """Bytes of the same tracks as a float32 ``.npz`` (in metres and degrees)."""
+    with np.load(out / meta["microphone_track"]["file"]) as z:
+        arrays = {n: (z[n] / (10_000 if n.endswith("_m") else 100)).astype(np.float32)
+                  for n in z.files}
+    buf = io.BytesIO()
+    (np.savez_compressed if compressed else np.savez)(buf, **arrays)
+    return len(buf.getvalue())
+
+
+def bench_bytes(args: argparse.Namespace) -> list[str]:
+    """Bytes per group by kind of a real cut-down demo build (see the module docstring)."""
+    from sonicspec.stages.workflow import run_build
+
+    with tempfile.TemporaryDirectory(prefix="bench-bytes-") as tmp:
+        folder = Path(tmp)
+        spec = write_spec(folder)
+        text = spec.read_text().replace("duration_s: 10.0", f"duration_s: {args.duration}")
+        spec.write_text(text)
+        plan = plan_for(spec)
+        t0 = time.perf_counter()
+        code = run_build(plan, cores=2)
+        built_s = time.perf_counter() - t0
+        if code != 0:
+            raise SystemExit(f"the demo build failed (exit {code})")
+        out, store = Path(plan.output_dir), Path(plan.store_dir)
+        groups = sorted(p.parent for p in out.glob("*/*/metadata.json"))
+        seconds = args.duration
+        by_kind: dict[str, int] = {}
+        for g in groups:
+            for p in g.rglob("*"):
+                if p.is_file():
+                    k = _kind(p.relative_to(out).as_posix())
+                    by_kind[k] = by_kind.get(k, 0) + p.stat().st_size
+        n = len(groups)
+        lines = [f"cut-down demo, {n} groups of {seconds:g} s, built in {built_s:.0f} s",
+                 "", "| dataset file kind | bytes per group | bytes per group-second |",
+                 "|---|---|---|"]
+        for k, b in sorted(by_kind.items()):
+            lines.append(f"| {k} | {b / n:,.0f} | {b / n / seconds:,.0f} |")
+        non_audio = sum(b for k, b in by_kind.items() if k in ("metadata.json", "tracks.npz"))
+        shared = _tree_bytes(out / "manifests") + sum(
+            (out / f).stat().st_size for f in ("dataset.json", "checksums.sha256"))
+        lines.append(f"| (dataset.json, manifests, checksums: shared) | {shared / n:,.0f} | "
+                     f"{shared / n / seconds:,.0f} |")
+        lines.append(f"\nnon-audio per group-second (metadata.json + tracks.npz + the group's "
+                     f"share of the shared files): {(non_audio + shared) / n / seconds:,.0f} B "
+                     "(target <= 20,000 B)")
+        lines += ["", "| store step | bytes per group | files per group |", "|---|---|---|"]
+        for step_dir in sorted(p for p in store.iterdir() if p.is_dir()):
+            if step_dir.name in ("logs", "benchmarks", "plans", "cache", ".snakemake"):
+                continue
+            files = [p for p in step_dir.rglob("*") if p.is_file()]
+            lines.append(f"| {step_dir.name} | {sum(p.stat().st_size for p in files) / n:,.0f} "
+                         f"| {len(files) / n:.1f} |")
+        meta_path = groups[0] / "metadata.json"
+        meta = json.loads(meta_path.read_text())
+        old = _old_json_tracks(out, meta)
+        npz = (groups[0] / "tracks.npz").stat().st_size
+        f32, f32z = _float32_npz(out, meta, False), _float32_npz(out, meta, True)
+        with zipfile.ZipFile(groups[0] / "tracks.npz") as zf:
+            raw = sum(i.file_size for i in zf.infolist())
+        compact = len(json.dumps(json.loads(old), separators=(",", ":")))
+        lines += ["", f"tracks of one {seconds:g} s group ({groups[0].relative_to(out)}):",
+                  "", "| encoding | bytes | vs int32 tracks.npz |", "|---|---|---|",
+                  f"| JSON lists in metadata.json (before, indented) | {len(old):,} | "
+                  f"{len(old) / npz:.1f}x |",
+                  f"| JSON lists, compact | {compact:,} | {compact / npz:.1f}x |",
+                  f"| float32 .npz, uncompressed | {f32:,} | {f32 / npz:.1f}x |",
+                  f"| float32 .npz, deflate | {f32z:,} | {f32z / npz:.1f}x |",
+                  f"| int32 .npz, uncompressed | {raw:,} | {raw / npz:.1f}x |",
+                  f"| int32 .npz, deflate (tracks.npz, now) | {npz:,} | 1.0x |",
+                  f"\nmetadata.json of that group now: {meta_path.stat().st_size:,} B"]
+        for line in lines:
+            print(line)
+        if args.keep:
+            shutil.copytree(folder, args.keep, dirs_exist_ok=True)
+        return lines
+
+
+def _walking_group_tracks(folder: Path, seconds: float) -> TrackFile:
+    """A SonicSet-like group's tracks: 3 talkers walking two legs over the whole clip
+    (``span: clip``), static noise, music and microphone."""
+    rng = np.random.default_rng(0)
+    n = round(seconds / 0.01)
+    files = TrackFile(folder, folder)
+    mic = np.array([4.0, 3.0, 1.5])
+
+    def labels(pos: np.ndarray) -> dict[str, np.ndarray]:
+        rel = pos - mic
+        dist = np.linalg.norm(rel, axis=1)
+        return {"positions_m": pos, "azimuth_deg": np.degrees(np.arctan2(rel[:, 1], rel[:, 0])),
+                "elevation_deg": np.degrees(np.arcsin(rel[:, 2] / dist)), "distance_m": dist}
+
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    for k in range(3):
+        a, b, c = (np.array([*rng.uniform(0, 10, 2), 1.7]) for _ in range(3))
+        walk = np.where(t < 0.5, a + (b - a) * 2 * t, b + (c - b) * (2 * t - 1))
+        files.add(f"source{k + 1}", 0.01, labels(walk))
+    for name in ("noise", "music"):
+        files.add(name, 0.01, labels(np.repeat([[*rng.uniform(0, 10, 2), 1.6]], n, axis=0)))
+    files.add("microphone", 0.01, {"positions_m": np.repeat([mic], n, axis=0)})
+    files.write()
+    return files
+
+
+def bench_tracks(args: argparse.Namespace) -> list[str]:
+    """Encodings of a SonicSet-like 60 s group's tracks (walking over the whole clip), to
+    choose the stored form with numbers."""
+    def npz(arrays: dict[str, np.ndarray], compressed: bool) -> int:
+        buf = io.BytesIO()
+        (np.savez_compressed if compressed else np.savez)(buf, **arrays)
+        return len(buf.getvalue())
+
+    with tempfile.TemporaryDirectory(prefix="bench-tracks-") as tmp:
+        files = _walking_group_tracks(Path(tmp), args.track_seconds)
+        now = files.path.stat().st_size
+        stored = files.arrays
+        values = {k: v / (10_000 if k.endswith("_m") else 100) for k, v in stored.items()}
+        rows = [
+            ("JSON lists, indented (metadata.json before; 3 copies were kept)",
+             len(json.dumps({k: v.tolist() for k, v in values.items()}, indent=2))),
+            ("JSON lists, compact",
+             len(json.dumps({k: v.tolist() for k, v in values.items()},
+                            separators=(",", ":")))),
+            ("float32 .npz", npz({k: v.astype(np.float32) for k, v in values.items()}, False)),
+            ("float32 .npz, deflate",
+             npz({k: v.astype(np.float32) for k, v in values.items()}, True)),
+            ("int32 .npz", npz(stored, False)),
+            ("int32 .npz, deflate (tracks.npz, now)", now),
+            ("int32 frame-to-frame differences, deflate (needs a cumsum to read)",
+             npz({k: np.diff(v, axis=0, prepend=0) for k, v in stored.items()}, True)),
+        ]
+    lines = [f"tracks of a {args.track_seconds:g} s group, 3 talkers walking the whole clip:",
+             "", "| encoding | bytes | bytes per group-second | vs tracks.npz |",
+             "|---|---|---|---|"]
+    lines += [f"| {name} | {b:,} | {b / args.track_seconds:,.0f} | {b / now:.2f}x |"
+              for name, b in rows]
+    for line in lines:
+        print(line)
+    return lines
+
+
+_BUILD_TINY = """
+import sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[2] + "/tests")
+from test_pipeline_stages import build
+build(Path(sys.argv[1]))
+"""
+
+
+def bench_compare(args: argparse.Namespace) -> list[str]:
+    """The outputs of the pipeline tests' one-group spec built by this checkout and by
+    ``--against`` (an older checkout), compared file by file: what changed, and that the rest
+    is the same."""
+    import hashlib
+    import subprocess
+
+    if args.against is None:
+        raise SystemExit("--only compare needs --against /path/to/an/older/checkout")
+    with tempfile.TemporaryDirectory(prefix="bench-compare-") as tmp:
+        outs = {}
+        for name, checkout in (("old", args.against.resolve()), ("new", ROOT)):
+            folder = Path(tmp) / name
+            folder.mkdir()
+            env = dict(os.environ, PYTHONPATH=str(checkout))
+            subprocess.run([sys.executable, "-c", _BUILD_TINY, str(folder), str(checkout)],
+                           check=True, env=env, capture_output=True, cwd=checkout)
+            outs[name] = folder / "out"
+        old, new = outs["old"], outs["new"]
+
+        def digests(root: Path) -> dict[str, str]:
+            return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+                    for p in root.rglob("*") if p.is_file()}
+
+        a, b = digests(old), digests(new)
+        same = sorted(k for k in a if b.get(k) == a[k])
+        lines = [f"files the same: {len(same)} ({sum(k.endswith(('.flac', '.wav')) for k in same)}"
+                 " audio)", f"only in the new: {sorted(set(b) - set(a))}",
+                 f"only in the old: {sorted(set(a) - set(b))}",
+                 f"differ: {sorted(k for k in a if k in b and a[k] != b[k])}"]
+        ra = [json.loads(x) for x in (old / "manifests/train_recordings.jsonl").open()]
+        rb = [json.loads(x) for x in (new / "manifests/train_recordings.jsonl").open()]
+        same_numbers = all(
+            np.array_equal(np.asarray(x["custom"]["track"][q]),
+                           read_track(new, y["custom"]["track"])[q])
+            for x, y in zip(ra, rb, strict=True) if "custom" in x
+            for q in x["custom"]["track"])
+        strip = [{k: v for k, v in r.items() if k != "custom"} for r in ra] == [
+            {k: v for k, v in r.items() if k != "custom"} for r in rb]
+        lines.append(f"recordings: the same apart from custom.track: {strip}; the tracks' "
+                     f"numbers read from tracks.npz equal the old lists: {same_numbers}")
+        meta_old = (old / "train/000000/metadata.json").stat().st_size
+        meta_new = (new / "train/000000/metadata.json").stat().st_size
+        tracks = (new / "train/000000/tracks.npz").stat().st_size
+        lines.append(f"metadata.json {meta_old:,} B -> {meta_new:,} B + tracks.npz {tracks:,} B")
+    for line in lines:
+        print(line)
+    return lines
+
+
+BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
+    "dataset": bench_dataset,
+    "bytes": bench_bytes,
+    "compare": bench_compare,
+    "tracks": bench_tracks,
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", choices=sorted(BENCHES), action="append",
+                        help="run only this measurement (repeatable)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000],
+                        help="groups for the dataset step (default: 100 1000 10000)")
+    parser.add_argument("--duration", type=float, default=10.0,
+                        help="seconds per group of the demo build for 'bytes' (default: 10)")
+    parser.add_argument("--track-seconds", type=float, default=60.0,
+                        help="group length for 'tracks' (default: 60)")
+    parser.add_argument("--keep", type=Path, help="copy the demo build here ('bytes')")
+    parser.add_argument("--against", type=Path,
+                        help="an older checkout to compare outputs with ('compare')")
+    args = parser.parse_args()
+    argv = " ".join(sys.argv[1:])
+    print(f"# python bench/bench_scale.py {argv}".rstrip())
+    for name in args.only or [n for n in BENCHES if n != "compare" or args.against]:
+        print(f"\n## {name}")
+        BENCHES[name](args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""A group's ``metadata.json``: the typed record the export writes, and its JSON Schema.
+
+The record is SonicSet's per-group metadata — ``source1..N: {audio, start_end_points, words}``,
+``noise``, ``music`` — extended with what sonicspec knows: the speaker, the trajectory, the RIR
+points, the acoustic figures, the gains, the mixtures and the content keys. Position tracks are
+not in it: each ``track`` (and ``microphone_track``) is a reference to the group's
+``tracks.npz`` (:mod:`sonicspec.export.tracks`).
+
+The models below are the one definition of the record: the export step builds it through them
+(so a field cannot be misspelled or mistyped) and :func:`metadata_schema` turns them into the
+JSON Schema checked in as ``schema/sonicspec-metadata-v2.schema.json`` (``sonicspec schema
+--metadata``), which other tools can validate a ``metadata.json`` against.
+
+Version history (``version`` in the record): 1 had no ``version`` field and the tracks inline
+(lists every 10 ms in ``track``/``microphone_track``, repeated in the Lhotse manifests); 2
+references ``tracks.npz`` and is written as compact JSON.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from sonicspec.atomic import write_text
+
+METADATA_VERSION = 2
+METADATA_SCHEMA_FILENAME = f"sonicspec-metadata-v{METADATA_VERSION}.schema.json"
+SPEECH_KEY_PATTERN = r"^source[1-9][0-9]*$"
+
+Vector3 = tuple[float, float, float]
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class TrackReference(_Record):
+    """Where a track's numbers are: arrays of the group's ``tracks.npz``."""
+
+    file: str = Field(description="The archive, relative to the dataset folder.")
+    frames: int = Field(ge=0, description="Frames in each array (one every hop_s).")
+    hop_s: float = Field(gt=0, description="Time between frames, seconds (0.01).")
+    arrays: dict[str, str] = Field(description=(
+        "Quantity (positions_m, azimuth_deg, elevation_deg, distance_m; the microphone: "
+        "positions_m and, when it moves, yaw_deg) -> the array's name in the archive."))
+    scale: dict[str, int] = Field(description=(
+        "Quantity -> integers per unit: the value is the stored int32 array / scale "
+        "(10000 per metre, 100 per degree)."))
+
+
+class Loudness(_Record):
+    """How a component was levelled (the mix step's record)."""
+
+    role: Literal["speech", "noise", "music"] = Field(description="The component's role.")
+    target_lufs: float = Field(description="Level asked for, LUFS.")
+    measured_lufs: float = Field(description="Level measured before the gain, LUFS.")
+    measured_on: Literal["reverberant", "dry"] = Field(
+        description="The signal the level was measured on.")
+    gain_db: float | None = Field(description="Gain applied, dB (null: silence).")
+    output_lufs: float = Field(description="Level of the written file, LUFS.")
+
+
+class _Track(_Record):
+    audio: list[str] = Field(description="Corpus files of the clips, in time order.")
+    start_end_points: list[tuple[int, int]] = Field(
+        description="Each clip's [start, end) in the group, samples.")
+    file: str | None = Field(description=(
+        "The track's audio file, relative to the dataset folder (null: not written, "
+        "outputs.sources / outputs.background off)."))
+    rir_points_m: list[Vector3] = Field(description="Where the RIRs were computed, metres.")
+    t30_s: float | None = Field(description="T30 of the first point's RIR, seconds "
+                                            "(null: the decay is too short to fit).")
+    drr_db: float | None = Field(description="Direct-to-reverberant ratio of the first "
+                                             "point's RIR, dB.")
+    direct_path: str = Field(description="The direct path at the first point: visible, "
+                                         "through walls or blocked.")
+    rir_tail: dict[str, Any] = Field(description=(
+        "How the RIR's length was chosen at the first point (rule, limit_s, decay_end_s, "
+        "per band decay_60db_s, continued_from_s, ...)."))
+    loudness: Loudness = Field(description="How the track was levelled.")
+    track: TrackReference = Field(description=(
+        "Where the source is every hop_s (positions_m) and where it is heard from "
+        "(azimuth_deg, elevation_deg, distance_m in the microphone's frame)."))
+
+
+class SpeechTrack(_Track):
+    """A moving talker: its utterances, what they say, and its walk."""
+
+    words: list[str] = Field(description="The transcript of each clip.")
+    speaker: str = Field(description="The corpus speaker id.")
+    trajectory_m: list[Vector3] = Field(description="The walk's corner points, metres.")
+    path_length_m: float = Field(ge=0, description="Length of the walk, metres.")
+
+
+class BackgroundTrack(_Track):
+    """A static noise or music source."""
+
+    position_m: Vector3 = Field(description="Where the source stands, metres.")
+
+
+class MixtureRecord(_Record):
+    name: str = Field(description="The mixture's name (sep_s1s2_noise ...).")
+    task: Literal["separation", "enhancement"] = Field(description="The task it is for.")
+    components: list[str] = Field(description="Tracks summed into it.")
+    targets: list[str] = Field(description="Tracks it is to be separated into.")
+    file: str = Field(description="Its audio file, relative to the dataset folder.")
+
+
+class GroupMetadata(BaseModel):
+    """One group's ``metadata.json``. Speech tracks are the keys ``source1`` … ``sourceN``."""
+
+    model_config = ConfigDict(frozen=True, extra="allow", json_schema_extra={
+        "propertyNames": {"anyOf": [{"pattern": SPEECH_KEY_PATTERN},
+                                    {"enum": ["version", "group", "split", "scene_id",
+                                              "mic_m", "floor", "sample_rate_hz",
+                                              "num_samples", "mixtures", "group_gain_db",
+                                              "keys", "microphone_track", "noise", "music",
+                                              "audio_scales"]}]}})
+    __pydantic_extra__: dict[str, SpeechTrack] = Field(init=False)  # type: ignore[assignment]
+
+    version: Literal[2] = Field(METADATA_VERSION, description="Version of this record's form.")
+    group: str = Field(description="The group id, <split>/<index>.")
+    split: str = Field(description="The split.")
+    scene_id: str = Field(description="The scene the group is in.")
+    mic_m: Vector3 = Field(description="Where the microphone starts, metres.")
+    floor: int = Field(description="The floor of the scene the group is on.")
+    sample_rate_hz: int = Field(gt=0, description="Sample rate of every file, Hz.")
+    num_samples: int = Field(ge=0, description="Length of every track, samples.")
+    mixtures: list[MixtureRecord] = Field(description="The task mixtures written.")
+    group_gain_db: float | None = Field(description=(
+        "Gain applied to the whole group to keep its peaks under the limit, dB."))
+    keys: dict[str, str] = Field(description="Step -> content key of the job that made it.")
+    microphone_track: TrackReference = Field(description=(
+        "Where the microphone is every hop_s (positions_m), and where it faces (yaw_deg) "
+        "when it moves."))
+    noise: BackgroundTrack | None = Field(None, description="The noise track, if any.")
+    music: BackgroundTrack | None = Field(None, description="The music track, if any.")
+    audio_scales: dict[str, float] | None = Field(None, description=(
+        "With outputs.scale: per_file, each audio file (relative to the group's folder) -> "
+        "its scale: the signal is the decoded samples times it (the file's sonicspec_scale "
+        "tag says the same)."))
+
+    def to_json(self) -> str:
+        """Compact JSON, keys sorted, final newline; absent backgrounds and scales left out."""
+        data = self.model_dump(mode="json")
+        for name in ("noise", "music", "audio_scales"):
+            if data[name] is None:
+                del data[name]
+        return json.dumps(data, sort_keys=True, separators=(",", ":"),
+                          ensure_ascii=False) + "\n"
+
+    def write(self, path: Path) -> Path:
+        return write_text(path, self.to_json())
+
+
+def metadata_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of ``metadata.json``."""
+    schema = GroupMetadata.model_json_schema(mode="validation")
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["$id"] = f"https://sonicspec.dev/schema/{METADATA_SCHEMA_FILENAME}"
+    schema["title"] = f"sonicspec group metadata.json, version {METADATA_VERSION}"
+    return schema
+
+
+def metadata_schema_text() -> str:
+    """The schema as stable text: sorted keys, two-space indent, final newline."""
+    return json.dumps(metadata_schema(), indent=2, sort_keys=True, ensure_ascii=False) + "\n"
