@@ -11,10 +11,12 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -33,7 +35,7 @@ from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
 from sonicspec.store import ArtifactStore
-from sonicspec.store.lock import StoreLock
+from sonicspec.store.lock import StoreLock, group_members
 
 
 def workflow_dir() -> Path:
@@ -333,7 +335,7 @@ def build(
     for claim in claims:  # both checked before either is written
         claim_folder(*claim, write=False)
     claim_folder(*claims[0], write=not dry_run)
-    with StoreLock(plan.store_dir):
+    with StoreLock(plan.store_dir) as lock, _signals_interrupt():
         claim_folder(*claims[1], write=not dry_run)
         start = time.monotonic()
         removed = store.clean_stale_temp()
@@ -355,7 +357,7 @@ def build(
         code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
                                         dry_run=dry_run, stream=stream, poll_s=poll_s,
                                         on_start=on_start, snakemake_args=snakemake_args,
-                                        start=start)
+                                        start=start, lock=lock)
         ran_keys = executed_keys(log_text) & {j.key for j in plan.jobs}
         jobs = plan.by_key()
         ran = {s.name: 0 for s in STEPS}
@@ -382,10 +384,88 @@ def run_build(plan: Plan, **kwargs: Any) -> int:
     return build(plan, **kwargs).code
 
 
+def _follow(plan: Plan, store: ArtifactStore, proc: subprocess.Popen, waiting: list[Job], *,
+            dry_run: bool, stream: TextIO, poll_s: float, start: float, start_done: int) -> None:
+    """Print progress until Snakemake ends."""
+    last = ""
+    while proc.poll() is None:
+        time.sleep(poll_s)
+        if not dry_run:
+            # Every job still to run started without its artifact (the check removed the
+            # ones to remake), so these counts only ever grow.
+            waiting = [j for j in waiting if not store.exists(j.step, j.key)]
+            steps = progress(plan, store)
+            line = format_progress(steps, time.monotonic() - start, start_done)
+            line += _job_progress(plan, waiting)
+            if line.split("] ", 1)[-1] != last:
+                print(line, file=stream, flush=True)
+                last = line.split("] ", 1)[-1]
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """For Popen's ``preexec_fn`` (Linux): the child gets SIGTERM when the head dies, even by
+    ``kill -9`` (``PR_SET_PDEATHSIG``). None elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def arm() -> None:  # runs in the child between fork and exec: no allocation, no imports
+        prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the head died before the line above
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return arm
+
+
+def stop_group(proc: subprocess.Popen, grace_s: float = 10.0) -> None:
+    """Stop Snakemake and every job of its process group: SIGTERM, then SIGKILL to what is
+    still there after ``grace_s``."""
+    pgid = proc.pid
+    for sig, wait_s in ((signal.SIGTERM, grace_s), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(pgid, sig)
+        except ProcessLookupError:
+            break
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            if proc.poll() is not None and not group_members(pgid):
+                return
+            time.sleep(0.05)
+    proc.poll()
+
+
+@contextmanager
+def _signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP end a build like Ctrl-C does (``KeyboardInterrupt``), so it stops
+    its Snakemake and jobs and releases the lock instead of dying with them running."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+
+
 def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores: int,
                    profile: Path | None, dry_run: bool, stream: TextIO, poll_s: float,
                    on_start: Callable[[subprocess.Popen], None] | None,
-                   snakemake_args: list[str] | None, start: float) -> tuple[int, str]:
+                   snakemake_args: list[str] | None, start: float,
+                   lock: StoreLock | None = None) -> tuple[int, str]:
     plan_path = plan.write(Path(plan.store_dir) / "plans" / f"{plan.digest}.json")
     cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run,
                             extra=snakemake_args)
@@ -399,24 +479,24 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
     with open(log_path, "w") as log:
         log.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
         log.flush()
+        # Snakemake and every job it starts form one process group (its own session, so a
+        # Ctrl-C reaches the head, which stops the group); the lock records it. If the head
+        # dies, the kernel tells Snakemake (SIGTERM: it starts no further job).
         proc = subprocess.Popen(
-            cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=plan.store_dir
+            cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=plan.store_dir,
+            start_new_session=True, preexec_fn=_die_with_parent(),
         )
-        if on_start is not None:
-            on_start(proc)
-        last = ""
-        while proc.poll() is None:
-            time.sleep(poll_s)
-            if not dry_run:
-                # Every job still to run started without its artifact (the check removed the
-                # ones to remake), so these counts only ever grow.
-                waiting = [j for j in waiting if not store.exists(j.step, j.key)]
-                steps = progress(plan, store)
-                line = format_progress(steps, time.monotonic() - start, start_done)
-                line += _job_progress(plan, waiting)
-                if line.split("] ", 1)[-1] != last:
-                    print(line, file=stream, flush=True)
-                    last = line.split("] ", 1)[-1]
+        try:
+            if lock is not None:
+                lock.set_group(proc.pid)
+            if on_start is not None:
+                on_start(proc)
+            _follow(plan, store, proc, waiting, dry_run=dry_run, stream=stream, poll_s=poll_s,
+                    start=start, start_done=start_done)
+        finally:
+            # Interrupted, or Snakemake died and left its jobs running: stop them all.
+            if proc.poll() is None or group_members(proc.pid):
+                stop_group(proc)
     text = log_path.read_text(errors="replace")
     if dry_run:
         print(text.split("\n", 1)[1] if "\n" in text else text, file=stream)

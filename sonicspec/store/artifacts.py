@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import __version__
+from sonicspec.atomic import os_error_cause
 from sonicspec.errors import StoreError
 from sonicspec.hashing import KEY_LENGTH, array_digest, canonical_json, sha256_hex
 
@@ -190,10 +191,8 @@ class ArtifactStore:
                     raise
         except OSError as exc:
             shutil.rmtree(tmp, ignore_errors=True)
-            hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-            raise StoreError(
-                f"{stage} {key[:12]}: cannot write {final}: {exc.strerror or exc}{hint}"
-            ) from exc
+            raise StoreError(f"{stage} {key[:12]}: cannot write {final}: "
+                             f"{os_error_cause(exc, self.root)}") from exc
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
