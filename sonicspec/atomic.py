@@ -31,6 +31,10 @@ _CAUSES = {
 }
 
 
+_NEARLY_FULL_BYTES = 1 << 20
+"""Free space below which a write that failed without saying why is put down to a full disk."""
+
+
 def folder_problem(folder: str | Path) -> str | None:
     """Why nothing can be written in ``folder`` (read-only file system, no permission, no
     space), or None if it looks writable. For failures that do not say why (libsndfile's
@@ -46,7 +50,10 @@ def folder_problem(folder: str | Path) -> str | None:
         return f"the file system is read-only ({folder})"
     if not os.access(folder, os.W_OK):
         return f"permission denied: this user may not write in {folder}"
-    if st.f_bavail == 0 or (st.f_favail == 0 and st.f_files > 0):
+    # Blocks this user may still use (root may use the reserved ones too); checked right after
+    # a failed write, while its temporary file still holds what it managed to write.
+    blocks = st.f_bfree if hasattr(os, "geteuid") and os.geteuid() == 0 else st.f_bavail
+    if blocks * st.f_frsize < _NEARLY_FULL_BYTES or (st.f_favail == 0 and st.f_files > 0):
         return f"no space left: the disk is full ({folder})"
     return None
 

@@ -104,6 +104,11 @@ def max_mesh_bytes() -> int:
     return int(mb * 2**20)
 
 
+def _mib(n: int) -> str:
+    mib = n / 2**20
+    return f"{mib:,.0f} MiB" if mib >= 10 else f"{mib:.2g} MiB"
+
+
 def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Path:
     path = Path(path)
     if path.suffix.lower() not in extensions:
@@ -115,8 +120,8 @@ def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Pa
     size, limit = path.stat().st_size, max_mesh_bytes()
     if size > limit:
         raise GeometryError(
-            f"{path}: expected a scene file of at most {limit / 2**20:,.0f} MiB, got "
-            f"{size / 2**20:,.0f} MiB ({size:,} bytes); it would be read whole (about twice "
+            f"{path}: expected a scene file of at most {_mib(limit)}, got {_mib(size)} "
+            f"({size:,} bytes); it would be read whole (about twice "
             f"its size in memory). Is it the right file? To read it anyway, set "
             f"{MAX_MESH_MB_VARIABLE}={int(np.ceil(size / 2**20)) + 1} (MiB)"
         )

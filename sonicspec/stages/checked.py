@@ -5,9 +5,10 @@ hashing it. Both are worth doing once, not at every build: this cache keeps, per
 fingerprint (file names, sizes, modification times) it had when it was last verified, and per
 dataset file its size, modification time and checksum. A build stats everything (cheap) and
 re-verifies only what moved. Damage that keeps a file's size and time (a disk's bit rot) is for
-``sonicspec verify``, which reads everything.
+``sonicspec verify``, which reads everything, and which forgets here what it found damaged, so
+the next build re-checks exactly those and repairs them.
 
-Only the process holding the store's build lock writes the cache (atomically).
+Only the process holding the store's lock (a build, or a verify) writes the cache (atomically).
 """
 
 from __future__ import annotations
@@ -53,6 +54,24 @@ class CheckCache:
 
     def forget_file(self, path: Path) -> None:
         self._files.pop(str(path), None)
+
+    def forget_artifact(self, key: str) -> None:
+        self._artifacts.pop(key, None)
+
+    def forget_files(self, paths: list[Path]) -> int:
+        """Forget ``paths`` however they were named when recorded (through a symlink, a
+        relative folder): entries are matched by real path. Returns how many were forgotten."""
+        wanted = {os.path.realpath(p) for p in paths}
+        real_dirs: dict[str, str] = {}
+        gone = 0
+        for name in list(self._files):
+            folder, base = os.path.split(name)
+            if folder not in real_dirs:
+                real_dirs[folder] = os.path.realpath(folder)
+            if os.path.join(real_dirs[folder], base) in wanted:
+                del self._files[name]
+                gone += 1
+        return gone
 
     def save(self) -> None:
         write_text(self.path, json.dumps({"artifacts": self._artifacts, "files": self._files},

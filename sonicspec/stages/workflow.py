@@ -214,6 +214,11 @@ class BuildResult:
     """Dataset files the jobs that ran recorded but that are not there after the build."""
     stray_files: list[str] = field(default_factory=list)
     """Files in the dataset folder that the finished dataset does not list."""
+    failed: list[str] = field(default_factory=list)
+    """Labels of the jobs that failed (from Snakemake's log)."""
+    not_made: dict[str, int] = field(default_factory=dict)
+    """Jobs whose artifacts are not in the store after the build, per step (the failed ones
+    and those waiting on them)."""
     summary: str = ""
 
     @property
@@ -271,6 +276,35 @@ def _hours(plan: Plan) -> tuple[int, float]:
     return groups, seconds / 3600.0
 
 
+def failed_jobs(snakemake_log: str, plan: Plan) -> list[str]:
+    """Labels of the jobs Snakemake reports failed, in the plan's order."""
+    keys = {Path(m.group(1).rstrip(",")).stem
+            for block in snakemake_log.split("Error in rule ")[1:]
+            if (m := _FAILED_LOG.search(block)) is not None}
+    return [j.label for j in plan.jobs if j.key in keys]
+
+
+def _failure_lines(plan: Plan, result: BuildResult) -> list[str]:
+    """What a failed build did not make, so its summary cannot read as a success."""
+    if result.failed:
+        more = ", ..." if len(result.failed) > 3 else ""
+        lines = [f"{len(result.failed)} job{'s' * (len(result.failed) != 1)} failed "
+                 f"({', '.join(result.failed[:3])}{more}); the ends of their logs are above"]
+    else:
+        lines = [f"Snakemake stopped (exit code {result.code}) before the jobs finished; its "
+                 "log is named above"]
+    missing = sum(result.not_made.values())
+    if missing:
+        lines.append(f"not made: {missing} of {len(plan.jobs)} jobs ("
+                     + ", ".join(f"{s} {n}" for s, n in result.not_made.items() if n)
+                     + "): the failed ones and every job that needs them")
+    if result.not_made.get("dataset") or result.not_made.get("export"):
+        lines.append(f"dataset: NOT written: {plan.output_dir} is incomplete (what an earlier "
+                     "build wrote there is unchanged); fix the cause and run the build again: "
+                     "it resumes from what was made")
+    return lines
+
+
 def format_summary(plan: Plan, result: BuildResult) -> str:
     ran = ", ".join(f"{s} {n}" for s, n in result.ran.items() if n) or "none"
     groups, hours = _hours(plan)
@@ -281,8 +315,11 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         f"checked {result.check.artifacts_checked} artifacts ({result.check.artifacts_verified}"
         f" re-read) and {result.check.files_checked} dataset files "
         f"({result.check.files_hashed} re-hashed)",
-        f"dataset: {groups} groups, {hours:.3f} h of audio per track",
     ]
+    if result.code == 0:
+        lines.append(f"dataset: {groups} groups, {hours:.3f} h of audio per track")
+    else:
+        lines += _failure_lines(plan, result)
     skipped = {role: files for role, files in result.skipped.items() if files}
     if skipped:
         lines.append("corpus files skipped (unreadable or unusable; listed in dataset.json): "
@@ -300,7 +337,7 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         if len(result.warnings) > 10:
             lines.append(f"  ... and {len(result.warnings) - 10} more (the logs are in "
                          f"{Path(plan.store_dir) / 'logs'})")
-    else:
+    elif result.code == 0:
         lines.append("no warnings")
     return "\n".join(lines)
 
@@ -374,6 +411,12 @@ def build(
         if not dry_run:
             if code == 0 and dataset_key is not None and (out / CHECKSUMS_NAME).is_file():
                 result.stray_files = unlisted_files(out, read_checksums(out))
+            if code != 0:
+                result.failed = failed_jobs(log_text, plan)
+                made = present_keys(plan, store)
+                for job in plan.jobs:
+                    if job.key not in made:
+                        result.not_made[job.step] = result.not_made.get(job.step, 0) + 1
             result.summary = format_summary(plan, result)
             print(result.summary, file=stream)
         return result
