@@ -292,6 +292,24 @@ def test_a_mesh_file_beyond_the_size_bound_is_refused_before_it_is_read(
         load_mesh(room)
 
 
+def test_a_spec_with_a_mesh_beyond_the_bound_is_refused_by_plan_and_validate(
+        tmp_path: Path) -> None:
+    spec = write_spec(tmp_path)
+    spec.write_text(spec.read_text().replace(
+        "  - kind: shoebox\n    id: living_room",
+        "  - {kind: mesh, id: scan, path: scan.obj}\n  - kind: shoebox\n    id: living_room", 1))
+    with open(tmp_path / "scan.obj", "wb") as fh:
+        fh.truncate(2 * 2**30)
+    for command in (("plan",), ("validate", "--check-files")):
+        done = cli(*command[:1], str(spec), *command[1:])
+        assert done.returncode == 2, (command, done.stderr)
+        assert "scan.obj: expected a scene file of at most 1,024 MiB, got 2,048 MiB" \
+            in done.stderr, done.stderr
+    # Refused before the plan hashed it: no digest of it was cached.
+    cached = tmp_path / "out" / "store" / "cache" / "file-digests.json"
+    assert not cached.exists() or "scan.obj" not in cached.read_text()
+
+
 # --- item 10: every I/O failure names the folder and the cause -----------------------------------
 
 

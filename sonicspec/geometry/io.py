@@ -117,6 +117,12 @@ def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Pa
         )
     if not path.is_file():
         raise GeometryError(f"{where}: expected an existing file, got missing path '{path}'")
+    check_mesh_size(path)
+    return path
+
+
+def check_mesh_size(path: Path) -> None:
+    """Refuse a scene file larger than :func:`max_mesh_bytes` (before it is read or hashed)."""
     size, limit = path.stat().st_size, max_mesh_bytes()
     if size > limit:
         raise GeometryError(
@@ -125,7 +131,6 @@ def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Pa
             f"its size in memory). Is it the right file? To read it anyway, set "
             f"{MAX_MESH_MB_VARIABLE}={int(np.ceil(size / 2**20)) + 1} (MiB)"
         )
-    return path
 
 
 def _check_scale(unit_scale: float) -> float:
