@@ -342,12 +342,16 @@ def io_rows(table: Table, base: Path) -> None:
     def clear(r: Run, words: str) -> bool:
         return r.code == 1 and words in r.err and "internal error" not in r.err
 
+    def cause(r: Run, words: str) -> str:
+        line = next((x.strip() for x in r.err.splitlines() if words in x), "NOT named")
+        return line[:110]
+
     try:
         store, out = work / "out" / "store", work / "out" / "demo"
         if read_only(store):
             r = sonicspec("build", str(spec), "--cores", "1")
             table.add("read-only store", "error naming the folder and the cause",
-                      f"exit {r.code}: {first_line(r.err)[:100]}",
+                      f"exit {r.code}: {cause(r, 'read-only')}",
                       clear(r, "the file system is read-only"), r)
         subprocess.run(["umount", "-l", str(store)], capture_output=True)
         mounted.remove(store)
@@ -355,7 +359,7 @@ def io_rows(table: Table, base: Path) -> None:
         if read_only(out):
             r = sonicspec("build", str(spec), "--cores", "1")
             table.add("read-only dataset folder", "error naming the folder and the cause",
-                      f"exit {r.code}: {first_line(r.err)[:100]}",
+                      f"exit {r.code}: {cause(r, 'read-only')}",
                       clear(r, "the file system is read-only"), r)
         full = base / "full"
         full.mkdir()
@@ -366,9 +370,8 @@ def io_rows(table: Table, base: Path) -> None:
             failed = r.err[r.err.find("build FAILED"):]
             table.add("full dataset folder", "error naming folder and cause; the summary "
                       "says what was not made",
-                      f"exit {r.code}: "
-                      f"{'disk is full named' if 'the disk is full' in r.err else 'NOT named'}"
-                      f"; {'summary: dataset NOT written' if 'NOT written' in failed else ''}",
+                      f"exit {r.code}: {cause(r, 'the disk is full')}; summary: "
+                      f"{'dataset NOT written' if 'NOT written' in failed else 'NOT said'}",
                       clear(r, "the disk is full") and "NOT written" in failed
                       and "no warnings" not in failed, r)
     finally:
