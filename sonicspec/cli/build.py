@@ -196,6 +196,9 @@ def cmd_verify(args: argparse.Namespace) -> int:
         f"{'s' * (len(problems) != 1)}",
         file=sys.stderr if problems else sys.stdout,
     )
+    if problems and cache is not None:
+        print("the next `sonicspec build` of this store re-checks what was found here and "
+              "remakes what is damaged or missing", file=sys.stderr)
     return EXIT_FAILURE if problems else EXIT_OK
 
 
