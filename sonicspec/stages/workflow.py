@@ -373,6 +373,8 @@ def build(
         claim_folder(*claim, write=False)
     claim_folder(*claims[0], write=not dry_run)
     with StoreLock(plan.store_dir) as lock, _signals_interrupt():
+        if lock.stopped:
+            print(lock.stopped, file=stream)
         claim_folder(*claims[1], write=not dry_run)
         start = time.monotonic()
         removed = store.clean_stale_temp()

@@ -9,14 +9,18 @@ not one pid.
 When a lock is stale: its holder is on this host, the head's process is gone and no process
 of its group lives (zombies do not count). A head that died (``kill -9``) while its jobs still
 run leaves a lock that is *not* stale: a second build would run beside those jobs on the same
-store. The error names the group and how to stop it. A holder on another host is never
-guessed dead; the error says which file to delete if that build is known to be over.
+store. A build that finds such a group, every process of which names this store on its
+command line (Snakemake's ``--directory``, the jobs' plan path), stops it (SIGTERM, then
+SIGKILL) and says so: what it was making is remade, with the same bytes. A group it cannot
+recognise is left alone and the error names it and how to stop it. A holder on another host
+is never guessed dead; the error says which file to delete if that build is known to be over.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import time
 from pathlib import Path
@@ -78,6 +82,42 @@ def group_members(pgid: int) -> list[int]:
     return [pgid]
 
 
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(
+            errors="replace")
+    except OSError:
+        return ""
+
+
+def stop_orphans(pgid: int, store_dir: Path, grace_s: float = 10.0) -> int:
+    """Stop process group ``pgid`` if every live process of it names ``store_dir`` on its
+    command line (a dead build's Snakemake and jobs); how many processes it had (0 if it is
+    not recognised, or already gone)."""
+    if not Path("/proc/self/stat").is_file():
+        return 0
+    names = {str(store_dir.absolute()), os.path.realpath(store_dir)}
+
+    def names_store(pid: int) -> bool:
+        line = _cmdline(pid)  # ends with a space: the folder, or a path inside it
+        return any(f"{n} " in line or f"{n}/" in line for n in names)
+
+    members = group_members(pgid)
+    if not members or not all(names_store(p) for p in members):
+        return 0
+    for sig, wait_s in ((signal.SIGTERM, grace_s), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(pgid, sig)
+        except ProcessLookupError:
+            break
+        deadline = time.monotonic() + wait_s
+        while group_members(pgid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if not group_members(pgid):
+            break
+    return len(members)
+
+
 class StoreLock:
     """Hold ``<store>/build.lock`` for the duration of a ``with`` block."""
 
@@ -86,6 +126,8 @@ class StoreLock:
         self.purpose = purpose
         self._held = False
         self._me: dict = {}
+        self.stopped = ""
+        """What :meth:`acquire` stopped to take the lock (a dead build's jobs), or ""."""
 
     def holder(self) -> dict | None:
         """Who holds the lock (pid, host, since, purpose, pgid), or None if nobody does."""
@@ -112,6 +154,13 @@ class StoreLock:
         pgid = holder.get("pgid")
         return not (isinstance(pgid, int) and group_members(pgid))
 
+    @staticmethod
+    def _orphaned(holder: dict) -> bool:
+        """A dead head on this host whose process group still lives."""
+        return (holder.get("host") == socket.gethostname() and isinstance(holder.get("pid"), int)
+                and isinstance(holder.get("pgid"), int) and not _alive(holder["pid"])
+                and bool(group_members(holder["pgid"])))
+
     def acquire(self) -> None:
         me = {"pid": os.getpid(), "host": socket.gethostname(),
               "since": time.strftime("%Y-%m-%d %H:%M:%S"), "purpose": self.purpose}
@@ -126,6 +175,14 @@ class StoreLock:
                 holder = self.holder()
                 if holder is None:
                     continue  # released meanwhile: try again
+                if self.purpose == "build" and self._orphaned(holder):
+                    pgid = holder["pgid"]
+                    n = stop_orphans(pgid, self.path.parent)
+                    if n and not group_members(pgid):
+                        self.stopped = (
+                            f"stopped {n} process(es) of a build of this store that died (pid "
+                            f"{holder['pid']}, process group {pgid}): Snakemake and the jobs "
+                            "it had running; what they were making is made again")
                 if self._stale(holder):
                     try:
                         self.path.unlink(missing_ok=True)  # its build died without releasing it
