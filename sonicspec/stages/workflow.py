@@ -448,8 +448,12 @@ def _follow(plan: Plan, store: ArtifactStore, proc: subprocess.Popen, waiting: l
 
 
 def _die_with_parent() -> Callable[[], None] | None:
-    """For Popen's ``preexec_fn`` (Linux): the child gets SIGTERM when the head dies, even by
-    ``kill -9`` (``PR_SET_PDEATHSIG``). None elsewhere."""
+    """For Popen's ``preexec_fn`` (Linux): the child is killed when the head dies, even by
+    ``kill -9`` (``PR_SET_PDEATHSIG``). None elsewhere.
+
+    SIGKILL, not SIGTERM: on SIGTERM Snakemake waits "gracefully" for its jobs, and was seen
+    waiting for many minutes after they were gone. Its jobs finish what they write (atomically)
+    and exit; the next build stops any still running (see :mod:`sonicspec.store.lock`)."""
     if not sys.platform.startswith("linux"):
         return None
     import ctypes
@@ -461,9 +465,9 @@ def _die_with_parent() -> Callable[[], None] | None:
     parent = os.getpid()
 
     def arm() -> None:  # runs in the child between fork and exec: no allocation, no imports
-        prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+        prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
         if os.getppid() != parent:  # the head died before the line above
-            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGKILL)
 
     return arm
 
@@ -526,7 +530,7 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
         log.flush()
         # Snakemake and every job it starts form one process group (its own session, so a
         # Ctrl-C reaches the head, which stops the group); the lock records it. If the head
-        # dies, the kernel tells Snakemake (SIGTERM: it starts no further job).
+        # dies, the kernel kills Snakemake: no further job starts.
         proc = subprocess.Popen(
             cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=plan.store_dir,
             start_new_session=True, preexec_fn=_die_with_parent(),
