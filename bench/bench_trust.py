@@ -23,9 +23,24 @@ Rows:
   of the SonicSet preset without data; ``evaluate`` of a NaN and of an all-zero estimate; the
   internal ``job`` command out of ``--help``.
 
+Issue 28 (second round) adds:
+- bit rot: a byte flipped in an exported FLAC and in a store chunk with the file's size and
+  time kept: a build alone trusts them (it stats, never re-reads, unchanged files); ``verify``
+  names them and the next build repairs them;
+- only the build's head killed (``kill -9`` of the main pid) while jobs run: the next build
+  must not run a second Snakemake beside the orphaned jobs (it stops the dead build's process
+  group first) and resumes to the reference bytes; ``verify`` during a build says a build is
+  running;
+- an output folder that is a symbolic link out of the spec's folder; a noise WAV whose header
+  claims 2 GB but holds 100 bytes (skipped, named in the summary); a 2 GiB OBJ (refused
+  before it is read, in bounded time and memory);
+- (root, where ``mount`` works) a read-only store, a read-only dataset folder and a full one:
+  an error naming the folder and the cause, never "internal error"; a failed build's summary
+  says what was not made.
+
 Reproduce:
-    python bench/bench_trust.py            # ~6 min on 2 cores
-    python bench/bench_trust.py --quick    # no kills, no edits table (~2 min)
+    python bench/bench_trust.py            # ~15 min on 2 cores
+    python bench/bench_trust.py --quick    # no kills, edits, head kill, clip build (~5 min)
 """
 
 from __future__ import annotations
@@ -38,6 +53,7 @@ import random
 import re
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -166,6 +182,205 @@ def damage_rows(table: Table, work: Path, spec: Path, reference: dict[str, str])
     v = sonicspec("verify", str(empty))
     table.add("verify on an empty folder", "exit 2: not a store or dataset",
               f"exit {v.code}: {first_line(v.err)}", v.code == 2, v)
+
+
+def flip_keeping_time(path: Path) -> None:
+    st = path.stat()
+    flip(path)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def bitrot_rows(table: Table, work: Path, spec: Path, reference: dict[str, str]) -> None:
+    store, out = work / "out" / "store", work / "out" / "demo"
+    flac = next(iter(sorted(out.rglob("source2.flac"))))
+    chunk = next(p for p in sorted((store / "mix").rglob("*")) if p.is_file()
+                 and p.name != "zarr.json")
+    key = next(p for p in chunk.parents if p.suffix == ".zarr").stem
+    for case, path, named_as, verify_dir in (
+            ("FLAC byte flipped, size and time kept", flac, flac.relative_to(out).as_posix(),
+             out),
+            ("store chunk byte flipped, size and time kept", chunk, f"mix {key}", store)):
+        flip_keeping_time(path)
+        alone = sonicspec("build", str(spec), "--cores", "2")
+        check = sonicspec("verify", str(verify_dir))
+        b = sonicspec("build", str(spec), "--cores", "2")
+        fixed = re.search(r"(\d+) repaired", b.err)
+        first = re.search(r"(\d+) repaired", alone.err)
+        same = digest(work / "out") == reference
+        table.add(case, "verify names it; the build after verify repairs it, same bytes",
+                  f"build alone: {first.group(1) if first else '?'} repaired; "
+                  f"verify exit {check.code}{' names it' if named_as in check.err else ''}; "
+                  f"then build: {fixed.group(1) if fixed else '?'} repaired, "
+                  f"{'same bytes' if same else 'DIFFERENT bytes'}",
+                  check.code == 1 and named_as in check.err and b.code == 0 and same, b)
+
+
+def _pgid_of(lock: Path) -> int | None:
+    try:
+        return json.loads(lock.read_text()).get("pgid")
+    except (OSError, ValueError):
+        return None
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def head_kill_rows(table: Table, work: Path, spec: Path, reference: dict[str, str]) -> None:
+    """Only the head killed while jobs run; verify during a build."""
+    store = work / "out" / "store"
+    for step in ("render", "mix", "export", "dataset"):
+        shutil.rmtree(store / step, ignore_errors=True)
+    head = subprocess.Popen([sys.executable, "-m", "sonicspec.cli", "build", str(spec),
+                             "--cores", "2"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    lock = store / "build.lock"
+    deadline = time.monotonic() + 300
+    while _pgid_of(lock) is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    pgid = _pgid_of(lock)
+    while not list(store.glob("render/*/*.zarr")) and time.monotonic() < deadline:
+        time.sleep(0.05)  # Snakemake made a render job's folder: jobs are running
+    v = sonicspec("verify", str(store))
+    table.add("verify during a build", "exit 1: says a build is running (no false damage)",
+              f"exit {v.code}: {first_line(v.err)[:90]}",
+              v.code == 1 and "build of this store is running" in v.err
+              and "no artifact at" not in v.err, v)
+    head.send_signal(signal.SIGKILL)
+    head.wait()
+    alive = pgid is not None and _group_alive(pgid)
+    second = sonicspec("build", str(spec), "--cores", "2")
+    start = time.monotonic()
+    while pgid is not None and _group_alive(pgid) and time.monotonic() - start < 300:
+        time.sleep(0.2)
+    ended = time.monotonic() - start
+    b = sonicspec("build", str(spec), "--cores", "2")
+    same = digest(work / "out") == reference
+    stopped = second.code == 0 and "stopped " in second.err and f"group {pgid})" in second.err
+    table.add("head killed (kill -9 main pid) while jobs run",
+              "no second Snakemake beside the orphaned jobs; resumes, same bytes",
+              f"jobs {'alive' if alive else 'gone'} after the kill; next build exit "
+              f"{second.code}{' (stopped the dead group first)' if stopped else ''}"
+              f"; group gone {ended:.0f} s after it; again: exit {b.code}, "
+              f"{'same' if same else 'DIFFERENT'} bytes",
+              (stopped or not alive) and second.code == 0 and b.code == 0 and same, second)
+
+
+def input_fault_rows(table: Table, base: Path) -> None:
+    """Folders and files that are not what they seem."""
+    folder = base / "inputs"
+    folder.mkdir()
+    spec = write_spec(folder)
+    outside = base / "outside"
+    outside.mkdir()
+    (folder / "out").symlink_to(outside)
+    r = sonicspec("build", str(spec))
+    table.add("output folder a symlink out of the spec's folder", "exit 2, nothing written",
+              f"exit {r.code}: {first_line(r.err)[:90]}",
+              r.code == 2 and "symbolic link" in r.err and not any(outside.iterdir()), r)
+    (folder / "out").unlink()
+    big = folder / "scan.obj"
+    with open(big, "wb") as fh:
+        fh.truncate(2 * 2**30)  # sparse: no disk used
+    text = spec.read_text()
+    mesh = text.replace("  - kind: shoebox\n    id: living_room",
+                        "  - {kind: mesh, id: scan, path: scan.obj}\n"
+                        "  - kind: shoebox\n    id: living_room", 1)
+    path = folder / "big_mesh.yaml"
+    path.write_text(mesh)
+    r = sonicspec("validate", str(path), "--check-files")
+    table.add("a 2 GiB OBJ scene", "refused before it is read, bounded time and memory",
+              f"exit {r.code}: {first_line(r.err)[:90]}",
+              r.code == 2 and "SONICSPEC_MAX_MESH_MB" in r.err and r.seconds < 30, r)
+
+
+def truncated_clip_row(table: Table, base: Path) -> None:
+    import numpy as np
+    import soundfile as sf
+
+    folder = base / "truncated"
+    folder.mkdir()
+    spec = write_spec(folder)
+    noise = folder / "noise"
+    noise.mkdir()
+    rng = np.random.default_rng(3)
+    for k in range(12):
+        sf.write(str(noise / f"clip{k:02d}.wav"), 0.1 * rng.standard_normal(16000 * 3), 16000)
+    fmt = struct.pack("<IHHIIHH", 16, 1, 1, 16000, 32000, 2, 16)
+    (noise / "cut.wav").write_bytes(b"RIFF" + struct.pack("<I", 2_000_000_036) + b"WAVE"
+                                    + b"fmt " + fmt + b"data"
+                                    + struct.pack("<I", 2_000_000_000) + b"\x01\x02" * 50)
+    old = "noise: {kind: generated, clips_per_split: 4, clip_duration_s: 3.0}"
+    spec.write_text(spec.read_text().replace(old, "noise: {kind: folder, root: noise}"))
+    b = sonicspec("build", str(spec), "--cores", "2")
+    said = re.search(r"noise 1 \(first: cut\.wav, truncated[^)]*\)", b.err)
+    table.add("noise WAV claiming 2 GB, holding 100 bytes", "skipped, named with the reason",
+              f"exit {b.code}; {said.group(0)[:80] if said else 'NOT named'}",
+              b.code == 0 and said is not None, b)
+
+
+def _mount(*args: str) -> bool:
+    return subprocess.run(["mount", *args], capture_output=True).returncode == 0
+
+
+def io_rows(table: Table, base: Path) -> None:
+    """Read-only and full folders (root only: made with mount)."""
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        table.add("read-only / full folders", "(needs root for mount)", "skipped", True, None)
+        return
+    work = base / "io"
+    shutil.copytree(base / "main", work, symlinks=True)
+    spec = work / "demo.yaml"
+    mounted: list[Path] = []
+
+    def read_only(folder: Path) -> bool:
+        ok = (_mount("--bind", str(folder), str(folder))
+              and _mount("-o", "remount,bind,ro", str(folder)))
+        mounted.append(folder)
+        return ok
+
+    def clear(r: Run, words: str) -> bool:
+        return r.code == 1 and words in r.err and "internal error" not in r.err
+
+    def cause(r: Run, words: str) -> str:
+        line = next((x.strip() for x in r.err.splitlines() if words in x), "NOT named")
+        return line[:110]
+
+    try:
+        store, out = work / "out" / "store", work / "out" / "demo"
+        if read_only(store):
+            r = sonicspec("build", str(spec), "--cores", "1")
+            table.add("read-only store", "error naming the folder and the cause",
+                      f"exit {r.code}: {cause(r, 'read-only')}",
+                      clear(r, "the file system is read-only"), r)
+        subprocess.run(["umount", "-l", str(store)], capture_output=True)
+        mounted.remove(store)
+        next(iter(sorted(out.rglob("source1.flac")))).unlink()
+        if read_only(out):
+            r = sonicspec("build", str(spec), "--cores", "1")
+            table.add("read-only dataset folder", "error naming the folder and the cause",
+                      f"exit {r.code}: {cause(r, 'read-only')}",
+                      clear(r, "the file system is read-only"), r)
+        full = base / "full"
+        full.mkdir()
+        if _mount("-t", "tmpfs", "-o", "size=64k", "tmpfs", str(full)):
+            mounted.append(full)
+            r = sonicspec("build", str(spec), "--cores", "2", "--output-dir",
+                          str(full / "demo"))
+            failed = r.err[r.err.find("build FAILED"):]
+            table.add("full dataset folder", "error naming folder and cause; the summary "
+                      "says what was not made",
+                      f"exit {r.code}: {cause(r, 'the disk is full')}; summary: "
+                      f"{'dataset NOT written' if 'NOT written' in failed else 'NOT said'}",
+                      clear(r, "the disk is full") and "NOT written" in failed
+                      and "no warnings" not in failed, r)
+    finally:
+        for point in reversed(mounted):
+            subprocess.run(["umount", "-l", str(point)], capture_output=True)
 
 
 def kill_rows(table: Table, base: Path, reference: dict[str, str]) -> None:
@@ -342,7 +557,12 @@ def main() -> None:
                   f"exit {b.code}, {ran(b.err)} jobs run; {checked.group(0) if checked else '?'}",
                   b.code == 0 and " 0 jobs run" in b.err and "0 re-read" in b.err, b)
         damage_rows(table, work, spec, reference)
+        bitrot_rows(table, work, spec, reference)
+        input_fault_rows(table, base)
+        io_rows(table, base)
         if not args.quick:
+            truncated_clip_row(table, base)
+            head_kill_rows(table, work, spec, reference)
             edits = base / "edits"
             shutil.copytree(work, edits)
             espec = edits / "demo.yaml"

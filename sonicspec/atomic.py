@@ -23,6 +23,55 @@ from typing import IO, Any
 
 from sonicspec.errors import StoreError
 
+_CAUSES = {
+    errno.ENOSPC: "no space left: the disk is full",
+    errno.EDQUOT: "no space left: the disk quota is exceeded",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+}
+
+
+_NEARLY_FULL_BYTES = 1 << 20
+"""Free space below which a write that failed without saying why is put down to a full disk."""
+
+
+def folder_problem(folder: str | Path) -> str | None:
+    """Why nothing can be written in ``folder`` (read-only file system, no permission, no
+    space), or None if it looks writable. For failures that do not say why (libsndfile's
+    "System error")."""
+    folder = Path(folder)
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent  # a folder about to be made: ask where it would be made
+    try:
+        st = os.statvfs(folder)
+    except OSError as exc:
+        return os_error_cause(exc, folder)
+    if st.f_flag & os.ST_RDONLY:
+        return f"the file system is read-only ({folder})"
+    if not os.access(folder, os.W_OK):
+        return f"permission denied: this user may not write in {folder}"
+    # Blocks this user may still use (root may use the reserved ones too); checked right after
+    # a failed write, while its temporary file still holds what it managed to write.
+    blocks = st.f_bfree if hasattr(os, "geteuid") and os.geteuid() == 0 else st.f_bavail
+    if blocks * st.f_frsize < _NEARLY_FULL_BYTES or (st.f_favail == 0 and st.f_files > 0):
+        return f"no space left: the disk is full ({folder})"
+    return None
+
+
+def os_error_cause(exc: OSError, folder: str | Path | None = None) -> str:
+    """The cause of an I/O error in words a user acts on: read-only, no space, permission
+    (with the folder when given), else the system's own message."""
+    cause = _CAUSES.get(exc.errno or 0)
+    if cause is None:
+        return exc.strerror or str(exc)
+    if exc.errno in (errno.EACCES, errno.EPERM) and folder is not None:
+        found = folder_problem(folder)
+        if found is not None and not found.startswith("permission"):
+            return found  # root gets EACCES-like errors from read-only mounts too
+        return f"permission denied: this user may not write in {folder}"
+    return cause if folder is None else f"{cause} ({folder})"
+
 
 def temp_beside(path: Path) -> Path:
     """A fresh temporary name in ``path``'s folder (see the module docstring)."""
@@ -34,8 +83,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename.
 
     Missing parent folders are made. On any failure the temporary file is removed and ``path``
-    keeps its old content; an ``OSError`` becomes a :class:`StoreError` naming the file (and a
-    full disk as such).
+    keeps its old content; an ``OSError``, or any failure while the folder is read-only, full or
+    not writable, becomes a :class:`StoreError` naming the file and the cause.
     """
     path = Path(path)
     tmp = temp_beside(path)
@@ -44,8 +93,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield tmp
         os.replace(tmp, path)
     except OSError as exc:
-        hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-        raise StoreError(f"cannot write {path}: {exc.strerror or exc}{hint}") from exc
+        raise StoreError(f"cannot write {path}: {os_error_cause(exc, path.parent)}") from exc
+    except Exception as exc:
+        # A writer that hides the cause (libsndfile says "System error"): ask the folder.
+        cause = folder_problem(path.parent)
+        if cause is None:
+            raise
+        raise StoreError(f"cannot write {path}: {cause}") from exc
     finally:
         if tmp.exists():
             tmp.unlink()

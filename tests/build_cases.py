@@ -65,7 +65,7 @@ EDITS = [  # (section of the spec, old text, new text): one edit each, applied o
     ("acoustics", "rays: 600", "rays: 500"),
     ("corpora", "clips_per_split: 4, clip_duration_s: 3.0}\n  music",
      "clips_per_split: 5, clip_duration_s: 3.0}\n  music"),
-    ("mixture", "duration_s: 10.0", "duration_s: 10.0\n  loudness: {speech_lufs: -20}"),
+    ("mixture", "speech_lufs: -24,", "speech_lufs: -22,"),
     ("splits", "train: {groups: 2,", "train: {groups: 3,"),
     ("outputs", "manifests: [lhotse]", "manifests: [lhotse, csv]"),
 ]

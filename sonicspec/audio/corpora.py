@@ -34,6 +34,7 @@ import csv
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -234,7 +235,29 @@ def probe_audio(path: Path) -> tuple[int, int] | str:
         return f"unreadable audio ({err})"
     if info.frames <= 0 or info.samplerate <= 0:
         return "no audio samples"
+    truncated = _truncated(info.extra_info)
+    if truncated is not None:
+        return truncated
     return int(info.frames), int(info.samplerate)
+
+
+# libsndfile's parse log: ``data : 2000000000 (should be 100)`` when a WAV (``data``), AIFF
+# (``SSND``) or similar chunk claims more bytes than the file holds; it then reads what is
+# there without a word.
+_CHUNK_CLAIM = re.compile(r"^\s*(data|SSND)\s*:\s*(\d+)\s*\(should be (\d+)\)", re.M)
+_UNKNOWN_LENGTH = (0, 0xFFFFFFFF, 0xFFFFFFFF - 1)
+"""Chunk sizes streaming writers leave when they do not know the length: not a claim."""
+
+
+def _truncated(parse_log: str) -> str | None:
+    """Why a file whose header claims more audio than it holds is unusable (a cut copy or
+    download: what is there is a fragment of the recording), or None."""
+    for chunk, claimed, held in _CHUNK_CLAIM.findall(parse_log or ""):
+        claimed_n, held_n = int(claimed), int(held)
+        if held_n < claimed_n and claimed_n not in _UNKNOWN_LENGTH:
+            return (f"truncated: its header's {chunk} chunk claims {claimed_n:,} bytes of audio "
+                    f"but the file holds {held_n:,} (an interrupted copy or download?)")
+    return None
 
 
 def _check_ratios(ratios: Mapping[str, float], where: str) -> dict[str, float]:

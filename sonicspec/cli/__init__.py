@@ -60,6 +60,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if isinstance(exc, SpecError):
             print(str(exc), file=sys.stderr)
             return EXIT_INVALID
+        if isinstance(exc, OSError):  # an I/O failure: where, and why (never "internal")
+            from sonicspec.atomic import os_error_cause
+
+            where = exc.filename
+            folder = os.path.dirname(os.path.abspath(where)) if where else None
+            print(f"sonicspec: error: {where or 'a file'}: {os_error_cause(exc, folder)}",
+                  file=sys.stderr)
+            return EXIT_FAILURE
         kind = (
             "error" if isinstance(exc, SonicspecError) else f"internal error ({type(exc).__name__})"
         )

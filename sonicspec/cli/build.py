@@ -116,9 +116,31 @@ def cmd_job(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _verify_lock(store_dir: Path | None):
+    """The store's lock, held for a verify (so no build writes while it reads, and it may
+    record what it found in the store's check cache); None when the store cannot be written
+    (a read-only store: nothing builds there, nothing is recorded). Raises
+    :class:`StoreLockedError` while a build runs."""
+    from sonicspec.errors import StoreError
+    from sonicspec.store.lock import StoreLock, StoreLockedError
+
+    if store_dir is None or not store_dir.is_dir():
+        return None
+    lock = StoreLock(store_dir, purpose="verify")
+    try:
+        lock.acquire()
+    except StoreLockedError:
+        raise
+    except StoreError:
+        return None
+    return lock
+
+
 def cmd_verify(args: argparse.Namespace) -> int:
-    from sonicspec.export.checksums import folder_kind
+    from sonicspec.export.checksums import folder_kind, read_marker
+    from sonicspec.stages.checked import CheckCache
     from sonicspec.store import ArtifactStore
+    from sonicspec.store.lock import StoreLockedError
 
     folder = Path(args.folder)
     if not folder.is_dir():
@@ -129,24 +151,44 @@ def cmd_verify(args: argparse.Namespace) -> int:
         print(f"sonicspec: error: {folder}: not a sonicspec store or dataset (it has neither "
               "sonicspec-store.json nor .sonicspec-dataset.json)", file=sys.stderr)
         return EXIT_INVALID
-    if kind == "dataset":
-        from sonicspec.stages.repair import verify_dataset_folder
+    expected = None
+    if kind == "store" and args.spec:
+        from sonicspec.plan.compile import compile_spec
 
-        count, problems = verify_dataset_folder(folder)
-        what = "dataset files"
-    else:
-        store = ArtifactStore(folder)
-        expected = None
-        if args.spec:
-            from sonicspec.plan.compile import compile_spec
+        loaded = load_or_exit(args.spec)
+        if loaded is None:
+            return EXIT_INVALID
+        expected = {j.key: j.step for j in compile_spec(loaded).jobs}
+    marker = read_marker(folder) if kind == "dataset" else {}
+    store_dir = folder if kind == "store" else (
+        folder / marker["store"] if "store" in marker else None)
+    try:
+        lock = _verify_lock(store_dir)
+    except StoreLockedError as exc:
+        print(f"sonicspec: error: {folder}: not verified: {exc}; a build writes the store and "
+              "the dataset folder while it runs, so verify waits for it", file=sys.stderr)
+        return EXIT_FAILURE
+    try:
+        cache = CheckCache.of_store(store_dir) if lock is not None else None
+        if kind == "dataset":
+            from sonicspec.stages.repair import verify_dataset_folder
 
-            loaded = load_or_exit(args.spec)
-            if loaded is None:
-                return EXIT_INVALID
-            expected = {j.key: j.step for j in compile_spec(loaded).jobs}
-        problems = [p.format() for p in store.verify(expected)]
-        count = sum(1 for _ in store.artifacts())
-        what = "artifacts"
+            count, problems = verify_dataset_folder(folder, cache)
+            what = "dataset files"
+        else:
+            store = ArtifactStore(folder)
+            found = store.verify(expected)
+            if cache is not None:
+                for p in found:
+                    cache.forget_artifact(p.key)  # the next build re-reads and repairs it
+            problems = [p.format() for p in found]
+            count = sum(1 for _ in store.artifacts())
+            what = "artifacts"
+        if cache is not None and problems:
+            cache.save()
+    finally:
+        if lock is not None:
+            lock.release()
     for p in problems:
         print(p, file=sys.stderr)
     print(
@@ -154,6 +196,9 @@ def cmd_verify(args: argparse.Namespace) -> int:
         f"{'s' * (len(problems) != 1)}",
         file=sys.stderr if problems else sys.stdout,
     )
+    if problems and cache is not None:
+        print("the next `sonicspec build` of this store re-checks what was found here and "
+              "remakes what is damaged or missing", file=sys.stderr)
     return EXIT_FAILURE if problems else EXIT_OK
 
 

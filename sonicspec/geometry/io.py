@@ -26,6 +26,7 @@ mesh is given (then faces have no labels).
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
 from dataclasses import dataclass
@@ -80,6 +81,36 @@ def mpcat40_table() -> tuple[Mpcat40Category, ...]:
 
 
 # --------------------------------------------------------------------------- generic import
+MAX_MESH_MB = 1024
+"""Largest scene file read, in MiB, unless the environment variable ``SONICSPEC_MAX_MESH_MB``
+says otherwise. Real scans are far smaller (a Matterport3D building: a 20-150 MB glb, a
+semantic ply of 10-60 MB); a mesh is loaded whole and takes about twice its file size in
+memory, so a wrong file (a 2 GB point cloud, a dump) would cost minutes and gigabytes before
+anything could say it is wrong."""
+
+MAX_MESH_MB_VARIABLE = "SONICSPEC_MAX_MESH_MB"
+
+
+def max_mesh_bytes() -> int:
+    """The size bound of :data:`MAX_MESH_MB`, raised or lowered by ``SONICSPEC_MAX_MESH_MB``."""
+    text = os.environ.get(MAX_MESH_MB_VARIABLE, "").strip()
+    if not text:
+        return MAX_MESH_MB * 2**20
+    try:
+        mb = float(text)
+    except ValueError:
+        mb = float("nan")
+    if not (mb > 0 and np.isfinite(mb)):
+        raise GeometryError(f"{MAX_MESH_MB_VARIABLE}: expected a positive number of MiB, got "
+                            f"{text!r}")
+    return int(mb * 2**20)
+
+
+def _mib(n: int) -> str:
+    mib = n / 2**20
+    return f"{mib:,.0f} MiB" if mib >= 10 else f"{mib:.2g} MiB"
+
+
 def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Path:
     path = Path(path)
     if path.suffix.lower() not in extensions:
@@ -88,7 +119,20 @@ def _check_path(path: str | Path, where: str, extensions: tuple[str, ...]) -> Pa
         )
     if not path.is_file():
         raise GeometryError(f"{where}: expected an existing file, got missing path '{path}'")
+    check_mesh_size(path)
     return path
+
+
+def check_mesh_size(path: Path) -> None:
+    """Refuse a scene file larger than :func:`max_mesh_bytes` (before it is read or hashed)."""
+    size, limit = path.stat().st_size, max_mesh_bytes()
+    if size > limit:
+        raise GeometryError(
+            f"{path}: expected a scene file of at most {_mib(limit)}, got {_mib(size)} "
+            f"({size:,} bytes); it would be read whole (about twice "
+            f"its size in memory). Is it the right file? To read it anyway, set "
+            f"{MAX_MESH_MB_VARIABLE}={int(np.ceil(size / 2**20)) + 1} (MiB)"
+        )
 
 
 def _check_scale(unit_scale: float) -> float:

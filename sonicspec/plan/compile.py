@@ -73,6 +73,20 @@ class FileDigests:
             self._dirty = True
         return self._cache[token]
 
+    def mesh(self, path: Path) -> str:
+        """:meth:`file` of a scene file, refused first if it is beyond the mesh size bound
+        (hashing a 2 GB file the mesh step would refuse costs half a minute)."""
+        from sonicspec.errors import GeometryError
+        from sonicspec.geometry.io import check_mesh_size
+
+        try:
+            check_mesh_size(path)
+        except FileNotFoundError:
+            raise CompileError(f"{path}: file does not exist") from None
+        except GeometryError as exc:
+            raise CompileError(str(exc)) from None
+        return self.file(path)
+
     @staticmethod
     def folder(path: Path) -> str:
         """Digest of a folder's file names and sizes (portable across copies)."""
@@ -266,7 +280,7 @@ def _mesh_params(
     paths: dict[str, str] = {}
     if isinstance(scene, MeshSceneSpec) and entry.file is not None:
         dumped.pop("path", None)
-        files["mesh"] = digests.file(entry.file)
+        files["mesh"] = digests.mesh(entry.file)
         paths["mesh"] = str(entry.file)
         stem = entry.file.with_suffix("")
         for role, extra in (
@@ -274,7 +288,7 @@ def _mesh_params(
             ("house", stem.with_suffix(".house")),
         ):
             if scene.format != "plain" and extra.is_file():
-                files[role] = digests.file(extra)
+                files[role] = digests.mesh(extra)
                 paths[role] = str(extra)
         if scene.format == "matterport" and "semantic" not in files:
             raise CompileError(
@@ -283,7 +297,7 @@ def _mesh_params(
             )
     for j, ob in enumerate(scene.obstacles):
         if isinstance(ob, MeshObstacleSpec):
-            files[f"obstacle{j}"] = digests.file(base_dir / ob.path)
+            files[f"obstacle{j}"] = digests.mesh(base_dir / ob.path)
             paths[f"obstacle{j}"] = str(base_dir / ob.path)
     params: dict[str, Any] = {"scene": dumped, "files": files, "scene_id": entry.id}
     if isinstance(scene, MeshSceneSpec):

@@ -155,13 +155,15 @@ def _box_corners(ob: BoxObstacleSpec) -> list[tuple[float, float, float]]:
 # --- the checks --------------------------------------------------------------------------
 
 
-def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = ()) -> list[Problem]:
+def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = (),
+               base_dir: Path | None = None) -> list[Problem]:
     """Every semantic error and warning in ``spec``.
 
     ``cli_outputs`` names the ``outputs`` folders (``dir``, ``store_dir``) that the command
-    line chooses instead of the spec: they may lie outside the spec's folder.
+    line chooses instead of the spec: they may lie outside the spec's folder. ``base_dir``: the
+    spec's folder, where the output folders are also checked after resolving symbolic links.
     """
-    problems: list[Problem] = list(_check_output_folders(spec, cli_outputs))
+    problems: list[Problem] = list(_check_output_folders(spec, cli_outputs, base_dir))
     for check in (
         _check_scenes,
         _check_materials,
@@ -535,16 +537,36 @@ def _outside(path: str) -> bool:
         len(norm) > 1 and norm[1] == ":")  # a Windows drive
 
 
-def _check_output_folders(spec: DatasetSpec, cli_outputs: Collection[str]) -> Iterator[Problem]:
+def _resolves_outside(path: str, base_dir: Path) -> Path | None:
+    """Where a spec-relative path really leads when a symbolic link on the way takes it out of
+    the spec's folder (None if it stays inside). The path text alone cannot tell."""
+    try:
+        base = base_dir.resolve()
+        real = (base_dir / path).resolve()
+    except (OSError, RuntimeError):  # a symlink loop: not a folder anything can be written to
+        return base_dir / path
+    return None if real == base or real.is_relative_to(base) else real
+
+
+def _check_output_folders(spec: DatasetSpec, cli_outputs: Collection[str],
+                          base_dir: Path | None = None) -> Iterator[Problem]:
     o = spec.outputs
     for name in ("dir", "store_dir"):
         value = getattr(o, name)
-        if name not in cli_outputs and not o.allow_outside_spec_folder and _outside(value):
-            flag = "--output-dir" if name == "dir" else "--store-dir"
+        if name in cli_outputs or o.allow_outside_spec_folder:
+            continue
+        flag = "--output-dir" if name == "dir" else "--store-dir"
+        hint = (f"a spec chooses where it writes only inside its own folder: pass {flag} DIR "
+                "to `sonicspec build`, or set outputs.allow_outside_spec_folder: true")
+        if _outside(value):
             yield _err(("outputs", name),
-                       f"expected a folder inside the spec's folder, got {value!r}; a spec "
-                       f"chooses where it writes only inside its own folder: pass {flag} DIR "
-                       "to `sonicspec build`, or set outputs.allow_outside_spec_folder: true")
+                       f"expected a folder inside the spec's folder, got {value!r}; {hint}")
+            continue
+        real = None if base_dir is None else _resolves_outside(value, base_dir)
+        if real is not None:
+            yield _err(("outputs", name),
+                       f"expected a folder inside the spec's folder, got {value!r}, which is a "
+                       f"symbolic link (or lies under one) to {real}; {hint}")
     if not cli_outputs:
         a = posixpath.normpath(o.dir.replace("\\", "/"))
         b = posixpath.normpath(o.store_dir.replace("\\", "/"))

@@ -77,7 +77,7 @@ def validate_text(
         spec = DatasetSpec.model_validate(data)
     except ValidationError as exc:
         return None, sort_problems(problems_from_validation(exc, DatasetSpec, data, smap))
-    problems = check_spec(spec, cli_outputs=cli_outputs)
+    problems = check_spec(spec, cli_outputs=cli_outputs, base_dir=base)
     if files:
         problems += check_files(spec, base)
     problems = sort_problems(_locate(problems, smap))

@@ -7,9 +7,10 @@ artifact, the fingerprint (file names, sizes, modification times) it had when it
 per ``export``/``dataset`` artifact the list of files it records (path, bytes, SHA-256), valid
 while the artifact keeps that fingerprint; and per dataset file its size, modification time and
 checksum. A build stats everything (cheap) and reads only what moved. Damage that keeps a file's
-size and time (a disk's bit rot) is for ``sonicspec verify``, which reads everything.
+size and time (a disk's bit rot) is for ``sonicspec verify``, which reads everything, and which
+forgets here what it found damaged, so the next build re-checks exactly those and repairs them.
 
-Only the process holding the store's build lock writes the cache (atomically).
+Only the process holding the store's lock (a build, or a verify) writes the cache (atomically).
 """
 
 from __future__ import annotations
@@ -83,6 +84,26 @@ class CheckCache:
     def forget_file(self, path: Path) -> None:
         if self._files.pop(str(path), None) is not None:
             self._dirty = True
+
+    def forget_artifact(self, key: str) -> None:
+        if self._artifacts.pop(key, None) is not None:
+            self._dirty = True
+
+    def forget_files(self, paths: list[Path]) -> int:
+        """Forget ``paths`` however they were named when recorded (through a symlink, a
+        relative folder): entries are matched by real path. Returns how many were forgotten."""
+        wanted = {os.path.realpath(p) for p in paths}
+        real_dirs: dict[str, str] = {}
+        gone = 0
+        for name in list(self._files):
+            folder, base = os.path.split(name)
+            if folder not in real_dirs:
+                real_dirs[folder] = os.path.realpath(folder)
+            if os.path.join(real_dirs[folder], base) in wanted:
+                del self._files[name]
+                gone += 1
+        self._dirty = self._dirty or gone > 0
+        return gone
 
     def save(self) -> None:
         """Write the cache if anything changed since it was read (a no-op build writes

@@ -181,11 +181,15 @@ def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
     return missing
 
 
-def verify_dataset_folder(out: Path) -> tuple[int, list[str]]:
+def verify_dataset_folder(out: Path, cache: CheckCache | None = None) -> tuple[int, list[str]]:
     """Every file of a dataset folder against ``checksums.sha256``, and that list against the
     records in the store that built it (the dataset artifact the marker names and its export
-    inputs); (files checked, problems)."""
+    inputs); (files checked, problems). With ``cache`` (the store's, under its lock), the files
+    found damaged are forgotten there, so the next build re-hashes and repairs them even if
+    their size and time were kept."""
     count, problems = verify_dataset(out)
+    if cache is not None and problems:
+        cache.forget_files([out / p.path for p in problems] + [out / CHECKSUMS_NAME])
     lines = [p.format() for p in problems]
     marker = read_marker(out)
     if "store" not in marker or "dataset_key" not in marker:
@@ -208,6 +212,8 @@ def verify_dataset_folder(out: Path) -> tuple[int, list[str]]:
         if r["path"] == CHECKSUMS_NAME:
             continue
         if listed.get(r["path"]) != r["sha256"]:
+            if cache is not None:
+                cache.forget_files([out / r["path"], out / CHECKSUMS_NAME])
             lines.append(f"{r['path']}: {CHECKSUMS_NAME} disagrees with the store's record of "
                          "what the build wrote")
     return count, lines

@@ -11,10 +11,12 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -34,7 +36,7 @@ from sonicspec.stages.context import finished_dir, progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
 from sonicspec.stages.warm import STEPS_THAT_COMPILE, warm_once
 from sonicspec.store import ArtifactStore
-from sonicspec.store.lock import StoreLock
+from sonicspec.store.lock import StoreLock, group_members
 
 
 def workflow_dir() -> Path:
@@ -213,6 +215,11 @@ class BuildResult:
     """Dataset files the jobs that ran recorded but that are not there after the build."""
     stray_files: list[str] = field(default_factory=list)
     """Files in the dataset folder that the finished dataset does not list."""
+    failed: list[str] = field(default_factory=list)
+    """Labels of the jobs that failed (from Snakemake's log)."""
+    not_made: dict[str, int] = field(default_factory=dict)
+    """Jobs whose artifacts are not in the store after the build, per step (the failed ones
+    and those waiting on them)."""
     summary: str = ""
 
     @property
@@ -286,6 +293,35 @@ def _hours(plan: Plan) -> tuple[int, float]:
     return groups, seconds / 3600.0
 
 
+def failed_jobs(snakemake_log: str, plan: Plan) -> list[str]:
+    """Labels of the jobs Snakemake reports failed, in the plan's order."""
+    keys = {Path(m.group(1).rstrip(",")).stem
+            for block in snakemake_log.split("Error in rule ")[1:]
+            if (m := _FAILED_LOG.search(block)) is not None}
+    return [j.label for j in plan.jobs if j.key in keys]
+
+
+def _failure_lines(plan: Plan, result: BuildResult) -> list[str]:
+    """What a failed build did not make, so its summary cannot read as a success."""
+    if result.failed:
+        more = ", ..." if len(result.failed) > 3 else ""
+        lines = [f"{len(result.failed)} job{'s' * (len(result.failed) != 1)} failed "
+                 f"({', '.join(result.failed[:3])}{more}); the ends of their logs are above"]
+    else:
+        lines = [f"Snakemake stopped (exit code {result.code}) before the jobs finished; its "
+                 "log is named above"]
+    missing = sum(result.not_made.values())
+    if missing:
+        lines.append(f"not made: {missing} of {len(plan.jobs)} jobs ("
+                     + ", ".join(f"{s} {n}" for s, n in result.not_made.items() if n)
+                     + "): the failed ones and every job that needs them")
+    if result.not_made.get("dataset") or result.not_made.get("export"):
+        lines.append(f"dataset: NOT written: {plan.output_dir} is incomplete (what an earlier "
+                     "build wrote there is unchanged); fix the cause and run the build again: "
+                     "it resumes from what was made")
+    return lines
+
+
 def format_summary(plan: Plan, result: BuildResult) -> str:
     ran = ", ".join(f"{s} {n}" for s, n in result.ran.items() if n) or "none"
     groups, hours = _hours(plan)
@@ -296,8 +332,11 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         f"checked {result.check.artifacts_checked} artifacts ({result.check.artifacts_verified}"
         f" re-read) and {result.check.files_checked} dataset files "
         f"({result.check.files_hashed} re-hashed)",
-        f"dataset: {groups} groups, {hours:.3f} h of audio per track",
     ]
+    if result.code == 0:
+        lines.append(f"dataset: {groups} groups, {hours:.3f} h of audio per track")
+    else:
+        lines += _failure_lines(plan, result)
     skipped = {role: files for role, files in result.skipped.items() if files}
     if skipped:
         lines.append("corpus files skipped (unreadable or unusable; listed in dataset.json): "
@@ -315,7 +354,7 @@ def format_summary(plan: Plan, result: BuildResult) -> str:
         if len(result.warnings) > 10:
             lines.append(f"  ... and {len(result.warnings) - 10} more (the logs are in "
                          f"{Path(plan.store_dir) / 'logs'})")
-    else:
+    elif result.code == 0:
         lines.append("no warnings")
     return "\n".join(lines)
 
@@ -350,7 +389,9 @@ def build(
     for claim in claims:  # both checked before either is written
         claim_folder(*claim, write=False)
     claim_folder(*claims[0], write=not dry_run)
-    with StoreLock(plan.store_dir):
+    with StoreLock(plan.store_dir) as lock, _signals_interrupt():
+        if lock.stopped:
+            print(lock.stopped, file=stream)
         claim_folder(*claims[1], write=not dry_run)
         start = time.monotonic()
         removed = store.clean_stale_temp()
@@ -381,7 +422,8 @@ def build(
             code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
                                             dry_run=dry_run, stream=stream, poll_s=poll_s,
                                             on_start=on_start,
-                                            snakemake_args=snakemake_args, start=start)
+                                            snakemake_args=snakemake_args, start=start,
+                                            lock=lock)
         ran_keys = executed_keys(log_text) & {j.key for j in plan.jobs}
         jobs = plan.by_key()
         ran = {s.name: 0 for s in STEPS}
@@ -398,6 +440,12 @@ def build(
         if not dry_run:
             if code == 0 and dataset_key is not None and (out / CHECKSUMS_NAME).is_file():
                 result.stray_files = unlisted_files(out, read_checksums(out))
+            if code != 0:
+                result.failed = failed_jobs(log_text, plan)
+                made = present_keys(plan, store)
+                for job in plan.jobs:
+                    if job.key not in made:
+                        result.not_made[job.step] = result.not_made.get(job.step, 0) + 1
             result.summary = format_summary(plan, result)
             print(result.summary, file=stream)
         return result
@@ -426,10 +474,96 @@ def take_finished(folder: Path) -> list[str]:
     return keys
 
 
+def _follow(plan: Plan, proc: subprocess.Popen, waiting: dict[str, Job], *, done: dict[str, int],
+            totals: dict[str, int], finished: Path, dry_run: bool, stream: TextIO,
+            poll_s: float, start: float, start_done: int) -> None:
+    """Print progress until Snakemake ends: counts from the finished-job markers (O(new
+    markers) per poll, ``take_finished``), text from the running jobs' progress files."""
+    last = ""
+    while proc.poll() is None:
+        time.sleep(poll_s)
+        if dry_run:
+            continue
+        for key in take_finished(finished):
+            job = waiting.pop(key, None)
+            if job is not None:
+                done[job.step] += 1
+        steps = [StepProgress(step, done[step], totals[step]) for step in totals]
+        line = format_progress(steps, time.monotonic() - start, start_done)
+        line += _job_progress(plan, waiting)
+        if line.split("] ", 1)[-1] != last:
+            print(line, file=stream, flush=True)
+            last = line.split("] ", 1)[-1]
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """For Popen's ``preexec_fn`` (Linux): the child is killed when the head dies, even by
+    ``kill -9`` (``PR_SET_PDEATHSIG``). None elsewhere.
+
+    SIGKILL, not SIGTERM: on SIGTERM Snakemake waits "gracefully" for its jobs, and was seen
+    waiting for many minutes after they were gone. Its jobs finish what they write (atomically)
+    and exit; the next build stops any still running (see :mod:`sonicspec.store.lock`)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def arm() -> None:  # runs in the child between fork and exec: no allocation, no imports
+        prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the head died before the line above
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    return arm
+
+
+def stop_group(proc: subprocess.Popen, grace_s: float = 10.0) -> None:
+    """Stop Snakemake and every job of its process group: SIGTERM, then SIGKILL to what is
+    still there after ``grace_s``."""
+    pgid = proc.pid
+    for sig, wait_s in ((signal.SIGTERM, grace_s), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(pgid, sig)
+        except ProcessLookupError:
+            break
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            if proc.poll() is not None and not group_members(pgid):
+                return
+            time.sleep(0.05)
+    proc.poll()
+
+
+@contextmanager
+def _signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP end a build like Ctrl-C does (``KeyboardInterrupt``), so it stops
+    its Snakemake and jobs and releases the lock instead of dying with them running."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+
+
 def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores: int,
                    profile: Path | None, dry_run: bool, stream: TextIO, poll_s: float,
                    on_start: Callable[[subprocess.Popen], None] | None,
-                   snakemake_args: list[str] | None, start: float) -> tuple[int, str]:
+                   snakemake_args: list[str] | None, start: float,
+                   lock: StoreLock | None = None) -> tuple[int, str]:
     plan_path = plan.write(Path(plan.store_dir) / "plans" / f"{plan.digest}.json")
     cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run,
                             extra=snakemake_args)
@@ -454,25 +588,25 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
     with open(log_path, "w") as log:
         log.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
         log.flush()
+        # Snakemake and every job it starts form one process group (its own session, so a
+        # Ctrl-C reaches the head, which stops the group); the lock records it. If the head
+        # dies, the kernel kills Snakemake: no further job starts.
         proc = subprocess.Popen(
-            cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=plan.store_dir
+            cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=plan.store_dir,
+            start_new_session=True, preexec_fn=_die_with_parent(),
         )
-        if on_start is not None:
-            on_start(proc)
-        last = ""
-        while proc.poll() is None:
-            time.sleep(poll_s)
-            if not dry_run:
-                for key in take_finished(finished):
-                    job = waiting.pop(key, None)
-                    if job is not None:
-                        done[job.step] += 1
-                steps = [StepProgress(step, done[step], totals[step]) for step in totals]
-                line = format_progress(steps, time.monotonic() - start, start_done)
-                line += _job_progress(plan, waiting)
-                if line.split("] ", 1)[-1] != last:
-                    print(line, file=stream, flush=True)
-                    last = line.split("] ", 1)[-1]
+        try:
+            if lock is not None:
+                lock.set_group(proc.pid)
+            if on_start is not None:
+                on_start(proc)
+            _follow(plan, proc, waiting, done=done, totals=totals, finished=finished,
+                    dry_run=dry_run, stream=stream, poll_s=poll_s, start=start,
+                    start_done=start_done)
+        finally:
+            # Interrupted, or Snakemake died and left its jobs running: stop them all.
+            if proc.poll() is None or group_members(proc.pid):
+                stop_group(proc)
     text = log_path.read_text(errors="replace")
     if dry_run:
         print(text.split("\n", 1)[1] if "\n" in text else text, file=stream)

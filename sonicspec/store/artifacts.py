@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import __version__
+from sonicspec.atomic import os_error_cause
 from sonicspec.errors import CompileError, StoreError
 from sonicspec.hashing import KEY_LENGTH, array_digest, canonical_json, sha256_hex
 
@@ -209,10 +210,8 @@ class ArtifactStore:
                     raise
         except OSError as exc:
             shutil.rmtree(tmp, ignore_errors=True)
-            hint = "; the disk is full" if exc.errno == errno.ENOSPC else ""
-            raise StoreError(
-                f"{stage} {key[:12]}: cannot write {final}: {exc.strerror or exc}{hint}"
-            ) from exc
+            raise StoreError(f"{stage} {key[:12]}: cannot write {final}: "
+                             f"{os_error_cause(exc, self.root)}") from exc
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -347,6 +346,9 @@ class ArtifactStore:
         problems = []
         present = set()
         for stage, key in self.artifacts():
+            path = self.path(stage, key)
+            if not self.exists(stage, key) and not any(path.iterdir()):
+                continue  # made empty by Snakemake for a job that never wrote: no artifact
             present.add(key)
             problem = self.verify_one(stage, key)
             if problem is not None:
