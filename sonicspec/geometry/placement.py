@@ -328,6 +328,16 @@ def polylines_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(min(ends, np.linalg.norm(gap, axis=-1)[inside].min()))
 
 
+def _near_walk(item: _Item, walk: np.ndarray | None, points: np.ndarray, min_m: float,
+               what: str) -> bool:
+    """Whether ``points`` (a point or a path) come closer than ``min_m`` to a moving
+    microphone's ``walk`` (None: it stands still); counted as ``item``'s failure if so."""
+    if walk is None or polylines_distance(points, walk) >= min_m - 1e-9:
+        return False
+    item.failures[f"{what} than {min_m:g} m to the microphone's walk"] += 1
+    return True
+
+
 def _fmt_range(low: float, high: float) -> str:
     return f"{low:g}–{high:g} m"
 
@@ -511,10 +521,7 @@ class _Sampler:
                     failed = True
                     break
                 start, start_floor, start_comp, height = got
-                if walk is not None and polyline_distance(walk, start) < (
-                        s.min_path_distance_m - 1e-9):
-                    item.failures[f"closer than {s.min_path_distance_m:g} m to the "
-                                  "microphone's walk"] += 1
+                if _near_walk(item, walk, start, s.min_path_distance_m, "closer"):
                     failed = True
                     break
                 if motion == "static":
@@ -567,11 +574,8 @@ class _Sampler:
                         f"a path closer than {s.min_path_distance_m:g} m to the mic"] += 1
                     failed = True
                     break
-                if walk is not None and polylines_distance(path, walk) < (
-                        s.min_path_distance_m - 1e-9):
-                    items[f"end{i}"].failures[
-                        f"a path closer than {s.min_path_distance_m:g} m to the "
-                        "microphone's walk"] += 1
+                if _near_walk(items[f"end{i}"], walk, path, s.min_path_distance_m,
+                              "a path closer"):
                     failed = True
                     break
                 speech.append(
@@ -594,10 +598,7 @@ class _Sampler:
                     failed = True
                     break
                 point, point_floor, _, height = got
-                if walk is not None and polyline_distance(walk, point) < (
-                        s.min_path_distance_m - 1e-9):
-                    item.failures[f"closer than {s.min_path_distance_m:g} m to the "
-                                  "microphone's walk"] += 1
+                if _near_walk(item, walk, point, s.min_path_distance_m, "closer"):
                     failed = True
                     break
                 statics[name] = SourcePlacement(
