@@ -386,6 +386,8 @@ def test_metadata_validates_and_the_tracks_are_stored_once(built: Plan) -> None:
     jsonschema.Draft202012Validator(metadata_schema()).validate(meta)
     assert GroupMetadata.model_validate(meta).to_json() == text  # the model wrote it
     assert meta["version"] == 2 and "\n " not in text
+    # issue 27 item 6: each track says how far its exact early reflections went
+    assert meta["source1"]["image_source_order"] == {"asked": 1, "reached": 1, "stopped": None}
     refs = [meta[n]["track"] for n in ("source1", "source2", "noise", "music")]
     assert {r["file"] for r in [*refs, meta["microphone_track"]]} == {"train/000000/tracks.npz"}
     with np.load(group_folder(built) / "tracks.npz") as z:

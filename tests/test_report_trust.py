@@ -182,3 +182,25 @@ def test_truncated_rirs_and_missing_t30_are_said(ds: Path, tmp_path: Path) -> No
     card = html[html.index('data-quantity="t30"'):]
     card = card[:card.index('<div class="card"')]
     assert 'data-missing="2"' in card and "val 2" in card
+
+
+def test_sources_whose_image_source_search_stopped_early_are_said(ds: Path,
+                                                                  tmp_path: Path) -> None:
+    """Issue 27 item 6: a scan's noise can stop the image-source search below the order
+    asked; the report says which sources, in which scene, and why (metadata.json's
+    ``image_source_order``)."""
+    page = tmp_path / "r.html"
+    assert main(["report", str(ds), "-o", str(page)]) == 0
+    assert "order" not in _warnings(page)
+
+    def edit(meta):
+        meta["source1"]["image_source_order"] = {
+            "asked": 3, "reached": 1, "stopped": "order 2 needs more than 2,000,000 candidates"}
+        meta["source2"]["image_source_order"] = {"asked": 3, "reached": 3, "stopped": None}
+
+    _edit(ds, "train/000000", edit)
+    assert main(["report", str(ds), "-o", str(page)]) == 0
+    said = _warnings(page)["order"]
+    assert "1 source(s) whose exact early reflections stopped below" in said
+    assert re.search(r"train/000000 source1 in \S+ \(order 1 of 3: order 2 needs more than "
+                     r"2,000,000 candidates\)", said), said

@@ -63,6 +63,15 @@ class Loudness(_Record):
     output_lufs: float = Field(description="Level of the written file, LUFS.")
 
 
+class ImageSourceOrder(_Record):
+    """How far the exact early reflections went (issue 27): a scan's noise can make the
+    candidate search stop below the order asked, the ray tracer covering the rest."""
+
+    asked: int = Field(ge=0, description="acoustics.image_source_order.")
+    reached: int = Field(ge=0, description="The order every RIR of the track completed.")
+    stopped: str | None = Field(description="Why reached < asked (null: it is not).")
+
+
 class _Track(_Record):
     audio: list[str] = Field(description="Corpus files of the clips, in time order.")
     start_end_points: list[tuple[int, int]] = Field(
@@ -81,6 +90,9 @@ class _Track(_Record):
         "How the RIR's length was chosen at the first point (rule, limit_s, decay_end_s, "
         "per band decay_60db_s, continued_from_s, ...)."))
     loudness: Loudness = Field(description="How the track was levelled.")
+    image_source_order: ImageSourceOrder | None = Field(None, description=(
+        "The image-source order asked and reached by the track's RIRs (the lowest over its "
+        "points), and why it is lower; absent in datasets built before it was recorded."))
     track: TrackReference = Field(description=(
         "Where the source is every hop_s (positions_m) and where it is heard from "
         "(azimuth_deg, elevation_deg, distance_m in the microphone's frame)."))

@@ -349,6 +349,7 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
             "intervals": [list(p) for p in e.get("start_end_points") or []],
             "position_m": e.get("position_m"), "file": e.get("file"),
             "rir_cut": rir_cut(e.get("rir_tail"), rate),
+            "image_source_order": e.get("image_source_order"),
         }
         if role == "speech":
             s.update(path_length_m=_num(e.get("path_length_m")),
@@ -584,23 +585,30 @@ class Warnings:
     default_materials: list[dict[str, Any]] = field(default_factory=list)
     truncated_rirs: list[dict[str, Any]] = field(default_factory=list)
     missing: list[dict[str, Any]] = field(default_factory=list)
+    lower_order: list[dict[str, Any]] = field(default_factory=list)
+    """Sources whose RIRs' exact early reflections stopped below the order asked."""
 
     @property
     def count(self) -> int:
         return (len(self.leaked_scenes) + len(self.guard_cut) + len(self.close_sources)
-                + len(self.default_materials) + len(self.truncated_rirs) + len(self.missing))
+                + len(self.default_materials) + len(self.truncated_rirs) + len(self.missing)
+                + len(self.lower_order))
 
 
 def group_warnings(groups: Sequence[dict[str, Any]], warnings: Warnings) -> None:
     """Groups the guard cut more than 3 dB, sources closer than 0.5 m (a moving microphone's
-    distances from its track) and sources whose RIRs were cut while still decaying, into
-    ``warnings``."""
+    distances from its track), sources whose RIRs were cut while still decaying and sources
+    whose image-source search stopped below the order asked, into ``warnings``."""
     for g in groups:
         for s in g["sources"]:
             cut = s.get("rir_cut")
             if cut is not None:
                 warnings.truncated_rirs.append({"group": g["group"], "source": s["name"],
                                                 **cut})
+            order = s.get("image_source_order")
+            if isinstance(order, dict) and order.get("reached", 0) < order.get("asked", 0):
+                warnings.lower_order.append({"group": g["group"], "scene": g.get("scene_id"),
+                                             "source": s["name"], **order})
         gain = g["group_gain_db"]
         if gain is not None and gain < GUARD_CUT_DB:
             warnings.guard_cut.append({"group": g["group"], "gain_db": gain})

@@ -39,7 +39,7 @@ STEPS: tuple[Step, ...] = (
     Step("rir", 18, 1, 4000, 60, "room impulse responses along every trajectory"),
     Step("render", 3, 1, 4000, 30, "moving-source convolution of every track"),
     Step("mix", 2, 1, 4000, 10, "loudness normalisation and task mixtures"),
-    Step("export", 5, 1, 2000, 10, "audio files and metadata per group"),
+    Step("export", 6, 1, 2000, 10, "audio files and metadata per group"),
     # dataset streams: peak RSS 152-156 MB at 10^2-10^4 groups (bench/bench_scale.py), 3x
     Step("dataset", 3, 1, 500, 10, "dataset.json and manifests"),
 )

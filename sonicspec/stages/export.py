@@ -30,6 +30,7 @@ from sonicspec.artifacts import (
     MixGroup,
     RenderGroup,
     RirGroup,
+    RirSource,
 )
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import peak_scale, write_audio
@@ -37,6 +38,7 @@ from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.export.metadata import (
     BackgroundTrack,
     GroupMetadata,
+    ImageSourceOrder,
     Loudness,
     MixtureRecord,
     SpeechTrack,
@@ -121,6 +123,16 @@ def microphone_track(line: Timeline, rate: int) -> tuple[float, dict[str, np.nda
     return hop / rate, track
 
 
+def _order(source: RirSource) -> ImageSourceOrder | None:
+    """The image-source order a source's RIRs asked and reached (None from a rir artifact
+    written before it was recorded)."""
+    if source.image_source_order is None or source.image_source_order_asked is None:
+        return None
+    return ImageSourceOrder(asked=source.image_source_order_asked,
+                            reached=source.image_source_order,
+                            stopped=source.image_source_order_stopped)
+
+
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
@@ -168,6 +180,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
             "direct_path": rir_source.direct,
             "rir_tail": rir_source.tail,
+            "image_source_order": _order(rir_source),
             "loudness": Loudness(**mix.components[name].model_dump()),
             "track": TrackReference(**track_labels),
         }
