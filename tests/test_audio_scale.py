@@ -155,8 +155,9 @@ def _variant(base_spec: Path, name: str, outputs: str) -> Path:
     from sonicspec.cli import main
 
     text = base_spec.read_text()
-    for old, new in (("duration_s: 10.0", "duration_s: 10.0\n  loudness: {speech_lufs: -6, "
-                                          "noise_lufs: -10, peak_limit_dbfs: null}"),
+    for old, new in (("loudness: {speech_lufs: -24, noise_lufs: -28, music_lufs: -31}",
+                      "loudness: {speech_lufs: -6, noise_lufs: -10, music_lufs: -24, "
+                      "peak_limit_dbfs: null}"),
                      ("dir: out/demo", f"dir: out/{name}"),
                      ("audio_format: flac", outputs),
                      ("manifests: [lhotse, huggingface, webdataset]",
@@ -229,7 +230,8 @@ def test_scaled_dataset_records_its_scales_everywhere(built: dict[str, Path]) ->
                                       "kwargs": {"factor": meta["audio_scales"][rel]}}]
     rows = (root / "manifests" / "train.csv").read_text().splitlines()
     assert rows[0].endswith(",scale")
-    assert all(float(r.rsplit(",", 1)[1]) > 0 for r in rows[1:] if "metadata" not in r)
+    audio = [r for r in rows[1:] if ".flac," in r]  # not metadata.json, tracks.npz
+    assert audio and all(float(r.rsplit(",", 1)[1]) > 0 for r in audio)
     # The old form, float WAV without scales, carries none of it.
     flt = built["float"]
     assert all("audio_scales" not in json.loads(p.read_text())
