@@ -26,7 +26,12 @@ from sonicspec.audio.corpora import folder_speakers, librispeech_speakers
 from sonicspec.errors import CompileError, SonicspecError
 from sonicspec.hashing import canonical_json, file_sha256, rng_for, sha256_hex, shared
 from sonicspec.plan.model import Job, Plan
-from sonicspec.plan.params import ARRANGEMENT_FIELDS, MaterialTable, OutputsParams
+from sonicspec.plan.params import (
+    ARRANGEMENT_FIELDS,
+    MaterialTable,
+    OutputsParams,
+    without_omitted,
+)
 from sonicspec.shares import split_shares
 from sonicspec.spec.corpora import GeneratedSpeechSpec, LibriSpeechCorpusSpec
 from sonicspec.spec.dataset import DatasetSpec
@@ -425,9 +430,8 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     outputs = _dump(spec.outputs)
     for k in ("dir", "store_dir", "allow_outside_spec_folder", "groups_per_shard", "report"):
         outputs.pop(k)  # where and how finely: no export writes other bytes for them
-    for k, default in OutputsParams.omitted_when.items():
-        if outputs.get(k, default) == default:
-            outputs.pop(k, None)  # left out at their defaults: older exports keep their keys
+    # left out at their defaults, as OutputsParams serialises them: older exports keep their keys
+    outputs = without_omitted(outputs, OutputsParams.omitted_when)
     outputs = shared(outputs)
 
     for split, layout in layouts.items():

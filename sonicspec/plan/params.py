@@ -129,11 +129,15 @@ class OutputsParams(OutputsSpec):
 
     @model_serializer(mode="wrap")
     def _omit(self, handler: Any) -> Any:
-        data = handler(self)
-        for name, value in self.omitted_when.items():
-            if name in data and data[name] == value:
-                del data[name]
-        return data
+        return without_omitted(handler(self), self.omitted_when)
+
+
+def without_omitted(data: dict[str, Any], omitted_when: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` less the fields that hold their ``omitted_when`` value."""
+    for name, value in omitted_when.items():
+        if name in data and data[name] == value:
+            del data[name]
+    return data
 
 
 # ----------------------------------------------------------------- the step models
@@ -148,11 +152,7 @@ class StepParams(BaseModel):
 
     @model_serializer(mode="wrap")
     def _omit(self, handler: Any) -> Any:
-        data = handler(self)
-        for name, value in self.omitted_when.items():
-            if name in data and data[name] == value:
-                del data[name]
-        return data
+        return without_omitted(handler(self), self.omitted_when)
 
 
 class CorpusParams(StepParams):
