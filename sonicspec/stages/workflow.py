@@ -8,6 +8,7 @@ input``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shlex
@@ -467,10 +468,8 @@ def take_finished(folder: Path) -> list[str]:
     for entry in entries:
         if entry.name.endswith(".done"):
             keys.append(entry.name[: -len(".done")])
-        try:
+        with contextlib.suppress(OSError):  # another head took it: counted there
             os.unlink(entry.path)
-        except OSError:
-            pass
     return keys
 
 

@@ -78,7 +78,7 @@ def group_members(pgid: int) -> list[int]:
     except ProcessLookupError:
         return []
     except PermissionError:
-        pass
+        pass  # the group exists, owned by someone else
     return [pgid]
 
 
