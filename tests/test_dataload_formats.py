@@ -1,0 +1,182 @@
+"""Readers of external layouts (sonicspec.dataload.formats): each tiny fixture in its real
+layout (tests/layout_cases.py) reads back as its files, scores the mixture as SI-SNRi 0 and the
+references as the ceiling, and an incomplete layout names what is missing."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import layout_cases as lc
+import numpy as np
+import pytest
+import soundfile as sf
+
+from sonicspec.dataload import MixingConfig, SonicspecDataset
+from sonicspec.dataload.evaluate import evaluate
+from sonicspec.dataload.folder import DatasetError
+from sonicspec.dataload.formats import detect, open_dataset
+
+# name, writer, the folder a user points at (relative to tmp), split, task
+CASES: list[tuple[str, Callable, str, str, str]] = [
+    ("librimix", lc.librimix, "Libri2Mix/wav8k/min", "test", "separation"),
+    ("librimix", lc.librimix, "Libri2Mix", "test", "enhancement"),
+    ("wham", lc.wham, "wham_mix", "tt", "separation"),
+    ("wham", lambda p: lc.wham(p, reverb=True), "whamr/wav8k/min", "test", "separation"),
+    ("lrs2mix", lc.lrs2mix, "LRS2-2Mix", "test", "separation"),
+    ("voicebank", lc.voicebank, ".", "test", "enhancement"),
+    ("dns", lc.dns, "test_set", "test", "enhancement"),
+    ("sonicset", lc.sonicset, ".", "test-noise", "separation"),
+    ("sonicset", lc.sonicset, ".", "test", "enhancement"),
+    ("plain", lc.plain, ".", "test", "separation"),
+]
+IDS = [f"{c[0]}-{c[2].replace('/', '_')}-{c[4]}" for c in CASES]
+
+
+def _read(path: Path) -> np.ndarray:
+    x, _ = sf.read(str(path), dtype="float32", always_2d=True)
+    return x.T
+
+
+@pytest.mark.parametrize(("name", "writer", "where", "split", "task"), CASES, ids=IDS)
+def test_items_are_the_files_read_directly(tmp_path: Path, name: str, writer, where: str,
+                                           split: str, task: str) -> None:
+    files = writer(tmp_path)
+    root = tmp_path / where
+    assert detect(root) == name
+    folder = open_dataset(root)
+    seen = 0
+    for group in folder.groups(split):
+        mine = files[group.id]
+        for m in group.mixtures(task):
+            np.testing.assert_array_equal(group.read(m["file"]), _read(mine[m["name"]]))
+            for t in m["targets"]:
+                np.testing.assert_array_equal(group.read(t), _read(mine[t]))
+            assert group.num_samples == _read(mine[m["name"]]).shape[1]
+            seen += 1
+    assert seen >= 2
+    # The loader gives the same items, whole and as written.
+    data = SonicspecDataset(root, split, task, config=MixingConfig(
+        dynamic=False, crop_s=None, sir_db=None, snr_db=None))
+    for i in range(len(data)):
+        item = data[i]
+        mine = files[item["group"]]
+        np.testing.assert_array_equal(item["mixture"], _read(mine[item["mixture_name"]]))
+        m = next(m for m in data.items if m[0] == item["group"]
+                 and m[1]["name"] == item["mixture_name"])[1]
+        for k, t in enumerate(m["targets"]):
+            np.testing.assert_array_equal(item["targets"][k], _read(mine[t]))
+
+
+@pytest.mark.parametrize(("name", "writer", "where", "split", "task"), CASES, ids=IDS)
+def test_oracle_mixture_scores_zero_and_references_the_ceiling(
+        tmp_path: Path, name: str, writer, where: str, split: str, task: str) -> None:
+    writer(tmp_path)
+    # SDR once (fast_bss_eval is slow to load); SI-SNR on every layout.
+    metrics = ["si_snr", "si_snri", *(["sdri"] if name == "librimix" else [])]
+    rows = evaluate(tmp_path / where, split, task, oracle=True, metrics=metrics)
+    mix = [r for r in rows if r["method"] == "oracle_mixture"]
+    top = [r for r in rows if r["method"] == "oracle_targets"]
+    assert mix and len(mix) == len(top)
+    for r in mix:
+        assert r["si_snri"] == pytest.approx(0.0, abs=1e-9)
+        assert r.get("sdri", 0.0) == pytest.approx(0.0, abs=1e-9)
+    for r in top:
+        assert r["si_snr"] >= 100.0
+
+
+def test_librimix_variants_mixture_filter_and_libri3mix(tmp_path: Path) -> None:
+    lc.librimix(tmp_path / "a", n_src=3, rate=16000, mode="max")
+    folder = open_dataset(tmp_path / "a" / "Libri3Mix")
+    g = folder.groups("test")[0]
+    assert g.speakers == ("source1", "source2", "source3") and g.sample_rate_hz == 16000
+    assert [m["name"] for m in g.mixtures("separation")] == ["mix_both", "mix_clean"]
+    rows = evaluate(tmp_path / "a" / "Libri3Mix", "test", "separation", oracle=True,
+                    metrics=["si_snri"], mixtures=["mix_both"])
+    assert {r["mixture"] for r in rows} == {"mix_both"} and len(rows) == 2 * 2 * 3
+    with pytest.raises(DatasetError, match=r"no separation mixture named mix_x; its "
+                       r"separation mixtures are \['mix_both', 'mix_clean'\]"):
+        evaluate(tmp_path / "a" / "Libri3Mix", "test", "separation", oracle=True,
+                 metrics=["si_snri"], mixtures=["mix_x"])
+    # Two variants under one top folder: the reader asks which.
+    lc.librimix(tmp_path / "a", n_src=3, rate=8000, mode="min")
+    with pytest.raises(DatasetError, match=r"holds 2 LibriMix variants \(wav8k/min, "
+                       r"wav16k/max\); point at one of them"):
+        open_dataset(tmp_path / "a" / "Libri3Mix", "librimix")
+
+
+def test_dynamic_mixing_redraws_a_layout_with_its_noise(tmp_path: Path) -> None:
+    lc.librimix(tmp_path)
+    data = SonicspecDataset(tmp_path / "Libri2Mix", "test", "separation",
+                            config=MixingConfig(crop_s=0.5), background="noise")
+    item = data[0]
+    assert item["mixture"].shape == (1, 4000) and item["targets"].shape == (2, 1, 4000)
+    assert -6.0 <= float(item["sir_db"][0]) <= 6.0 and 10.0 <= item["snr_db"] <= 20.0
+    # A layout whose noise is not released cannot be re-mixed: said, not silently clean.
+    lc.voicebank(tmp_path / "vb")
+    with pytest.raises(DatasetError, match="not among its files .* use "
+                       r"MixingConfig\(dynamic=False\)"):
+        SonicspecDataset(tmp_path / "vb", "test", "enhancement", config="paper")
+
+
+def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
+    """A damaged layout, the format to ask for, and the message expected."""
+    if how == "librimix-missing-source":
+        lc.librimix(tmp)
+        (tmp / "Libri2Mix/wav8k/min/test/s2/1089-134686-0000_121-121726-0000.wav").unlink()
+        return (tmp / "Libri2Mix", None,
+                r"s2/1089-134686-0000_121-121726-0000.wav: missing; the librimix layout "
+                r"lists it as source2 of test/1089")
+    if how == "librimix-column":
+        lc.librimix(tmp)
+        csv = tmp / "Libri2Mix/wav8k/min/metadata/mixture_test_mix_clean.csv"
+        csv.write_text(csv.read_text().replace("mixture_path", "mix_path"))
+        return tmp / "Libri2Mix", None, r"mixture_test_mix_clean.csv: no column 'mixture_path'"
+    if how == "librimix-length":
+        lc.librimix(tmp)
+        for p in (tmp / "Libri2Mix/wav8k/min/metadata").glob("*.csv"):
+            p.write_text(p.read_text().replace(",8000\n", ",8001\n"))
+        return (tmp / "Libri2Mix", None, r"mix_(both|clean|single)/1089.*\.wav: 8000 samples, "
+                r"but the librimix metadata gives test/1089.* a length of 8001")
+    if how == "voicebank-clean":
+        lc.voicebank(tmp)
+        for p in (tmp / "clean_testset_wav").iterdir():
+            p.unlink()
+        (tmp / "clean_testset_wav").rmdir()
+        return tmp, None, r"clean_testset_wav: missing; the VoiceBank-DEMAND layout pairs"
+    if how == "dns-fileid":
+        lc.dns(tmp)
+        noisy = tmp / "test_set/synthetic/no_reverb/noisy"
+        next(noisy.iterdir()).rename(noisy / "some_noisy_clip.wav")
+        return tmp / "test_set", None, r"some_noisy_clip.wav: no fileid_<N> in its name"
+    if how == "wham-length":
+        lc.wham(tmp)
+        lc.write(tmp / f"wham_mix/wav8k/min/tt/s1/{lc.WSJ_NAMES[0]}.wav", np.zeros(7999),
+                 8000)
+        return (tmp / "wham_mix", None, r"s1/011a0101.*\.wav: 7999 samples at 8000 Hz, but "
+                r"mix_.*\.wav of tt/011a0101.* has 8000 at 8000 Hz")
+    if how == "plain-reference":
+        lc.plain(tmp)
+        (tmp / "test/room1/take1/s1.wav").unlink()
+        return tmp, None, r"take1: references \['s2.wav'\]; expected s1 … s1 with none missing"
+    if how == "sonicset-wrong-format":
+        lc.plain(tmp)
+        return tmp, "sonicset", r"no test-noise/, test-music/, enh-test-noise/ or " \
+                                r"enh-test-music/; expected the released SonicSet"
+    if how == "unknown":
+        (tmp / "empty").mkdir()
+        return tmp / "empty", None, r"not a layout sonicspec reads .* give --format"
+    if how == "format-name":
+        return tmp, "timit", r"format: expected one of \['auto', 'sonicspec', 'sonicset'"
+    raise AssertionError(how)
+
+
+@pytest.mark.parametrize("how", ["librimix-missing-source", "librimix-column",
+                                 "librimix-length", "voicebank-clean", "dns-fileid",
+                                 "wham-length", "plain-reference", "sonicset-wrong-format",
+                                 "unknown", "format-name"])
+def test_an_incomplete_layout_names_what_is_missing(tmp_path: Path, how: str) -> None:
+    root, fmt, message = _break(tmp_path, how)
+    with pytest.raises(DatasetError, match=message):
+        evaluate(root, "test", "separation" if "voicebank" not in how and "dns" not in how
+                 else "enhancement", oracle=True, metrics=["si_snri"], format=fmt)
