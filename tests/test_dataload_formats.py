@@ -154,7 +154,7 @@ def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
         lc.write(tmp / f"wham_mix/wav8k/min/tt/s1/{lc.WSJ_NAMES[0]}.wav", np.zeros(7999),
                  8000)
         return (tmp / "wham_mix", None, r"s1/011a0101.*\.wav: 7999 samples at 8000 Hz, but "
-                r"mix_.*\.wav of tt/011a0101.* has 8000 at 8000 Hz")
+                r"tt/mix_both/011a0101.*\.wav of tt/011a0101.* has 8000 at 8000 Hz")
     if how == "plain-reference":
         lc.plain(tmp)
         (tmp / "test/room1/take1/s1.wav").unlink()
@@ -180,3 +180,82 @@ def test_an_incomplete_layout_names_what_is_missing(tmp_path: Path, how: str) ->
     with pytest.raises(DatasetError, match=message):
         evaluate(root, "test", "separation" if "voicebank" not in how and "dns" not in how
                  else "enhancement", oracle=True, metrics=["si_snri"], format=fmt)
+
+
+# -- cross-set tables ---------------------------------------------------------------------
+
+def _estimates(root: Path, model_dir: Path, split: str, task: str, kind: str,
+               mixtures: tuple[str, ...]) -> None:
+    """Estimates of every mixture: the references (``ceiling``) or the mixture (``zero``)."""
+    for g in open_dataset(root).groups(split):
+        for m in g.mixtures(task):
+            if m["name"] not in mixtures:
+                continue
+            x = (np.stack([g.read(t)[0] for t in m["targets"]]) if kind == "ceiling"
+                 else np.stack([g.read(m["file"])[0]] * len(m["targets"])))
+            path = model_dir / g.id / f"{m['name']}.wav"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            sf.write(str(path), x.T, g.sample_rate_hz, subtype="FLOAT")
+
+
+def test_cross_set_table_of_models_by_sets(tmp_path: Path, capsys) -> None:
+    from sonicspec.cli import main
+
+    lc.librimix(tmp_path / "data")
+    lc.plain(tmp_path / "data" / "real")
+    sets = {"libri2mix": tmp_path / "data" / "Libri2Mix", "real": tmp_path / "data" / "real"}
+    est = tmp_path / "estimates"
+    for s, root in sets.items():
+        _estimates(root, est / "ceiling" / s, "test", "separation", "ceiling",
+                   ("mix_both", "mixture"))
+        _estimates(root, est / "identity" / s, "test", "separation", "zero",
+                   ("mix_both", "mixture"))
+    _estimates(sets["real"], est / "partial" / "real", "test", "separation", "zero",
+               ("mixture",))
+    out = tmp_path / "table"
+    code = main(["evaluate", "--estimates-root", str(est), "--split", "test", "--task",
+                 "separation", "--sets", f"libri2mix={sets['libri2mix']},{sets['real']}",
+                 "--mixture", "mix_both", "--mixture", "mixture", "--oracle",
+                 "--metrics", "si_snr", "si_snri", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "estimates/partial/libri2mix: no such folder" in captured.err
+    md = (out / "table.md").read_text()
+    lines = md.splitlines()
+    assert lines[0] == ("| Model | libri2mix SI-SNR | libri2mix SI-SNRi | real SI-SNR | "
+                        "real SI-SNRi |")
+    rows = {ln.split(" | ")[0].lstrip("| "): ln for ln in lines[2:6]}
+    assert list(rows) == ["Mixture", "Oracle", "ceiling", "identity"]
+    assert rows["Mixture"].endswith("| 0.00 |") and " 0.00 | " in rows["Mixture"]
+    assert rows["identity"].split(" | ")[2] == "0.00"
+    assert "**" in rows["ceiling"] and lines[6].startswith("| partial | - | - |")
+    assert "partial/libri2mix has no estimates" in md
+    table = list(__import__("csv").reader((out / "table.csv").open()))
+    assert table[0] == ["model", "libri2mix/si_snr", "libri2mix/si_snri", "real/si_snr",
+                        "real/si_snri"]
+    by = {r[0]: r for r in table[1:]}
+    assert float(by["ceiling"][2]) >= 100 and float(by["Oracle"][4]) >= 100
+    assert float(by["identity"][2]) == pytest.approx(0.0, abs=1e-6)
+    assert by["partial"][1:3] == ["", ""] and float(by["partial"][4]) == pytest.approx(0, abs=1e-6)
+    # Each cell's scores are kept, the per-target rows of the set's own groups.
+    cell = (out / "ceiling" / "libri2mix" / "scores.csv").read_text().splitlines()
+    assert cell[1].startswith("estimates,test/1089-134686-0000_121-121726-0000,mix_both,")
+    assert len(cell) == 1 + 2 * 2
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--sets", "a=x"], "--estimates-root and --sets go together"),
+    (["--estimates-root", "E", "--sets", "a=x,a=y"], "the name 'a' is given twice"),
+    (["--estimates-root", "E", "--sets", "a=x@"], r"nothing after '@'"),
+    (["--estimates-root", "E", "--sets", "a=x,"], "an empty entry"),
+    (["--estimates-root", "NOPE", "--sets", "a=x"], "NOPE: no such estimates folder"),
+])
+def test_cross_set_arguments_are_checked(tmp_path: Path, capsys, argv: list[str],
+                                         message: str) -> None:
+    from sonicspec.cli import main
+
+    (tmp_path / "E" / "m").mkdir(parents=True)
+    argv = [a.replace("E", str(tmp_path / "E")) if a == "E" else a for a in argv]
+    code = main(["evaluate", "--split", "test", "--task", "separation", *argv])
+    assert code == 2
+    assert message in capsys.readouterr().err

@@ -144,8 +144,8 @@ class ExternalFolder:
         files.update({f"mixture {m['name']}": m["file"] for m in item.mixtures})
         rate = length = None
         first = None
-        for name, rel in _mixtures_first(files):
-            path = self.root / rel
+        for name, file in _mixtures_first(files):
+            path = self.root / file
             if not path.is_file():
                 raise DatasetError(f"{path}: missing; the {self.layout} layout lists it as "
                                    f"{name} of {item.id}")
@@ -157,8 +157,8 @@ class ExternalFolder:
                 first, rate, length = path, info.samplerate, info.frames
             elif info.samplerate != rate or info.frames != length:
                 raise DatasetError(f"{path}: {info.frames} samples at {info.samplerate} Hz, "
-                                   f"but {first.name} of {item.id} has {length} at {rate} "
-                                   "Hz; expected every file of an item to match")
+                                   f"but {rel(self.root, first)} of {item.id} has {length} at "
+                                   f"{rate} Hz; expected every file of an item to match")
         expected = item.extra.get("expected_num_samples")
         if expected is not None and expected != length:
             raise DatasetError(f"{first}: {length} samples, but the {self.layout} metadata "
@@ -166,8 +166,8 @@ class ExternalFolder:
         meta: dict[str, Any] = {"group": item.id, "split": item.id.split("/")[0],
                                 "format": self.layout, "sample_rate_hz": rate,
                                 "num_samples": length, **item.extra}
-        for name, rel in item.tracks.items():
-            meta[name] = {"file": rel}
+        for name, file in item.tracks.items():
+            meta[name] = {"file": file}
         meta["mixtures"] = [dict(m) for m in item.mixtures]
         return meta
 
