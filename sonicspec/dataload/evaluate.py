@@ -1,7 +1,9 @@
 """``sonicspec evaluate``: a model's outputs scored against a dataset's targets.
 
-The estimates folder mirrors the dataset: for each mixture of the task,
-``<estimates>/<split>/<group index>/<mixture name>.wav`` (or ``.flac``), as long as the
+The dataset is a built sonicspec dataset or a public test set in its own layout
+(:mod:`sonicspec.dataload.formats`). The estimates folder mirrors its groups: for each
+mixture of the task, ``<estimates>/<group id>/<mixture name>.wav`` (or ``.flac``; a sonicspec
+group id is ``<split>/<group index>``, an external set's is its own), as long as the
 mixture, at its sample rate, with one channel per target (``k`` for separation of ``k``
 speakers, one for enhancement). Targets and mixture are taken at the reference channel
 (``channel``, default 0). Separation outputs are matched to the targets by the permutation
