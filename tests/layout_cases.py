@@ -192,3 +192,30 @@ def plain(root: Path, n: int = 16000) -> dict[str, dict[str, Path]]:
             "noise": write(folder / "noise.wav", noise, 16000),
             "mixture": write(folder / "mixture.wav", s[0] + s[1] + noise, 16000)}
     return out
+
+
+def sonicset_raw(root: Path, n: int = 80000) -> dict[str, dict[str, Path]]:
+    """The raw released folders: ``SonicSet/scene_datasets/mp3d/test/<scene>/<a>-<b>-<c>/``
+    with ``moving_audio_{1,2,3}.wav``, ``noise_audio.wav``, ``music_audio.wav`` and
+    ``json_data.json`` (as SonicSim-SonicSet/SonicSet.py writes them)."""
+    import json
+
+    out = {}
+    base = root / "SonicSet" / "scene_datasets" / "mp3d" / "test"
+    for i, (scene, spk) in enumerate((("2t7WUuJeko7", "1089-121-1221"),
+                                      ("8194nk5LbLH", "2961-237-260"))):
+        folder = base / scene / spk
+        s, noise = _sources(90 + i, 3, n, 16000)
+        music = 0.5 * signal(np.random.default_rng(95 + i), n, 16000)
+        files = {f"source{k + 1}": write(folder / f"moving_audio_{k + 1}.wav", s[k], 16000)
+                 for k in range(3)}
+        files["noise"] = write(folder / "noise_audio.wav", noise, 16000)
+        files["music"] = write(folder / "music_audio.wav", music, 16000)
+        facts = {f"source{k + 1}": {"audio": [f"{spk.split('-')[k]}-0-0000"],
+                                    "start_end_points": [[0, n]], "words": ["HELLO"]}
+                 for k in range(3)}
+        facts["noise"] = {"audio": ["123.wav"], "start_end_points": [[0, n]]}
+        facts["music"] = {"audio": ["456.mp3"], "start_end_points": [[0, n]]}
+        (folder / "json_data.json").write_text(json.dumps(facts))
+        out[f"test/{scene}/{spk}"] = files
+    return out

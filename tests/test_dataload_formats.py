@@ -29,6 +29,7 @@ CASES: list[tuple[str, Callable, str, str, str]] = [
     ("sonicset", lc.sonicset, ".", "test-noise", "separation"),
     ("sonicset", lc.sonicset, ".", "test", "enhancement"),
     ("plain", lc.plain, ".", "test", "separation"),
+    ("sonicset", lc.sonicset_raw, "SonicSet/scene_datasets/mp3d", "test", "separation"),
 ]
 IDS = [f"{c[0]}-{c[2].replace('/', '_')}-{c[4]}" for c in CASES]
 
@@ -49,6 +50,11 @@ def test_items_are_the_files_read_directly(tmp_path: Path, name: str, writer, wh
     for group in folder.groups(split):
         mine = files[group.id]
         for m in group.mixtures(task):
+            if not m.get("file"):  # the raw SonicSet folders: mixed from its tracks
+                for c in m["components"]:
+                    np.testing.assert_array_equal(group.read(c), _read(mine[c]))
+                seen += 1
+                continue
             np.testing.assert_array_equal(group.read(m["file"]), _read(mine[m["name"]]))
             for t in m["targets"]:
                 np.testing.assert_array_equal(group.read(t), _read(mine[t]))
@@ -61,9 +67,11 @@ def test_items_are_the_files_read_directly(tmp_path: Path, name: str, writer, wh
     for i in range(len(data)):
         item = data[i]
         mine = files[item["group"]]
-        np.testing.assert_array_equal(item["mixture"], _read(mine[item["mixture_name"]]))
         m = next(m for m in data.items if m[0] == item["group"]
                  and m[1]["name"] == item["mixture_name"])[1]
+        want = (_read(mine[item["mixture_name"]]) if m.get("file") else
+                sum(_read(mine[c]).astype(np.float64) for c in m["components"]))
+        np.testing.assert_allclose(item["mixture"], want, rtol=0, atol=1e-6)
         for k, t in enumerate(m["targets"]):
             np.testing.assert_array_equal(item["targets"][k], _read(mine[t]))
 
@@ -117,6 +125,29 @@ def test_dynamic_mixing_redraws_a_layout_with_its_noise(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="not among its files .* use "
                        r"MixingConfig\(dynamic=False\)"):
         SonicspecDataset(tmp_path / "vb", "test", "enhancement", config="paper")
+
+
+def test_raw_sonicset_folders_mix_like_the_released_loader(tmp_path: Path) -> None:
+    files = lc.sonicset_raw(tmp_path)
+    root = tmp_path / "SonicSet/scene_datasets/mp3d"
+    g = open_dataset(root).group("test/2t7WUuJeko7/1089-121-1221")
+    assert g.speakers == ("source1", "source2", "source3")
+    assert g.backgrounds == ("noise", "music")
+    assert g.metadata["source2"]["start_end_points"] == [[0, 80000]]
+    assert g.metadata["source2"]["words"] == ["HELLO"]
+    assert [m["name"] for m in g.mixtures("separation")][:3] == [
+        "sep_s1s2_noise", "sep_s1s3_noise", "sep_s2s3_noise"]
+    # The released training loader's draws: 4 s crops, ±6 dB SIR, 10-20 dB SNR.
+    data = SonicspecDataset(root, "test", "separation", config="sonicsim",
+                            background="music")
+    item = data[3]
+    assert item["mixture"].shape == (1, 64000) and item["targets"].shape == (2, 1, 64000)
+    assert 10.0 <= item["snr_db"] <= 20.0
+    speech = item["targets"].sum(axis=0)[0].astype(np.float64)
+    music = item["mixture"][0] - speech
+    assert 10 * np.log10(np.mean(speech ** 2) / np.mean(music ** 2)) == pytest.approx(
+        item["snr_db"], abs=0.01)
+    assert files  # the fixture's files are the ones read (test_items_are_the_files_...)
 
 
 def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:

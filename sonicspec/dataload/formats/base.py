@@ -141,7 +141,8 @@ class ExternalFolder:
         import soundfile as sf
 
         files = dict(item.tracks)
-        files.update({f"mixture {m['name']}": m["file"] for m in item.mixtures})
+        files.update({f"mixture {m['name']}": m["file"] for m in item.mixtures
+                      if m.get("file")})
         rate = length = None
         first = None
         for name, file in _mixtures_first(files):
@@ -168,8 +169,31 @@ class ExternalFolder:
                                 "num_samples": length, **item.extra}
         for name, file in item.tracks.items():
             meta[name] = {"file": file}
+        info_file = item.extra.get("track_info_file")
+        if info_file is not None:
+            for name, info in _track_info(self.root / info_file, self.layout).items():
+                if name in meta and isinstance(info, dict):
+                    meta[name].update({k: v for k, v in info.items() if k != "file"})
+        meta.pop("track_info_file", None)
         meta["mixtures"] = [dict(m) for m in item.mixtures]
         return meta
+
+
+def _track_info(path: Path, layout: str) -> dict[str, Any]:
+    """A layout's per-item JSON of track facts (SonicSet's ``json_data.json``)."""
+    import json
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: missing; the {layout} layout has one beside each "
+                           "item's audio") from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DatasetError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise DatasetError(f"{path}: expected a JSON object of track -> facts, got "
+                           f"{type(data).__name__}")
+    return data
 
 
 def _mixtures_first(files: dict[str, str]) -> Iterable[tuple[str, str]]:
