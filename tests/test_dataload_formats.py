@@ -196,7 +196,9 @@ def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
                                 r"enh-test-music/; expected the released SonicSet"
     if how == "unknown":
         (tmp / "empty").mkdir()
-        return tmp / "empty", None, r"not a layout sonicspec reads .* give --format"
+        return (tmp / "empty", None, r"empty/dataset.json: missing; expected a dataset "
+                r"folder built by `sonicspec build` .* or a test set in one of the layouts "
+                r"\['sonicset', .* give --format")
     if how == "format-name":
         return tmp, "timit", r"format: expected one of \['auto', 'sonicspec', 'sonicset'"
     raise AssertionError(how)

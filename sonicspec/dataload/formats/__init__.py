@@ -34,9 +34,9 @@ def detect(root: str | Path) -> str:
     for name, reader in READERS.items():
         if reader.detect(path):
             return name
-    raise DatasetError(f"{path}: not a layout sonicspec reads (a built dataset's "
-                       f"dataset.json, or one of {list(READERS)}); give --format to be told "
-                       "what is missing")
+    raise DatasetError(f"{path / 'dataset.json'}: missing; expected a dataset folder built "
+                       "by `sonicspec build` (its outputs.dir) or a test set in one of the "
+                       f"layouts {list(READERS)} (give --format to be told what it lacks)")
 
 
 def open_dataset(root: str | Path, format: str | None = None
