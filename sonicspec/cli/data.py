@@ -54,6 +54,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from sonicspec.audio.metrics import METRICS
     from sonicspec.dataload.evaluate import evaluate, summarise, summary_table, write_results
     from sonicspec.dataload.folder import DatasetError
+    from sonicspec.dataload.formats import detect
 
     metrics = args.metrics or list(METRICS)
     fmt = None if args.format == "auto" else args.format
@@ -77,7 +78,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     settings = {"dataset": str(Path(args.dataset).resolve()), "split": args.split,
                 "task": args.task, "estimates": args.estimates, "oracle": args.oracle,
                 "channel": args.channel, "metrics": metrics, "window_s": 6.0, "hop_s": 3.0,
-                "format": args.format, "mixtures": args.mixture,
+                "format": fmt or detect(args.dataset), "mixtures": args.mixture,
                 "sonicspec_version": __version__}
     out = Path(args.output or f"evaluation-{args.split}-{args.task}")
     csv_path, json_path = write_results(out, rows, summary, settings)
