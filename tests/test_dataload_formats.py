@@ -193,12 +193,14 @@ def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
     if how == "sonicset-wrong-format":
         lc.plain(tmp)
         return tmp, "sonicset", r"no test-noise/, test-music/, enh-test-noise/ or " \
-                                r"enh-test-music/; expected the released SonicSet"
+                                r"enh-test-music/ \(the benchmarks\), nor train\|val\|test/" \
+                                r"<scene>/<speakers>/moving_audio_1.wav \(the raw folders\); " \
+                                r"expected the released SonicSet layout"
     if how == "unknown":
         (tmp / "empty").mkdir()
         return (tmp / "empty", None, r"empty/dataset.json: missing; expected a dataset "
                 r"folder built by `sonicspec build` .* or a test set in one of the layouts "
-                r"\['sonicset', .* give --format")
+                r"\['sonicset', .*\(give --format to be told what it lacks\)")
     if how == "format-name":
         return tmp, "timit", r"format: expected one of \['auto', 'sonicspec', 'sonicset'"
     raise AssertionError(how)
