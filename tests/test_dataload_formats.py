@@ -294,3 +294,25 @@ def test_cross_set_arguments_are_checked(tmp_path: Path, capsys, argv: list[str]
     code = main(["evaluate", "--split", "test", "--task", "separation", *argv])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_cli_scores_a_public_set_with_one_command(tmp_path: Path, capsys) -> None:
+    import json
+
+    from sonicspec.cli import main
+
+    lc.wham(tmp_path, reverb=True)
+    root = tmp_path / "whamr"
+    _estimates(root, tmp_path / "est", "test", "separation", "ceiling", ("mix_both_reverb",))
+    out = tmp_path / "eval"
+    code = main(["evaluate", str(root), "--split", "test", "--task", "separation",
+                 "--format", "wham", "--mixture", "mix_both_reverb", "--estimates",
+                 str(tmp_path / "est"), "--metrics", "si_snr", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["format"] == "wham"
+    assert summary["per_method"]["estimates"]["targets"] == 2 * 2
+    assert summary["per_method"]["estimates"]["si_snr"] >= 100.0
+    # The anechoic sources are the targets; the reverberant mixture scored against them.
+    lines = (out / "scores.csv").read_text().splitlines()
+    assert lines[1].startswith(f"estimates,tt/{lc.WSJ_NAMES[0]},mix_both_reverb,source1,")
