@@ -196,6 +196,26 @@ def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
                                 r"enh-test-music/ \(the benchmarks\), nor train\|val\|test/" \
                                 r"<scene>/<speakers>/moving_audio_1.wav \(the raw folders\); " \
                                 r"expected the released SonicSet layout"
+    if how == "lrs2mix-references":
+        lc.lrs2mix(tmp)
+        for ref in ("s1", "s2"):
+            for f in (tmp / "LRS2-2Mix/tt" / ref).iterdir():
+                f.unlink()
+            (tmp / "LRS2-2Mix/tt" / ref).rmdir()
+        return tmp / "LRS2-2Mix", "lrs2mix", r"tt: mix/ but no s1/, s2/"
+    if how == "plain-flat":
+        lc.write(tmp / "test" / "mixture.wav", np.zeros(100), 16000)
+        return tmp, "plain", r"test: a mixture directly in the split folder"
+    if how == "sonicset-raw-json":
+        lc.sonicset_raw(tmp)
+        raw = tmp / "SonicSet/scene_datasets/mp3d"
+        next(raw.glob("test/*/*/json_data.json")).unlink()
+        return raw, None, r"json_data.json: missing; the sonicset layout has one beside"
+    if how == "sonicset-raw-music":
+        lc.sonicset_raw(tmp)
+        raw = tmp / "SonicSet/scene_datasets/mp3d"
+        next(raw.glob("test/*/*/music_audio.wav")).unlink()
+        return raw, None, r"no music_audio.wav or music.wav; the released SonicSet layout"
     if how == "unknown":
         (tmp / "empty").mkdir()
         return (tmp / "empty", None, r"empty/dataset.json: missing; expected a dataset "
@@ -209,7 +229,8 @@ def _break(tmp: Path, how: str) -> tuple[Path, str | None, str]:
 @pytest.mark.parametrize("how", ["librimix-missing-source", "librimix-column",
                                  "librimix-length", "voicebank-clean", "dns-fileid",
                                  "wham-length", "plain-reference", "sonicset-wrong-format",
-                                 "unknown", "format-name"])
+                                 "lrs2mix-references", "plain-flat", "sonicset-raw-json",
+                                 "sonicset-raw-music", "unknown", "format-name"])
 def test_an_incomplete_layout_names_what_is_missing(tmp_path: Path, how: str) -> None:
     root, fmt, message = _break(tmp_path, how)
     with pytest.raises(DatasetError, match=message):
@@ -284,13 +305,24 @@ def test_cross_set_table_of_models_by_sets(tmp_path: Path, capsys) -> None:
     (["--estimates-root", "E", "--sets", "a=x@"], r"nothing after '@'"),
     (["--estimates-root", "E", "--sets", "a=x,"], "an empty entry"),
     (["--estimates-root", "NOPE", "--sets", "a=x"], "NOPE: no such estimates folder"),
+    (["--estimates-root", "E", "--sets", "b=DATA"], "no model has a folder for any of the "
+     "sets ['b']"),
+    (["--estimates-root", "E", "--sets", "m=DATA", "--oracle", "CLASH"],
+     "a model folder may not be named 'Oracle'"),
+    (["DATA", "--estimates-root", "E", "--sets", "a=x"], "with --sets, give no DATASET"),
 ])
 def test_cross_set_arguments_are_checked(tmp_path: Path, capsys, argv: list[str],
                                          message: str) -> None:
     from sonicspec.cli import main
 
     (tmp_path / "E" / "m").mkdir(parents=True)
-    argv = [a.replace("E", str(tmp_path / "E")) if a == "E" else a for a in argv]
+    if "CLASH" in argv:
+        argv.remove("CLASH")
+        (tmp_path / "E" / "Oracle").mkdir()
+    lc.plain(tmp_path / "DATA")
+    where = {"E": str(tmp_path / "E"), "DATA": str(tmp_path / "DATA")}
+    argv = [where.get(a, a) for a in argv]
+    argv = [a.replace("=DATA", f"={tmp_path / 'DATA'}") for a in argv]
     code = main(["evaluate", "--split", "test", "--task", "separation", *argv])
     assert code == 2
     assert message in capsys.readouterr().err
