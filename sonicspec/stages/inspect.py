@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.artifacts import GroupPlacement
 from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
@@ -64,7 +65,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         placement=spec.placement, trajectory=spec.trajectory, microphone=spec.microphone,
         speakers=spec.mixture.speakers, noise=spec.corpora.noise is not None,
         music=spec.corpora.music is not None)
-    placement: dict[str, Any] | None = None
+    placement: GroupPlacement | None = None
     placement_error = None
     try:
         placement = place_group(nav, placement_settings(params), params, "inspect",
@@ -95,7 +96,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         "materials_m2": dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
         "labels": list(mesh.labels),
         "floors": [g.to_dict() for g in nav.grids],
-        "placement": placement,
+        "placement": None if placement is None else placement.model_dump(mode="json"),
         "placement_error": placement_error,
     }
     if plot is not None:
@@ -107,22 +108,21 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
 
 
 def _edge_choice(vertices: np.ndarray, faces: np.ndarray, max_edges: int,
-                 placement: dict[str, Any] | None) -> dict[str, Any]:
+                 placement: GroupPlacement | None) -> dict[str, Any]:
     """The diffracting edges a group's RIRs would use (for the sampled group's microphone and
     RIR points, else by length and exposure), as the RIR facts report them."""
     from sonicspec.acoustics.paths.edges import diffracting_edges
 
     near = None
     if placement is not None:
-        sources = [*placement["speech"], placement.get("noise"), placement.get("music")]
-        near = np.array([*placement["mic_path_m"], *(p for s in sources if s is not None
-                                                     for p in s["rir_points_m"])],
-                        dtype=np.float64)
+        sources = [*placement.speech, placement.noise, placement.music]
+        near = np.array([*placement.mic_path_m, *(p for s in sources if s is not None
+                                                  for p in s.rir_points_m)], dtype=np.float64)
     cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                      vertices[faces[:, 2]] - vertices[faces[:, 0]])
     normals = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
     return diffracting_edges(vertices, faces, normals, max_edges=max_edges,
-                             near_m=near).choice()
+                             near_m=near).choice().to_dict()
 
 
 def _leak_place(place: dict[str, Any]) -> str:

@@ -16,6 +16,7 @@ import numpy as np
 
 from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
+    RirFacts,
     SimulationSettings,
     acoustic_scene,
     check_inside,
@@ -258,9 +259,9 @@ def run(ctx) -> None:
             choice = scene_edges(scene, settings.diffraction_max_edges,
                                  group_settings.diffraction_focus_m).choice()
             log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges and %d "
-                     "buried wedges left out)", placement.group, choice["kept"],
-                     choice["found"], choice["rule"], choice["seams_left_out"],
-                     choice["buried_left_out"])
+                     "buried wedges left out)", placement.group, choice.kept,
+                     choice.found, choice.rule, choice.seams_left_out,
+                     choice.buried_left_out)
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
@@ -300,8 +301,8 @@ def run(ctx) -> None:
             paths = None
             if params.early_paths:
                 paths = f"{key}_paths"
-                from_mic = [f["early_arrivals"] for f in facts]
-                at_mic = [f["early_arrivals_at_mic"] for f in facts]
+                from_mic = [f.early_arrivals for f in facts]
+                at_mic = [f.early_arrivals_at_mic for f in facts]
                 directional = microphone["kind"] != "mono"
                 src_m = np.asarray(sources[s][1]) if line is None else line.source_m
                 mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
@@ -310,7 +311,7 @@ def run(ctx) -> None:
                 fine = refined_early_paths(
                     scene, group_settings, src_m, mic_m, from_mic, at_mic, regions=regions,
                     directional=directional,
-                    image_source_order=facts[0]["image_source_order"])
+                    image_source_order=facts[0].image_source_order)
                 if line is None:
                     found = PathSet.identify(fine.sources_m, fine.from_mic,
                                              at_mic=fine.at_mic if directional else None)
@@ -330,8 +331,8 @@ def run(ctx) -> None:
             entries.append(RirSource(
                 name=name, array=key, points=len(block),
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
-                direct=facts[0]["direct"], tail=facts[0]["tail"],
-                escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths,
+                direct=facts[0].direct, tail=facts[0].tail,
+                escaped_ray_fraction=facts[0].escaped_ray_fraction, paths=paths,
                 **_order_reached(facts, settings.image_source_order)))
         groups.append(RirGroup(group=placement.group, sources=entries,
                                diffraction_edges=choice))
@@ -343,45 +344,44 @@ def run(ctx) -> None:
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
 
 
-def _order_reached(facts: list[dict[str, Any]], asked: int) -> dict[str, Any]:
+def _order_reached(facts: list[RirFacts], asked: int) -> dict[str, Any]:
     """The image-source order a source's RIRs reached (the lowest over its points), the order
-    asked and why it is lower."""
-    low = min(facts, key=lambda f: f["image_source_order"])
-    return {"image_source_order": low["image_source_order"], "image_source_order_asked": asked,
-            "image_source_order_stopped": low.get("image_source_order_stopped")}
+    asked and why it is lower: :class:`RirSource`'s fields."""
+    low = min(facts, key=lambda f: f.image_source_order)
+    return dict(image_source_order=low.image_source_order, image_source_order_asked=asked,
+                image_source_order_stopped=low.image_source_order_stopped)
 
 
 def _warn_lower_order(scene_name: str, group: str, asked: int,
-                      facts: list[dict[str, Any]]) -> None:
+                      facts: list[RirFacts]) -> None:
     """One warning line (the job's log, which the build summary collects) when the image-source
     search stopped below the asked order for some of a group's RIRs."""
-    low = [f for f in facts if f["image_source_order"] < asked]
+    low = [f for f in facts if f.image_source_order < asked]
     if not low:
         return
-    worst = min(low, key=lambda f: f["image_source_order"])
+    worst = min(low, key=lambda f: f.image_source_order)
     log.warning("%s, group %s: image-source order %d asked, %d reached in %d "
                 "of %d RIRs (%s); the ray tracer covers the higher orders, less exactly; lower "
                 "acoustics.image_source_order for this scene or simplify its mesh "
                 "(acoustics.simplify_tolerance_m)", scene_name, group, asked,
-                worst["image_source_order"], len(low), len(facts),
-                worst.get("image_source_order_stopped") or "the candidate limit")
+                worst.image_source_order, len(low), len(facts),
+                worst.image_source_order_stopped or "the candidate limit")
 
 
-def fixed_cut_warning(facts: list[dict], bands_hz, where: str) -> str | None:
+def fixed_cut_warning(facts: list[RirFacts], bands_hz, where: str) -> str | None:
     """The job log's warning for RIRs a fixed ``max_rir_length_s`` cut while still decaying
     (the library reports such a cut in the facts only: the length was asked for; ``auto``
     cuts warn there). A dataset of such RIRs understates its reverberation, so the build
     summary and the report say so (issue 28 item 8)."""
-    tails = [f["tail"] for f in facts if f["tail"]["rule"] == "fixed"
-             and any(v is not None for v in f["tail"]["level_at_limit_db"])]
+    tails = [f.tail for f in facts if f.tail.cut_at_limit]
     if not tails:
         return None
-    worst = max(tails, key=lambda t: max(v for v in t["level_at_limit_db"] if v is not None))
+    worst = max(tails, key=lambda t: max(v for v in t.level_at_limit_db if v is not None))
     levels = ", ".join(f"{b:g} Hz at {v:.0f} dB" for b, v in
-                       zip(bands_hz, worst["level_at_limit_db"], strict=True) if v is not None)
-    t60 = [v for t in tails for v in t["fitted_t60_s"] if v is not None]
+                       zip(bands_hz, worst.level_at_limit_db, strict=True) if v is not None)
+    t60 = [v for t in tails for v in t.fitted_t60_s if v is not None]
     needs = f"; its decay needs about {max(t60):.1f} s" if t60 else ""
-    return (f"{where}: {len(tails)} of {len(facts)} RIRs cut at {worst['limit_s']:g} s "
+    return (f"{where}: {len(tails)} of {len(facts)} RIRs cut at {worst.limit_s:g} s "
             f"(acoustics.max_rir_length_s) while still decaying ({levels}, 60 dB down is the "
             f"end){needs}; T30 and the band figures understate it: raise "
             "acoustics.max_rir_length_s or set it to auto")
