@@ -32,12 +32,12 @@ _MOTION = {"static": "static", "line": "line", "shortest_path": "shortest_path",
 def settings_from(params: PlacementParams) -> PlacementSettings:
     """The library's settings: the spec's placement rules (same names), the mic height and
     the trajectory's smoothing."""
-    rules = params.placement.model_dump()
-    names = {f.name for f in fields(PlacementSettings)} & set(rules)
+    rules = params.placement.model_dump(include={f.name for f in fields(PlacementSettings)})
     mic_path = _fixed_path(params.microphone.trajectory, None, None)
-    if mic_path is not None and rules.get("mic_position_m") is None:
-        rules["mic_position_m"] = mic_path[0]  # a moving microphone starts its walk there
-    return PlacementSettings(**{name: rules[name] for name in names},
+    if mic_path is not None and params.placement.mic_position_m is None:
+        # a moving microphone starts its walk there
+        rules.update(mic_position_m=mic_path[0])
+    return PlacementSettings(**rules,
                              mic_path_m=None if mic_path is None else tuple(map(tuple, mic_path)),
                              mic_height_m=params.microphone.height_m,
                              smooth_paths=getattr(params.trajectory, "smooth", True))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,6 +18,7 @@ import numpy as np
 from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
     RirFacts,
+    RirResult,
     SimulationSettings,
     acoustic_scene,
     check_inside,
@@ -29,6 +31,7 @@ from sonicspec.acoustics.engine import (
     simulate_rirs,
     with_diffraction_focus,
 )
+from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.image_sources import planar_regions
 from sonicspec.artifacts import (
@@ -50,10 +53,86 @@ log = logging.getLogger("sonicspec.stages.rir")
 
 def spec_materials(materials: MaterialsSpec | MaterialTable):
     """The material library of a spec's ``materials`` section, custom ones added."""
-    return material_library(materials.library, materials.model_dump(mode="json")["custom"])
+    return material_library(materials.library,
+                            {k: m.model_dump(mode="json") for k, m in materials.custom.items()})
 
 
-def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
+@dataclass(frozen=True, eq=False)
+class RirReport:
+    """One RIR of ``sonicspec rir`` and what the command says about it: the engine's
+    :class:`~sonicspec.acoustics.engine.RirResult` (its facts and figures), the scene, the
+    warnings, and where the RIR and its plot were written. :meth:`to_dict` is what
+    ``--json`` prints, :meth:`format` the text."""
+
+    result: RirResult
+    scene_id: str
+    mesh_triangles: int
+    warnings: tuple[str, ...] = ()
+    materials_m2: dict[str, float] | None = None
+    """Surface area of each material (a scene built through the Python API), m²."""
+    output: str | None = None
+    plot: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The facts, JSON-ready (``sonicspec rir --json``)."""
+        out = {"scene_id": self.scene_id, **self.result.to_dict(),
+               "mesh_triangles": self.mesh_triangles}
+        if self.materials_m2 is not None:
+            out["materials_m2"] = self.materials_m2
+        out["warnings"] = list(self.warnings)
+        if self.output is not None:
+            out["output"] = self.output
+        if self.plot is not None:
+            out["plot"] = self.plot
+        return out
+
+    def format(self) -> str:
+        """The facts as a short report for a terminal."""
+        r = self.result
+        fig = r.figures
+
+        def num(v, fmt):
+            return "—" if v is None or not np.isfinite(v) else format(v, fmt)
+
+        def per_band(t30, edt, c50) -> list[str]:
+            return [f"{label:>10} " + " ".join(num(v, fmt) for v in values)
+                    for label, values, fmt in (("T30 (s)", t30, "7.3f"), ("EDT (s)", edt, "7.3f"),
+                                               ("C50 (dB)", c50, "7.2f"))]
+
+        samples = int(r.rir.shape[-1])
+        channels = int(r.rir.shape[0])
+        lines = [
+            f"RIR in {self.scene_id}: source {list(r.source_m)} -> mic {list(r.mic_m)} "
+            f"({r.distance_m:.2f} m), {channels} channel{'s' * (channels != 1)} x {samples} "
+            f"samples at {r.sample_rate_hz} Hz, {r.arrivals} early arrivals (image sources to "
+            f"order {r.image_source_order}), direct path {r.direct}",
+            f"mesh: {self.mesh_triangles:,} triangles, traced as {r.traced_faces:,} "
+            "(flat areas merged within acoustics.simplify_tolerance_m)",
+            *_material_lines(self.materials_m2),
+            f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig.bands_hz),
+            *per_band(fig.t30_s, fig.edt_s, fig.c50_db),
+        ]
+        if r.expected:  # the same fits on the energy the RIR was synthesised to have
+            lines.append("expected (the energy it was synthesised to have, without the noise "
+                         "draw):")
+            lines += per_band(*(np.array(r.expected[k], dtype=float)  # None -> NaN
+                                for k in ("t30_s", "edt_s", "c50_db")))
+        broadband = fig.broadband
+        lines += [
+            _tail_line(r.tail, fig.bands_hz, samples / r.sample_rate_hz),
+            f"broadband: T30 {num(broadband['t30_s'], '.3f')} s, EDT "
+            f"{num(broadband['edt_s'], '.3f')} s, C50 {num(broadband['c50_db'], '.2f')}"
+            f" dB, DRR {num(fig.drr_db, '.2f')} dB; escaped rays "
+            f"{r.escaped_ray_fraction:.2e}",
+        ]
+        if self.output is not None:
+            lines.append(f"written: {self.output}")
+        if self.plot is not None:
+            lines.append(f"plot: {self.plot}")
+        return "\n".join(lines)
+
+
+def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> RirReport:
     """One RIR in a spec's scene (``sonicspec rir``), and the facts to report with it."""
     from sonicspec.hashing import rng_for
     from sonicspec.stages.inspect import build_scene
@@ -77,10 +156,9 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     for w in caught:
         if not issubclass(w.category, SonicspecWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    facts = {"scene_id": scene_id, **result.to_dict(), "mesh_triangles": mesh.n_faces,
-             "warnings": scene_warnings + [str(w.message) for w in caught
-                                           if issubclass(w.category, SonicspecWarning)]}
-    return result.rir, facts
+    return RirReport(result, scene_id, mesh.n_faces, tuple(
+        scene_warnings + [str(w.message) for w in caught
+                          if issubclass(w.category, SonicspecWarning)]))
 
 
 def _material_lines(areas: dict[str, float] | None) -> list[str]:
@@ -92,60 +170,19 @@ def _material_lines(areas: dict[str, float] | None) -> list[str]:
                                       for name, area in areas.items())]
 
 
-def format_rir_facts(facts: dict[str, Any]) -> str:
-    fig = facts["figures"]
-
-    def num(v, fmt):
-        return "—" if v is None else format(v, fmt)
-
-    def per_band(figures: dict[str, Any]) -> list[str]:
-        return [f"{label:>10} " + " ".join(num(v, fmt) for v in figures[key])
-                for label, key, fmt in (("T30 (s)", "t30_s", "7.3f"), ("EDT (s)", "edt_s", "7.3f"),
-                                        ("C50 (dB)", "c50_db", "7.2f"))]
-
-    lines = [
-        f"RIR in {facts['scene_id']}: source {facts['source_m']} -> mic {facts['mic_m']} "
-        f"({facts['distance_m']:.2f} m), {facts['channels']} channel"
-        f"{'s' * (facts['channels'] != 1)} x {facts['samples']} samples at "
-        f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
-        f"order {facts['image_source_order']}), direct path {facts['direct']}",
-        f"mesh: {facts['mesh_triangles']:,} triangles, traced as {facts['traced_triangles']:,} "
-        "(flat areas merged within acoustics.simplify_tolerance_m)",
-        *_material_lines(facts.get("materials_m2")),
-        f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
-        *per_band(fig),
-    ]
-    if "expected" in facts:  # the same fits on the energy the RIR was synthesised to have
-        lines.append("expected (the energy it was synthesised to have, without the noise draw):")
-        lines += per_band(facts["expected"])
-    lines += [
-        _tail_line(facts),
-        f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
-        f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
-        f" dB, DRR {num(fig['drr_db'], '.2f')} dB; escaped rays "
-        f"{facts['escaped_ray_fraction']:.2e}",
-    ]
-    if "output" in facts:
-        lines.append(f"written: {facts['output']}")
-    if "plot" in facts:
-        lines.append(f"plot: {facts['plot']}")
-    return "\n".join(lines)
-
-
-def _tail_line(facts: dict[str, Any]) -> str:
+def _tail_line(tail: TailFacts | None, bands_hz, length_s: float) -> str:
     """How the RIR's length was chosen, on one line."""
-    tail = facts["tail"]
-    bands = facts["figures"]["bands_hz"]
-    rule = ("max_rir_length_s: auto, every band's decay 60 dB down" if tail["rule"] == "auto"
-            else f"max_rir_length_s: {tail['limit_s']:g}, every band's decay 60 dB down")
-    line = (f"length: {facts['samples'] / facts['sample_rate_hz']:.3f} s ({rule}, at most "
-            f"{tail['limit_s']:g} s)")
-    continued = [f"{b:g} Hz from {t:.2f} s" for b, t in zip(bands, tail["continued_from_s"],
+    if tail is None:
+        return f"length: {length_s:.3f} s"
+    rule = ("max_rir_length_s: auto, every band's decay 60 dB down" if tail.rule == "auto"
+            else f"max_rir_length_s: {tail.limit_s:g}, every band's decay 60 dB down")
+    line = f"length: {length_s:.3f} s ({rule}, at most {tail.limit_s:g} s)"
+    continued = [f"{b:g} Hz from {t:.2f} s" for b, t in zip(bands_hz, tail.continued_from_s,
                                                            strict=True) if t is not None]
     if continued:
         line += "; rays ran out, decay fitted to its last 20 dB continued: " + ", ".join(
             continued)
-    cut = [f"{b:g} Hz at {v:.0f} dB" for b, v in zip(bands, tail["level_at_limit_db"],
+    cut = [f"{b:g} Hz at {v:.0f} dB" for b, v in zip(bands_hz, tail.level_at_limit_db,
                                                    strict=True) if v is not None]
     if cut:
         line += "; cut at the limit: " + ", ".join(cut)
@@ -303,7 +340,7 @@ def run(ctx) -> None:
                 paths = f"{key}_paths"
                 from_mic = [f.early_arrivals for f in facts]
                 at_mic = [f.early_arrivals_at_mic for f in facts]
-                directional = microphone["kind"] != "mono"
+                directional = params.microphone.kind != "mono"
                 src_m = np.asarray(sources[s][1]) if line is None else line.source_m
                 mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
                          if line is None else line.mic_m)
