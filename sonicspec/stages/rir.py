@@ -52,9 +52,11 @@ log = logging.getLogger("sonicspec.stages.rir")
 
 
 def spec_materials(materials: MaterialsSpec | MaterialTable):
-    """The material library of a spec's ``materials`` section, custom ones added."""
+    """The material library of a spec's ``materials`` section: custom ones added, every
+    surface's scattering replaced where ``scattering_override`` says."""
     return material_library(materials.library,
-                            {k: m.model_dump(mode="json") for k, m in materials.custom.items()})
+                            {k: m.model_dump(mode="json") for k, m in materials.custom.items()},
+                            materials.scattering_override)
 
 
 @dataclass(frozen=True, eq=False)
