@@ -71,7 +71,7 @@ class MaterialsSpec(SpecModel):
         "which is what RLR — the engine SonicSet was rendered with — computes whatever its "
         "material table says: with SonicSet's table (scattering 0.10–0.15 on walls, carpet "
         "and furniture) sonicspec's T30 in a furnished apartment is then RLR's, against "
-        "about 2.4x RLR's with the measured values (bench/bench_sonicset_scattering.py). "
+        "about 2.3x RLR's with the measured values (bench/bench_sonicset_scattering.py). "
         "The 'sonicset' presets set 1.0 to give SonicSet's reverberation; leave it null "
         "for realistic reverberation.",
     )
