@@ -201,10 +201,9 @@ def apartment() -> dict:
                 facts[on] = f
         for on in (False, True):
             out[f"{name}_{'on' if on else 'off'}"] = {
-                "rir_s": best[on], "direct": facts[on][0]["direct"],
-                "arrivals": int(np.mean([f["arrivals"] for f in facts[on]])),
-                "diffracted_paths": int(np.mean([f.get("diffracted_paths", 0)
-                                                 for f in facts[on]]))}
+                "rir_s": best[on], "direct": facts[on][0].direct,
+                "arrivals": int(np.mean([f.arrivals for f in facts[on]])),
+                "diffracted_paths": int(np.mean([f.diffracted_paths for f in facts[on]]))}
         out[f"{name}_overhead_pct"] = 100 * (best[True] / best[False] - 1)
     return out
 

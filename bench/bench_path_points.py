@@ -49,7 +49,7 @@ def accuracy() -> None:
         t0 = time.process_time()
         _, facts = engine.simulate_rirs(scene, mic, points, st, np.random.default_rng(0),
                                         keep_arrivals=True)
-        heard = [f["early_arrivals"] for f in facts]
+        heard = [f.early_arrivals for f in facts]
         if refine:
             fine = engine.refined_early_paths(scene, st, points,
                                               np.repeat(mic[None], len(points), 0), heard, heard)
@@ -110,11 +110,11 @@ def cost() -> None:
             _, facts = simulate_rirs(scene, MIC_M, points, settings, np.random.default_rng(0),
                                      regions=regions, keep_arrivals=True)
             t1 = time.process_time()
-            heard = [f["early_arrivals"] for f in facts]
+            heard = [f.early_arrivals for f in facts]
             fine = refined_early_paths(scene, settings, points,
                                        np.repeat(MIC_M[None], len(points), 0), heard, heard,
                                        regions=regions,
-                                       image_source_order=facts[0]["image_source_order"])
+                                       image_source_order=facts[0].image_source_order)
             t2 = time.process_time()
         paths = PathSet.identify(fine.sources_m, fine.from_mic)
         print(f"{order:>6} {len(points):>11} {t1 - t0:>8.2f} {t2 - t1:>15.2f} "

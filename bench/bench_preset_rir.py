@@ -34,7 +34,7 @@ for seed in range(4):
     c0 = time.process_time()
     _, facts = b.sonicspec_rir(scene, regions, s, seed, 1)
     cpu.append(time.process_time() - c0)
-print(json.dumps({"cpu_s": sorted(cpu), "order": facts["image_source_order"]}))
+print(json.dumps({"cpu_s": sorted(cpu), "order": facts.image_source_order}))
 """
 
 

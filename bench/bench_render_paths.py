@@ -114,11 +114,11 @@ def main() -> None:
             stack[i, :, :r.shape[-1]] = r
         late = stack.copy()
         for i, f in enumerate(facts):
-            late[i, :, :rirs[i].shape[-1]] -= early_part(f["early_arrivals_at_mic"], settings,
+            late[i, :, :rirs[i].shape[-1]] -= early_part(f.early_arrivals_at_mic, settings,
                                                          rirs[i].shape[-1], microphone)
         directional = microphone["kind"] != "mono"
-        paths = PathSet.identify(points, [f["early_arrivals"] for f in facts],
-                                 at_mic=[f["early_arrivals_at_mic"] for f in facts]
+        paths = PathSet.identify(points, [f.early_arrivals for f in facts],
+                                 at_mic=[f.early_arrivals_at_mic for f in facts]
                                  if directional else None)
         if name == "8 capsules":
             receiver = Receiver("array", offsets_m=array_offsets(microphone), center_m=mic)

@@ -360,7 +360,7 @@ def sonicspec_rir(scene, regions, settings: SimulationSettings, seed: int, n_thr
     """One mono RIR by the engine's ``simulate_rirs`` (the same bytes whatever
     ``n_threads``) and its facts: the image-source order completed (3 stops at 2 in this scene:
     more than 2 M candidates; its warning is silenced here) and the *expected* figures of the
-    same trace (``facts["expected"]``): T30, EDT and C50 per band of the energy the RIR is
+    same trace (``facts.expected``): T30, EDT and C50 per band of the energy the RIR is
     synthesised to have, free of the synthesis noise that makes one RIR's low-band figures
     fluctuate (at 125 Hz a second noise draw over the same trace moves EDT by ~20 %)."""
     with warnings.catch_warnings():
@@ -393,7 +393,7 @@ def child_sonicspec(tmp: Path, rays: int, order: int, threads: int, repeats: int
     for _ in range(repeats):
         w0, c0 = time.perf_counter(), time.process_time()
         out, facts = sonicspec_rir(scene, regions, settings, seed, threads)
-        order_done = facts["image_source_order"]
+        order_done = facts.image_source_order
         walls.append(time.perf_counter() - w0)
         cpus.append(time.process_time() - c0)
         rir = out if rir is None else rir
@@ -439,7 +439,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
     ref_runs = [sonicspec_rir(scene, regions, ref_settings, REF_SEED_BASE + k, threads)
                 for k in range(REF_RUNS)]
     ref_wall = (time.perf_counter() - t0) / REF_RUNS
-    ref_expected = {k: np.mean(np.array([f["expected"][k] for _, f in ref_runs], float),
+    ref_expected = {k: np.mean(np.array([f.expected[k] for _, f in ref_runs], float),
                                axis=0).tolist()
                     for k in ("t30_s", "edt_s", "c50_db")}
     rows = []
@@ -471,7 +471,7 @@ def child_sweep(tmp: Path, ref_rays: int, seeds: list[int],
     return {"ref_rays": ref_rays, "ref_setting": ref_setting(ref_rays, diffuse),
             "ref_wall_s": ref_wall, "ref_threads": threads,
             "ref": figures(ref_runs[0][0], SAMPLE_RATE_HZ), "ref_expected": ref_expected,
-            "ref_expected_runs": [f["expected"] for _, f in ref_runs], "candidates": rows}
+            "ref_expected_runs": [f.expected for _, f in ref_runs], "candidates": rows}
 
 
 def child_diagnose(tmp: Path) -> dict:

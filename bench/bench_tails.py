@@ -93,10 +93,10 @@ def run(scene, mic, points, settings, repeat: int, name: str):
 def describe(facts) -> str:
     rules = set()
     for f in facts:
-        tail = f["tail"]
-        if any(v is not None for v in tail["level_at_limit_db"]):
+        tail = f.tail
+        if any(v is not None for v in tail.level_at_limit_db):
             rules.add("cut at the limit")
-        elif any(v is not None for v in tail["continued_from_s"]):
+        elif any(v is not None for v in tail.continued_from_s):
             rules.add("continued")
         else:
             rules.add("decay 60 dB down")

@@ -77,12 +77,15 @@ _MICROPHONE = TypeAdapter(MicrophoneSpec)
 _CUSTOM = TypeAdapter(dict[str, CustomMaterialSpec])
 
 
-def _library(name: str, custom: Mapping[str, Any] | None) -> MaterialLibrary:
+def _library(name: str, custom: Mapping[str, Any] | None,
+             scattering: Sequence[float] | None = None) -> MaterialLibrary:
     """A built-in library plus materials given like the spec's ``materials.custom`` (one
-    value for all bands allowed; scattering 0.1 and transmission 0 by default)."""
+    value for all bands allowed; scattering 0.1 and transmission 0 by default), and every
+    material's scattering replaced by ``scattering`` (the spec's
+    ``materials.scattering_override``) when given."""
     dumped = {k: v.model_dump(mode="json") for k, v in _CUSTOM.validate_python(
         dict(custom or {})).items()}
-    return material_library(name, dumped)
+    return material_library(name, dumped, scattering)
 
 
 def _check_material(library: MaterialLibrary, name: str, where: str) -> None:
@@ -280,7 +283,8 @@ class Scene:
         params = MeshParams.model_validate({
             "scene": scene.model_dump(mode="json", exclude={"id", "path"}), "files": {},
             "scene_id": scene.id, **extra})
-        lib = _library(materials.library, materials.model_dump(mode="json")["custom"])
+        lib = _library(materials.library, materials.model_dump(mode="json")["custom"],
+                       materials.scattering_override)
         mesh, _ = build_scene_mesh(params, paths, rng_for(seed, "mesh", scene.id))
         return cls(mesh, lib, scene.id)
 

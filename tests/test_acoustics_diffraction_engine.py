@@ -88,7 +88,7 @@ def band_energy(x: np.ndarray, fs: float, start_s: float, stop_s: float) -> np.n
 
 def compare_first_arrival(scene, wedge: Wedge, src, mic, window_s: float) -> None:
     (rir,), (facts,) = rirs(scene, mic, [src])
-    assert facts["direct"] == "diffracted"
+    assert facts.direct == "diffracted"
     length = edge_path_length_m(wedge, src, mic)
     onset = length / C
     h = rir[0].astype(np.float64)
@@ -120,14 +120,14 @@ def test_door_room_first_arrival_round_the_jamb() -> None:
 def test_door_room_second_order_round_both_jamb_edges() -> None:
     src, mic = np.array([1.5, 0.4, 1.2]), np.array([3.8, 0.3, 1.2])
     (rir,), (facts,) = rirs(door_room(), mic, [src])
-    assert facts["direct"] == "diffracted"
+    assert facts.direct == "diffracted"
     run = math.dist(src[:2], [3.0, 1.0]) + 0.2 + math.dist([3.2, 1.0], mic[:2])
     h = np.abs(rir[0])
     first = int(np.flatnonzero(h > 0.05 * h.max())[0])
     peak = first + int(np.argmax(h[first:first + 8]))
     assert abs(peak - run / C * FS) <= 1.0
     (_,), (off,) = rirs(door_room(), mic, [src], diffraction=False)
-    assert off["direct"] == "blocked" and "diffracted_paths" not in off
+    assert off.direct == "blocked" and off.diffracted_paths == 0 and off.diffraction_edges is None
 
 
 def test_a_thin_thick_screen_heard_over_both_edges_is_the_half_plane() -> None:
@@ -144,7 +144,7 @@ def test_a_thin_thick_screen_heard_over_both_edges_is_the_half_plane() -> None:
     scene = rigid(mesh.vertices, mesh.faces)
     src, mic = np.array([2.5, 2.0, 1.0]), np.array([6.0, 2.0, 1.2])
     (rir,), (facts,) = rirs(scene, mic, [src])
-    assert facts["direct"] == "diffracted"
+    assert facts.direct == "diffracted"
     top = Wedge.half_plane([4.0, 0.0, 1.8], [0, 1, 0], [0, 0, -1])
     onset = (edge_path_length_m(top, src, mic) + w) / C  # over the two edges
     fs_ref = 4 * FS
@@ -164,7 +164,7 @@ def walk_levels(scene, mic, points, diffraction=True) -> np.ndarray:
     start = min(np.linalg.norm(points - mic, axis=1)) / C
     return np.array([10 * np.log10(1e-30 + np.sum(r[0, int(start * FS) - 40:
                                                  int((start + 0.008) * FS)].astype(float) ** 2))
-                     for r in out]), [f["direct"] for f in facts]
+                     for r in out]), [f.direct for f in facts]
 
 
 @pytest.mark.parametrize("y_cross", [2.0, 1.0], ids=["direct-to-edge", "edge-to-two-edges"])

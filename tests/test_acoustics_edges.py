@@ -151,7 +151,7 @@ def test_edges_in_sight_of_the_job_come_before_edges_behind_a_wall() -> None:
     by_distance = edges_of(mesh, near_m=near)
     assert box(by_distance)[0] == "B"  # nearer, through the wall
     by_sight = scene_edges(scene, 4, near)
-    assert by_sight.by_sight and "share of them in sight" in by_sight.choice()["rule"]
+    assert by_sight.by_sight and "share of them in sight" in by_sight.choice().rule
     assert box(by_sight)[0] == "A" and "B" not in box(by_sight)
 
 
@@ -169,7 +169,7 @@ def test_a_box_standing_on_the_floor_has_no_edges_where_it_stands() -> None:
         scene = AcousticScene(mesh.vertices, mesh.faces, np.full((n, bands), 0.1),
                               np.zeros((n, bands)), np.zeros((n, bands)))
         found = scene_edges(scene, 1000)
-        assert found.choice()["buried_left_out"] == found.buried
+        assert found.choice().buried_left_out == found.buried
         return len(found), found.buried
 
     assert edges_found(0.5, 0.6) == (12, 0)  # floating: every edge of the box is in the air

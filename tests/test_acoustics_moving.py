@@ -166,9 +166,9 @@ def engine_walk(microphone=None):
     scene, settings = reflecting_shoebox()
     _, facts = simulate_rirs(scene, MIC, points, settings, np.random.default_rng(0),
                              microphone=microphone, keep_arrivals=True)
-    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts],
+    paths = PathSet.identify(points, [f.early_arrivals for f in facts],
                              at_mic=None if microphone is None else
-                             [f["early_arrivals_at_mic"] for f in facts])
+                             [f.early_arrivals_at_mic for f in facts])
     along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     index = np.interp(np.clip(np.arange(2 * FS) / FS * 1.5, 0, along[-1]), along,
                       np.arange(len(points)))
@@ -227,11 +227,11 @@ def test_paths_and_late_part_of_a_static_source_are_its_rir(kind: str) -> None:
     rirs, facts = simulate_rirs(scene, mic, point, settings, np.random.default_rng(1),
                                 microphone=microphone, keep_arrivals=True)
     rir = rirs[0].astype(np.float64)
-    late = rir - early_part(facts[0]["early_arrivals_at_mic"], settings, rir.shape[1],
+    late = rir - early_part(facts[0].early_arrivals_at_mic, settings, rir.shape[1],
                             microphone)
     bank = OctaveFilterBank(FS, settings.bands_hz)
-    paths = PathSet.identify(point, [facts[0]["early_arrivals"]],
-                             at_mic=[facts[0]["early_arrivals_at_mic"]])
+    paths = PathSet.identify(point, [facts[0].early_arrivals],
+                             at_mic=[facts[0].early_arrivals_at_mic])
     assert paths.order.max() == 2 and np.all(np.any(paths.directions[:, 0] != 0, axis=1))
     ours = render_paths(dry, np.zeros(n), point, paths, bank, n_out=n,
                         receiver=path_receiver(spec, mic))

@@ -26,7 +26,7 @@ def walk_render(spacing: float, refine: bool, dry: np.ndarray) -> tuple[np.ndarr
     points = resample_polyline(ENDS, spacing)
     _, facts = engine.simulate_rirs(scene, MIC, points, st, np.random.default_rng(0),
                                     keep_arrivals=True)
-    heard = [f["early_arrivals"] for f in facts]
+    heard = [f.early_arrivals for f in facts]
     if refine:
         fine = engine.refined_early_paths(scene, st, points, np.repeat(MIC[None], len(points), 0),
                                           heard, heard)
@@ -78,7 +78,7 @@ def test_a_diffracted_paths_length_is_read_exactly_between_points() -> None:
     points = resample_polyline(np.array([[2.5, 0.6, 1.0], [2.0, 3.4, 1.4]]), 0.25)
     _, facts = engine.simulate_rirs(scene, mic, points, st, np.random.default_rng(0),
                                     keep_arrivals=True)
-    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts])
+    paths = PathSet.identify(points, [f.early_arrivals for f in facts])
     first = np.flatnonzero(paths.diffracted & (paths.order == 1)
                            & np.all(~np.isnan(paths.lengths_m), axis=1))
     wedge = Wedge(point=np.array([4.0, 0.0, 1.8]), edge=np.array([0.0, 1.0, 0.0]),

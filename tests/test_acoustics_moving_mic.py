@@ -42,7 +42,7 @@ def engine_pairs(source_track, mic_track, n: int, microphone=None, yaw_deg=None)
             mic["yaw_deg"] = float(yaw_deg[j])
         _, facts = simulate_rirs(scene, mics[j], points[j:j + 1], settings,
                                  np.random.default_rng(0), microphone=mic, keep_arrivals=True)
-        arrivals.append(facts[0]["early_arrivals"])
+        arrivals.append(facts[0].early_arrivals)
     paths = PathSet.identify_moving(points, mics, arrivals)
     index = np.interp(np.arange(n), at, np.arange(len(at), dtype=float))
     return points, mics, paths, index, OctaveFilterBank(FS, settings.bands_hz)

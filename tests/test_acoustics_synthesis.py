@@ -175,10 +175,10 @@ def test_rir_stage_shapes_the_tail_by_the_smoothed_envelope(monkeypatch) -> None
         (rir,), (facts,) = engine.simulate_rirs(
             scene, np.array([7.2, 4.9, 1.6]), np.array([[2.1, 3.3, 1.4]]), settings,
             np.random.default_rng(0), expected_figures=True)
-        assert all(t is not None for t in facts["tail"]["continued_from_s"])  # ran out
-        x = rir[0, :round(facts["tail"]["decay_end_s"] * FS)].astype(np.float64)
+        assert all(t is not None for t in facts.tail.continued_from_s)  # ran out
+        x = rir[0, :round(facts.tail.decay_end_s * FS)].astype(np.float64)
         w = (x[: len(x) // 160 * 160].reshape(-1, 160) ** 2).sum(axis=1)
-        return int(np.sum(w[30:] == 0)), facts["expected"]
+        return int(np.sum(w[30:] == 0)), facts.expected
 
     smoothed, expected = silent_windows()
     monkeypatch.setattr(EnergyHistogram, "smoothed", lambda self, width: self)

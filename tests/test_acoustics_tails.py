@@ -134,11 +134,11 @@ def test_a_live_room_at_default_settings_decays_to_its_end() -> None:
     assert 6.5 < exact[0] < 7.2
     np.testing.assert_allclose(result.t30_s, exact, rtol=0.05)
     tail = result.tail
-    assert tail["rule"] == "auto" and set(tail["level_at_limit_db"]) == {None}
-    assert tail["decay_end_s"] == max(tail["decay_60db_s"]) < 10.0
-    assert result.rir.shape[-1] / 8000 >= tail["decay_end_s"]
+    assert tail.rule == "auto" and set(tail.level_at_limit_db) == {None}
+    assert tail.decay_end_s == max(tail.decay_60db_s) < 10.0
+    assert result.rir.shape[-1] / 8000 >= tail.decay_end_s
     # Each band's 60 dB point lies near its T60 (the build-up adds a little).
-    np.testing.assert_allclose(tail["decay_60db_s"], exact, rtol=0.1)
+    np.testing.assert_allclose(tail.decay_60db_s, exact, rtol=0.1)
     fs = settings.sample_rate_hz
     for b, band in enumerate(OctaveFilterBank(fs, bands).split(result.rir[0].astype(float))):
         edc = edc_db(band**2)
@@ -166,14 +166,14 @@ def test_the_cap_warns_naming_the_scene_and_the_band() -> None:
     assert "the 1000 Hz band at -" in message and "raise acoustics.max_rir_cap_s" in message
     assert result.rir.shape[-1] == 2 * 8000
     tail = result.tail
-    assert tail["decay_60db_s"] == [None, None]
-    assert all(-25 < v < -12 for v in tail["level_at_limit_db"]), tail  # 2 s of a 7 s T60
-    assert all(5.5 < v < 8.0 for v in tail["fitted_t60_s"]), tail
+    assert tail.decay_60db_s == (None, None)
+    assert all(-25 < v < -12 for v in tail.level_at_limit_db), tail  # 2 s of a 7 s T60
+    assert all(5.5 < v < 8.0 for v in tail.fitted_t60_s), tail
     fixed = live_settings(rays=2000, bands_hz=[250, 1000], max_rir_length_s=2.0)
     (quiet,) = engine.rir_results(scene, LIVE_MIC, LIVE_SRC[None], fixed,
                                   np.random.default_rng(0))  # filterwarnings: error
-    assert quiet.tail["rule"] == "fixed" and quiet.tail["limit_field"] == "max_rir_length_s"
-    assert quiet.tail["level_at_limit_db"] == tail["level_at_limit_db"]
+    assert quiet.tail.rule == "fixed" and quiet.tail.limit_field == "max_rir_length_s"
+    assert quiet.tail.level_at_limit_db == tail.level_at_limit_db
     with pytest.raises(AcousticsError, match="max_rir_length_s: expected 'auto' or seconds"):
         engine.SimulationSettings(**{**settings.__dict__, "max_rir_length_s": "longest"})
     with pytest.raises(AcousticsError, match="max_rir_cap_s: expected seconds > 0"):
@@ -202,8 +202,8 @@ def test_the_sonicset_preset_no_longer_ends_early_in_a_door_room() -> None:
                                           "ray_splitting": 0.0, "energy_threshold_db": 100.0})
     (reference,) = engine.rir_results(scene, DOOR_MIC, DOOR_SRC[None], reference_settings,
                                       np.random.default_rng(99))
-    assert reference.tail["continued_from_s"] == [None, None]
-    ref_end = np.array(reference.tail["decay_60db_s"])
+    assert reference.tail.continued_from_s == (None, None)
+    ref_end = np.array(reference.tail.decay_60db_s)
     ref_t30 = reference.t30_s
     assert np.all((0.9 < ref_t30) & (ref_t30 < 1.2)), ref_t30
     settings = live_settings(**SONICSET)
@@ -213,12 +213,12 @@ def test_the_sonicset_preset_no_longer_ends_early_in_a_door_room() -> None:
         (result,) = engine.rir_results(scene, DOOR_MIC, DOOR_SRC[None], settings,
                                        np.random.default_rng(seed))
         tail = result.tail
-        assert None not in tail["continued_from_s"], (seed, tail)  # the rays ran out
+        assert None not in tail.continued_from_s, (seed, tail)  # the rays ran out
         # ... 10 dB or more before the decay's end (a tenth of T60 or more)
-        started = np.array(tail["continued_from_s"])
+        started = np.array(tail.continued_from_s)
         assert np.all(started < ref_end - 0.1), (seed, tail)
-        np.testing.assert_allclose(tail["decay_60db_s"], ref_end, rtol=0.15)
-        assert result.rir.shape[-1] / fs >= max(tail["decay_60db_s"])
+        np.testing.assert_allclose(tail.decay_60db_s, ref_end, rtol=0.15)
+        assert result.rir.shape[-1] / fs >= max(tail.decay_60db_s)
         np.testing.assert_allclose(result.t30_s, ref_t30, rtol=0.10)
         for b, band in enumerate(bank.split(result.rir[0].astype(float))):
             at = edc_db(band**2)[round(0.8 * ref_t30[b] * fs)]
@@ -233,8 +233,8 @@ def test_figures_of_a_continued_rir_match_its_expected_energy() -> None:
     scene = rooms.uniform_scene(*rooms.door_rooms(), 0.1, 0.3, 0.0, len(bands))
     (result,) = engine.rir_results(scene, DOOR_MIC, DOOR_SRC[None], live_settings(**SONICSET),
                                    np.random.default_rng(1))
-    assert None not in result.tail["continued_from_s"]
+    assert None not in result.tail.continued_from_s
     np.testing.assert_allclose(result.expected["t30_s"], result.t30_s, rtol=0.10)
     facts = result.to_dict()
-    assert facts["tail"] == result.tail
+    assert facts["tail"] == result.tail.to_dict()
     assert facts["length_s"] == result.rir.shape[-1] / result.sample_rate_hz

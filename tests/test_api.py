@@ -300,7 +300,8 @@ def test_compute_rirs_equals_the_rir_stage_for_the_same_settings_and_seed(tmp_pa
             assert np.array_equal(stored[i, :, :rir.shape[-1]], rir)
         start += len(points)
     # sonicspec rir SPEC: the same engine with the CLI's seed.
-    rir, facts = rir_from_spec(loaded, "room", SOURCE, MIC)
+    report = rir_from_spec(loaded, "room", SOURCE, MIC)
+    rir, facts = report.result.rir, report.to_dict()
     same = ss.compute_rir(scene, SOURCE, MIC, settings, receiver=spec.microphone,
                           seed=rng_for(spec.seed, "rir-cli", mesh_job.key, repr(SOURCE),
                                        repr(MIC)))

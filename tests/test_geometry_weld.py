@@ -229,7 +229,7 @@ def test_edges_kept_are_the_important_ones_for_the_job(obj_files) -> None:
     assert by_radiator(kept) == 8 and by_radiator(_edges(mesh, max_edges=9)) < 8
     assert any(np.allclose(s[:2], [3.5, 2.5]) for s in kept.start)
     assert np.all(np.diff(kept.importance) <= 0)
-    choice = kept.choice()
+    choice = kept.choice().to_dict()
     assert (choice["found"], choice["kept"], choice["near_points"]) == (REAL_EDGES, 9, 2)
     assert "distance to the nearest of 2 source and receiver positions" in choice["rule"]
 
@@ -276,9 +276,9 @@ def test_diffracted_paths_do_not_change_when_the_objects_are_merged(obj_files) -
     # and the RIR facts say how the edges were chosen
     result = ss.compute_rir(split, SOURCE, MIC, ss.RirSettings(
         rays=500, image_source_order=1, diffraction=True, diffraction_max_edges=20), seed=0)
-    assert result.diffraction_edges["found"] == REAL_EDGES
-    assert result.diffraction_edges["kept"] == 20 and result.diffraction_edges["near_points"] == 2
-    assert result.to_dict()["diffraction_edges"] == result.diffraction_edges
+    assert result.diffraction_edges.found == REAL_EDGES
+    assert result.diffraction_edges.kept == 20 and result.diffraction_edges.near_points == 2
+    assert result.to_dict()["diffraction_edges"] == result.diffraction_edges.to_dict()
 
 
 def test_a_glb_with_one_mesh_per_material_loads_closed(obj_files, tmp_path) -> None:

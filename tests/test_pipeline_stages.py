@@ -8,6 +8,7 @@ itself and keeps what was finished.
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import json
 import os
@@ -474,10 +475,20 @@ def test_rirs_a_fixed_length_cuts_while_decaying_are_a_warning_in_the_log(tmp_pa
                     messages[0]), messages[0]
     assert messages[0].endswith("raise acoustics.max_rir_length_s or set it to auto")
     # a decay 60 dB down within the length, or an `auto` cut (the engine's warning): none here
+    from sonicspec.acoustics.engine import RirFacts
+    from sonicspec.acoustics.late.tails import TailFacts
     from sonicspec.stages.rir import fixed_cut_warning
 
-    done = {"rule": "fixed", "limit_s": 1.0, "level_at_limit_db": [None, None],
-            "fitted_t60_s": [None, None]}
-    assert fixed_cut_warning([{"tail": done}], (500.0, 1000.0), "x") is None
-    auto = {**done, "rule": "auto", "level_at_limit_db": [-20.0, None]}
-    assert fixed_cut_warning([{"tail": auto}], (500.0, 1000.0), "x") is None
+    def facts(tail: TailFacts) -> RirFacts:
+        return RirFacts(arrivals=1, direct="visible", image_source_order=1,
+                        image_source_order_asked=1, image_source_order_stopped=None,
+                        escaped_ray_fraction=0.0, tail=tail)
+
+    done = TailFacts(rule="fixed", limit_s=1.0, limit_field="max_rir_length_s",
+                     decay_end_s=0.5, decay_60db_s=(0.5, 0.4), continued_from_s=(None, None),
+                     level_at_limit_db=(None, None), fitted_t60_s=(None, None))
+    assert fixed_cut_warning([facts(done)], (500.0, 1000.0), "x") is None
+    auto = dataclasses.replace(done, rule="auto", level_at_limit_db=(-20.0, None))
+    assert fixed_cut_warning([facts(auto)], (500.0, 1000.0), "x") is None
+    cut = dataclasses.replace(done, level_at_limit_db=(-20.0, None), fitted_t60_s=(3.0, None))
+    assert "1 of 1 RIRs cut at 1 s" in fixed_cut_warning([facts(cut)], (500.0, 1000.0), "x")

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,7 +35,7 @@ from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
 from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
-from sonicspec.acoustics.late.tails import TailReport, cut_warning, shape_tail
+from sonicspec.acoustics.late.tails import TailFacts, TailReport, cut_warning, shape_tail
 from sonicspec.acoustics.metrics import (
     RoomAcousticFigures,
     figures_from_energy,
@@ -43,7 +43,7 @@ from sonicspec.acoustics.metrics import (
 )
 from sonicspec.acoustics.paths.direct import direct_sound
 from sonicspec.acoustics.paths.edge_paths import close_pairs, diffracted_sound
-from sonicspec.acoustics.paths.edges import DiffractingEdges, diffracting_edges
+from sonicspec.acoustics.paths.edges import DiffractingEdges, EdgeChoice, diffracting_edges
 from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
 from sonicspec.acoustics.receivers.synthesis import synthesize_early, synthesize_rir
 from sonicspec.acoustics.room.scene import AcousticScene
@@ -247,7 +247,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                   hrirs: HrirSet | None = None, n_threads: int = 1,
                   expected_figures: bool = False, progress=None, where: str = "the scene",
                   keep_arrivals: bool = False,
-                  ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+                  ) -> tuple[list[np.ndarray], list[RirFacts]]:
     """RIRs from every source position to the microphone, and facts about each.
 
     Parameters
@@ -276,16 +276,17 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         Threads for the trace; changes how fast rays are traced, never the bytes.
     expected_figures : bool
         Add each RIR's figures without the late noise's draw
-        (:func:`~sonicspec.acoustics.metrics.figures_from_energy`) to its facts as
-        ``"expected"``.
+        (:func:`~sonicspec.acoustics.metrics.figures_from_energy`) to its facts
+        (:attr:`RirFacts.expected`).
     progress : callable, optional
         ``progress(rays_done, rays_total)``, called as the trace goes.
     where : str
         What the cap warning calls the scene (``"scene 'flat'"``).
     keep_arrivals : bool
         Add each RIR's direct sound and image-source arrivals to its facts: as traced from
-        the microphone (``"early_arrivals"``, directions at the source point: where each
-        path's image of the microphone is) and towards it (``"early_arrivals_at_mic"``,
+        the microphone (:attr:`RirFacts.early_arrivals`, directions at the source point: where
+        each path's image of the microphone is) and towards it
+        (:attr:`RirFacts.early_arrivals_at_mic`,
         directions of arrival at the microphone, as rendered into the RIR). A moving source's
         paths are rendered from them (:class:`~sonicspec.acoustics.moving.delays.PathSet`), its late
         part is the RIR less :func:`early_part` of the latter. Edge-diffracted paths are in
@@ -296,13 +297,9 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     -------
     rirs : list of (channels, samples) float32 arrays
         One per source position.
-    facts : list of dict
-        Per position: ``arrivals`` (early arrivals: direct sound, image sources and
-        diffracted paths), ``direct`` (``"visible"``, ``"through walls"``, ``"diffracted"``:
-        out of sight and heard round edges, or ``"blocked"``), ``diffracted_paths`` (with
-        diffraction on), ``image_source_order`` (completed), ``escaped_ray_fraction``,
-        ``tail`` (how the length was chosen:
-        :meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`).
+    facts : list of RirFacts
+        One per position: the early arrivals, the direct path, the image-source order
+        reached, the escaped energy, how the length was chosen (:class:`RirFacts`).
 
     Warns
     -----
@@ -344,23 +341,72 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         path = "visible" if not blocked[k] else (
             "through walls" if len(early.direct[k]) else
             "diffracted" if len(early.diffracted[k]) else "blocked")
-        facts.append({"arrivals": len(arrivals), "direct": path,
-                      "image_source_order": early.image_source_order,
-                      "image_source_order_asked": settings.image_source_order,
-                      "image_source_order_stopped": early.image_source_stopped,
-                      "escaped_ray_fraction": traces[k].escaped_ray_fraction,
-                      "tail": report.to_dict()})
-        if settings.diffraction:
-            facts[-1]["diffracted_paths"] = len(early.diffracted[k])
-            facts[-1]["diffraction_edges"] = edge_choice
+        expected = None
         if expected_figures:
             energy = late.energy + arrivals.energy_histogram(late.bin_s, late.n_bins)
-            facts[-1]["expected"] = figures_from_energy(energy, late.bin_s)
-        if keep_arrivals:
-            facts[-1]["early_arrivals"] = early.from_mic[k]
-            facts[-1]["early_arrivals_at_mic"] = early.at_mic[k]
+            expected = figures_from_energy(energy, late.bin_s)
+        facts.append(RirFacts(
+            arrivals=len(arrivals), direct=path,
+            image_source_order=early.image_source_order,
+            image_source_order_asked=settings.image_source_order,
+            image_source_order_stopped=early.image_source_stopped,
+            escaped_ray_fraction=traces[k].escaped_ray_fraction, tail=report.facts(),
+            diffracted_paths=len(early.diffracted[k]) if settings.diffraction else 0,
+            diffraction_edges=edge_choice, expected=expected,
+            early_arrivals=early.from_mic[k] if keep_arrivals else None,
+            early_arrivals_at_mic=early.at_mic[k] if keep_arrivals else None))
     warn_cut_tails(reports, where)
     return rirs, facts
+
+
+@dataclass(frozen=True, eq=False)
+class RirFacts:
+    """What :func:`simulate_rirs` knows about one RIR besides its samples: typed, so the
+    steps read fields, not string keys (a new fact is a new field with a default).
+
+    Attributes
+    ----------
+    arrivals : int
+        Early arrivals rendered exactly: the direct sound, the image sources and the
+        edge-diffracted paths.
+    direct : {"visible", "through walls", "diffracted", "blocked"}
+        The direct path: in sight, heard through transmitting surfaces, heard round edges
+        (out of sight, with ``acoustics.diffraction``), or absent.
+    image_source_order : int
+        The image-source order completed (lower than asked when a scene has too many).
+    image_source_order_asked : int
+        The order the settings asked.
+    image_source_order_stopped : str or None
+        Why the completed order is lower than asked (``"order 3 needs more than 2,000,000
+        candidates"``; the ray tracer covers the rest), None when it is not.
+    escaped_ray_fraction : float
+        Share of the traced energy that left the scene (a leaking mesh shows here).
+    tail : TailFacts
+        How the RIR's length was chosen.
+    diffracted_paths : int
+        Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
+    diffraction_edges : EdgeChoice or None
+        How the diffracting edges were chosen (None with diffraction off).
+    expected : dict or None
+        T30, EDT and C50 per band of the energy the RIR was synthesised to have
+        (:func:`~sonicspec.acoustics.metrics.figures_from_energy`; with ``expected_figures``).
+    early_arrivals, early_arrivals_at_mic : Arrivals or None
+        The exact early paths as traced from the microphone and towards it (with
+        ``keep_arrivals``).
+    """
+
+    arrivals: int
+    direct: str
+    image_source_order: int
+    image_source_order_asked: int
+    image_source_order_stopped: str | None
+    escaped_ray_fraction: float
+    tail: TailFacts
+    diffracted_paths: int = 0
+    diffraction_edges: EdgeChoice | None = None
+    expected: dict[str, Any] | None = None
+    early_arrivals: Arrivals | None = None
+    early_arrivals_at_mic: Arrivals | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -603,17 +649,17 @@ class RirResult:
         late noise's draw (:func:`~sonicspec.acoustics.metrics.figures_from_energy`).
     traced_faces : int
         Triangles traced (after flat areas were merged).
-    tail : dict
+    tail : TailFacts
         How the RIR's length was chosen
-        (:meth:`~sonicspec.acoustics.late.tails.TailReport.to_dict`):
+        (:class:`~sonicspec.acoustics.late.tails.TailFacts`):
         the rule (``auto`` or ``fixed``), the longest RIR allowed, per band when the decay
         is 60 dB down, where a fitted continuation starts (the rays ran out before), and the
         level a cut band reached at the limit.
     diffracted_paths : int
         Edge-diffracted arrivals among ``arrivals`` (0 with diffraction off).
-    diffraction_edges : dict or None
+    diffraction_edges : EdgeChoice or None
         How the diffracting edges were chosen (None with diffraction off):
-        :meth:`~sonicspec.acoustics.paths.edges.DiffractingEdges.choice` (found, kept, the rule,
+        :class:`~sonicspec.acoustics.paths.edges.EdgeChoice` (found, kept, the rule,
         seams left out).
     """
 
@@ -628,9 +674,9 @@ class RirResult:
     escaped_ray_fraction: float
     expected: dict[str, Any]
     traced_faces: int
-    tail: dict[str, Any] = field(default_factory=dict)
+    tail: TailFacts | None = None
     diffracted_paths: int = 0
-    diffraction_edges: dict[str, Any] | None = None
+    diffraction_edges: EdgeChoice | None = None
     image_source_order_asked: int | None = None
     image_source_order_stopped: str | None = None
 
@@ -680,9 +726,11 @@ class RirResult:
                 "channels": int(self.rir.shape[0]), "distance_m": self.distance_m,
                 "sample_rate_hz": self.sample_rate_hz, "samples": int(self.rir.shape[-1]),
                 "traced_triangles": self.traced_faces, "diffracted_paths": self.diffracted_paths,
-                "diffraction_edges": self.diffraction_edges,
+                "diffraction_edges": (None if self.diffraction_edges is None
+                                      else self.diffraction_edges.to_dict()),
                 "figures": self.figures.to_dict(),
-                "length_s": self.rir.shape[-1] / self.sample_rate_hz, "tail": self.tail}
+                "length_s": self.rir.shape[-1] / self.sample_rate_hz,
+                "tail": {} if self.tail is None else self.tail.to_dict()}
 
 
 def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
@@ -707,14 +755,14 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
     return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
                       bands_hz=tuple(settings.bands_hz),
                       source_m=tuple(float(v) for v in point), mic_m=mic,
-                      arrivals=f["arrivals"], direct=f["direct"],
-                      image_source_order=f["image_source_order"],
-                      escaped_ray_fraction=f["escaped_ray_fraction"], expected=f["expected"],
-                      traced_faces=scene.n_faces, tail=f["tail"],
-                      diffracted_paths=f.get("diffracted_paths", 0),
-                      diffraction_edges=f.get("diffraction_edges"),
-                      image_source_order_asked=f["image_source_order_asked"],
-                      image_source_order_stopped=f["image_source_order_stopped"])
+                      arrivals=f.arrivals, direct=f.direct,
+                      image_source_order=f.image_source_order,
+                      escaped_ray_fraction=f.escaped_ray_fraction, expected=f.expected or {},
+                      traced_faces=scene.n_faces, tail=f.tail,
+                      diffracted_paths=f.diffracted_paths,
+                      diffraction_edges=f.diffraction_edges,
+                      image_source_order_asked=f.image_source_order_asked,
+                      image_source_order_stopped=f.image_source_order_stopped)
             for rir, f, point in zip(rirs, facts, points, strict=True)]
 
 

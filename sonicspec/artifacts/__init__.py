@@ -42,7 +42,9 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
+from sonicspec.acoustics.paths.edges import EdgeChoice
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.corpora import CorpusIndex
 from sonicspec.errors import StageError
@@ -229,9 +231,9 @@ class RirSource(_Data):
     direct: str
     """The direct path at the first point: ``visible``, ``through walls`` or ``blocked``."""
     escaped_ray_fraction: float
-    tail: dict[str, Any]
+    tail: TailFacts
     """How the RIR's length was chosen (first point;
-    :meth:`sonicspec.acoustics.late.tails.TailReport.to_dict`)."""
+    :class:`sonicspec.acoustics.late.tails.TailFacts`, stored field by field)."""
     image_source_order: int | None = None
     """The image-source order reached at every point of the source (the lowest over its
     points; None in artifacts written before it was recorded)."""
@@ -252,10 +254,10 @@ class RirSource(_Data):
 class RirGroup(_Data):
     group: str
     sources: list[RirSource]
-    diffraction_edges: dict[str, Any] | None = None
+    diffraction_edges: EdgeChoice | None = None
     """With ``acoustics.diffraction``: how the group's diffracting edges were chosen, one set
-    for all of its RIRs (:meth:`sonicspec.acoustics.edges.DiffractingEdges.choice`: found,
-    kept, the rule, the seam edges left out)."""
+    for all of its RIRs (:class:`sonicspec.acoustics.paths.edges.EdgeChoice`: found, kept,
+    the rule, the seam edges left out)."""
 
     def source(self, track: str) -> RirSource:
         for s in self.sources:

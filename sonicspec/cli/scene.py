@@ -4,6 +4,7 @@ response in a spec's scene, a scene file or a mesh file)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -33,7 +34,7 @@ def _choose_scene(loaded, args: argparse.Namespace) -> bool:
 
 
 def cmd_scene_inspect(args: argparse.Namespace) -> int:
-    from sonicspec.stages.inspect import format_facts, inspect_scene
+    from sonicspec.stages.inspect import inspect_scene
 
     if plot_unavailable(args):
         return EXIT_INVALID
@@ -41,12 +42,11 @@ def cmd_scene_inspect(args: argparse.Namespace) -> int:
     if loaded is None or not _choose_scene(loaded, args):
         return EXIT_INVALID
     facts = inspect_scene(loaded, args.scene, plot=Path(args.plot) if args.plot else None)
-    print(json.dumps(facts, indent=2) if args.json else format_facts(facts))
+    print(json.dumps(facts.to_dict(), indent=2) if args.json else facts.format())
     return EXIT_OK
 
 
 def cmd_rir(args: argparse.Namespace) -> int:
-    from sonicspec.stages.rir import format_rir_facts
 
     if plot_unavailable(args):
         return EXIT_INVALID
@@ -59,8 +59,8 @@ def cmd_rir(args: argparse.Namespace) -> int:
             print("sonicspec: error: --scene: expected a SPEC to choose a scene from, got "
                   "--mesh; the mesh is the scene", file=sys.stderr)
             return EXIT_INVALID
-        rir, facts = _rir_of_mesh(args)
-        if rir is None:
+        report = _rir_of_mesh(args)
+        if report is None:
             return EXIT_INVALID
         title = f"{Path(args.mesh).name}: source {args.source} -> mic {args.mic}"
     else:
@@ -75,53 +75,55 @@ def cmd_rir(args: argparse.Namespace) -> int:
                   "SPEC (the spec sets materials, acoustics and the seed)", file=sys.stderr)
             return EXIT_INVALID
         if names_scene_file(args.spec):
-            rir, facts = _rir_of_scene_file(args)
-            if rir is None:
+            report = _rir_of_scene_file(args)
+            if report is None:
                 return EXIT_INVALID
-            title = f"{facts['scene_id']}: source {args.source} -> mic {args.mic}"
+            title = f"{report.scene_id}: source {args.source} -> mic {args.mic}"
         else:
             from sonicspec.stages.rir import rir_from_spec
 
             loaded = load_or_exit(args.spec)
             if loaded is None or not _choose_scene(loaded, args):
                 return EXIT_INVALID
-            rir, facts = rir_from_spec(loaded, args.scene, args.source, args.mic)
+            report = rir_from_spec(loaded, args.scene, args.source, args.mic)
             title = f"{args.scene}: source {args.source} -> mic {args.mic}"
-    for warning in facts["warnings"]:
+    for warning in report.warnings:
         print(f"sonicspec: warning: {warning}", file=sys.stderr)
+    result = report.result
     if args.output:
         from sonicspec.export.files import write_audio
 
-        write_audio(Path(args.output), rir, facts["sample_rate_hz"],
+        write_audio(Path(args.output), result.rir, result.sample_rate_hz,
                     audio_format="wav", subtype="FLOAT")
-        facts["output"] = args.output
+        report = dataclasses.replace(report, output=args.output)
     if args.plot:
         from sonicspec.export.plots import plot_rir
 
-        plot_rir(rir[0], facts["sample_rate_hz"], facts["figures"]["bands_hz"], Path(args.plot),
+        plot_rir(result.rir[0], result.sample_rate_hz, result.bands_hz, Path(args.plot),
                  title=title)
-        facts["plot"] = args.plot
-    print(json.dumps(facts, indent=2) if args.json else format_rir_facts(facts))
+        report = dataclasses.replace(report, plot=args.plot)
+    print(json.dumps(report.to_dict(), indent=2) if args.json else report.format())
     return EXIT_OK
 
 
 def _rir_of_scene_file(args: argparse.Namespace):
     """``sonicspec rir SCENE.yaml``: the RIR and facts of a scene file through the Python API,
-    or (None, None) after a message."""
+    or None after a message."""
     import warnings
 
     from sonicspec.api import RirSettings, Scene, compute_rir
     from sonicspec.errors import SonicspecError, SonicspecWarning
     from sonicspec.spec.validate import validate_scene_file
+    from sonicspec.stages.rir import RirReport
 
     if args.scene is not None:
         print("sonicspec: error: --scene: a scene file holds one scene; --scene chooses one "
               "of a dataset spec's", file=sys.stderr)
-        return None, None
+        return None
     spec, problems = validate_scene_file(args.spec)
     print_problems(problems, args.spec)
     if spec is None:
-        return None, None
+        return None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SonicspecWarning)
         try:
@@ -134,12 +136,10 @@ def _rir_of_scene_file(args: argparse.Namespace):
                                  receiver=spec.microphone, seed=spec.seed)
         except SonicspecError as exc:
             print(f"sonicspec: error: {args.spec}: {exc}", file=sys.stderr)
-            return None, None
-    facts = {"scene_id": scene.name, **result.to_dict(), "mesh_triangles": scene.mesh.n_faces,
-             "materials_m2": scene.material_areas_m2(),
-             "warnings": [str(w.message) for w in caught
-                          if issubclass(w.category, SonicspecWarning)]}
-    return result.rir, facts
+            return None
+    return RirReport(result, scene.name, scene.mesh.n_faces, tuple(
+        str(w.message) for w in caught if issubclass(w.category, SonicspecWarning)),
+        materials_m2=scene.material_areas_m2())
 
 
 def _spec_default(section: str, field: str) -> object:
@@ -154,14 +154,15 @@ def _spec_default(section: str, field: str) -> object:
 
 
 def _rir_of_mesh(args: argparse.Namespace):
-    """``sonicspec rir --mesh``: the RIR and facts through the Python API, or (None, None)
-    after a message when the mesh, a label or a material name is wrong."""
+    """``sonicspec rir --mesh``: the RIR and facts through the Python API, or None after a
+    message when the mesh, a label or a material name is wrong."""
     import warnings
 
     from pydantic import ValidationError
 
     from sonicspec.api import RirSettings, Scene, compute_rir
     from sonicspec.errors import SonicspecError, SonicspecWarning
+    from sonicspec.stages.rir import RirReport
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SonicspecWarning)
@@ -171,7 +172,7 @@ def _rir_of_mesh(args: argparse.Namespace):
                                     library=args.library or "sonicspec", repair=args.repair)
         except SonicspecError as exc:
             print(f"sonicspec: error: {exc}", file=sys.stderr)
-            return None, None
+            return None
         flags = {"rays": ("--rays", args.rays), "sample_rate_hz": ("--sample-rate",
                                                                    args.sample_rate)}
         try:
@@ -180,17 +181,15 @@ def _rir_of_mesh(args: argparse.Namespace):
             error = exc.errors()[0]
             print(f"sonicspec: error: {flags[error['loc'][0]][0]}: {error['msg'].lower()}, got "
                   f"{error['input']}", file=sys.stderr)
-            return None, None
+            return None
         receiver = _microphone_option(args.microphone)
         if receiver is False:
-            return None, None
+            return None
         result = compute_rir(scene, args.source, args.mic, settings, receiver=receiver,
                              seed=args.seed or 0)
-    facts = {"scene_id": scene.name, **result.to_dict(), "mesh_triangles": scene.mesh.n_faces,
-             "materials_m2": scene.material_areas_m2(),
-             "warnings": [str(w.message) for w in caught
-                          if issubclass(w.category, SonicspecWarning)]}
-    return result.rir, facts
+    return RirReport(result, scene.name, scene.mesh.n_faces, tuple(
+        str(w.message) for w in caught if issubclass(w.category, SonicspecWarning)),
+        materials_m2=scene.material_areas_m2())
 
 
 def _microphone_option(text: str | None):

@@ -63,6 +63,32 @@ class Loudness(_Record):
     output_lufs: float = Field(description="Level of the written file, LUFS.")
 
 
+class RirTail(_Record):
+    """How a RIR's length was chosen (the rir step's
+    :class:`~sonicspec.acoustics.late.tails.TailFacts`, field by field): every band's decay
+    60 dB down, at most a limit."""
+
+    rule: Literal["auto", "fixed"] = Field(description=(
+        "acoustics.max_rir_length_s: auto (the decay decides, at most max_rir_cap_s) or a "
+        "number of seconds (fixed)."))
+    limit_s: float = Field(description="The longest RIR allowed, seconds.")
+    limit_field: str = Field(description=(
+        "The spec field that sets the limit (max_rir_cap_s or max_rir_length_s)."))
+    decay_end_s: float = Field(description="Where the last band's late decay ends, seconds.")
+    decay_60db_s: list[float | None] = Field(description=(
+        "Per band: when its decay is 60 dB below its early level, seconds (null: not "
+        "within the limit)."))
+    continued_from_s: list[float | None] = Field(description=(
+        "Per band: where the rays ran out and a line fitted to the last 20 dB of the decay "
+        "carries it on, seconds (null: traced to the end)."))
+    level_at_limit_db: list[float | None] = Field(description=(
+        "Per band: the level its decay reached where the limit cut it, dB re its early "
+        "level (null: not cut)."))
+    fitted_t60_s: list[float | None] = Field(description=(
+        "Per band: the 60 dB time of the fitted line where it was used (a continuation, a "
+        "cut), seconds (null: not used)."))
+
+
 class ImageSourceOrder(_Record):
     """How far the exact early reflections went (issue 27): a scan's noise can make the
     candidate search stop below the order asked, the ray tracer covering the rest."""
@@ -86,9 +112,7 @@ class _Track(_Record):
                                              "point's RIR, dB.")
     direct_path: str = Field(description="The direct path at the first point: visible, "
                                          "through walls or blocked.")
-    rir_tail: dict[str, Any] = Field(description=(
-        "How the RIR's length was chosen at the first point (rule, limit_s, decay_end_s, "
-        "per band decay_60db_s, continued_from_s, ...)."))
+    rir_tail: RirTail = Field(description="How the RIR's length was chosen at the first point.")
     loudness: Loudness = Field(description="How the track was levelled.")
     image_source_order: ImageSourceOrder | None = Field(None, description=(
         "The image-source order asked and reached by the track's RIRs (the lowest over its "

@@ -6,10 +6,10 @@ matplotlib is an optional dependency (``pip install 'sonicspec[plot]'``), import
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from sonicspec.artifacts import GroupPlacement
 from sonicspec.errors import SonicspecError
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.navigation import Navigation
@@ -47,7 +47,7 @@ def slice_segments(mesh: SceneMesh, z_m: float) -> tuple[np.ndarray, np.ndarray]
     return segments, ids
 
 
-def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: dict[str, Any] | None,
+def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: GroupPlacement | None,
                     path: Path, *, title: str = "") -> Path:
     """Floor plan per floor: walkable area, walls, obstacles, mic, sources and their paths."""
     plt = _pyplot()  # first: without matplotlib, its message rather than an ImportError
@@ -81,22 +81,22 @@ def plot_floor_plan(mesh: SceneMesh, nav: Navigation, placement: dict[str, Any] 
         if len(obstacle_segments):
             ax.add_collection(LineCollection(obstacle_segments, colors="saddlebrown",
                                              linewidths=1.2, label="obstacles"))
-        if placement is not None and placement.get("floor_index") == k:
-            mic = placement["mic_m"]
+        if placement is not None and placement.floor_index == k:
+            mic = placement.mic_m
             ax.plot(mic[0], mic[1], marker="^", color="crimson", markersize=11, ls="none",
                     label="microphone")
-            for i, src in enumerate(placement["speech"]):
-                p = np.asarray(src["path_m"])
+            for i, src in enumerate(placement.speech):
+                p = np.asarray(src.path_m)
                 color = f"C{i}"
                 ax.plot(p[:, 0], p[:, 1], "-", color=color, lw=2, label=f"speaker {i + 1}")
-                pts = np.asarray(src.get("rir_points_m", p))
+                pts = np.asarray(src.rir_points_m)
                 ax.plot(pts[:, 0], pts[:, 1], ".", color=color, ms=4)
                 ax.plot(p[0, 0], p[0, 1], "o", color=color, ms=8)
                 ax.plot(p[-1, 0], p[-1, 1], "s", color=color, ms=8)
             for kind, marker in (("noise", "X"), ("music", "P")):
-                src = placement.get(kind)
+                src = getattr(placement, kind)
                 if src is not None:
-                    ax.plot(src["start_m"][0], src["start_m"][1], marker=marker, color="dimgray",
+                    ax.plot(src.start_m[0], src.start_m[1], marker=marker, color="dimgray",
                             ms=11, ls="none", label=kind)
         area = grid.area_m2
         ax.set_title(f"floor {k} (z = {grid.floor.z_m:.2f} m, walkable {area:.1f} m²)")

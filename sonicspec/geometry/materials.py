@@ -25,6 +25,7 @@ only 20 Hz and 20 kHz points, i.e. flat).
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import math
@@ -120,6 +121,27 @@ class MaterialLibrary:
         except KeyError:
             raise GeometryError(f"material: expected a name in library {self.name!r}, got "
                                 f"{name!r}" + _hint(name, list(self.materials))) from None
+
+    def with_scattering(self, scattering: Sequence[float],
+                        bands_hz: Sequence[float] = OCTAVE_BANDS_HZ) -> MaterialLibrary:
+        """This library with every material's scattering coefficients replaced by
+        ``scattering`` (on ``bands_hz``, carried onto each material's own bands by
+        log-frequency interpolation, end values held); absorption and transmission kept.
+
+        ``1.0`` everywhere makes every reflection fully diffuse (Lambert): what RLR, the
+        engine SonicSet was rendered with, computes whatever its material table says
+        (``bench/bench_sonicset_scattering.py``)."""
+        values = np.asarray(scattering, dtype=np.float64).reshape(-1)
+        src = np.log(np.asarray(bands_hz, dtype=np.float64))
+        if len(values) != len(src) or not np.all((values >= 0.0) & (values <= 1.0)):
+            raise GeometryError(f"scattering: expected {len(src)} values in [0, 1], one per "
+                                f"band {list(bands_hz)}, got {values.tolist()}")
+        replaced = {}
+        for name, m in self.materials.items():
+            on = np.interp(np.log(np.asarray(m.bands_hz, dtype=np.float64)), src, values)
+            replaced[name] = dataclasses.replace(m, scattering=tuple(float(v) for v in on))
+        return MaterialLibrary(self.name, replaced, self.label_rule, self.label_table,
+                               self.default_material, self.substring_labels)
 
     def with_materials(self, custom: Mapping[str, Material]) -> MaterialLibrary:
         """This library plus (or overridden by) user materials."""
@@ -225,7 +247,8 @@ def load_library(name: str) -> MaterialLibrary:
 
 
 def material_library(name: str = "sonicspec",
-                     custom: Mapping[str, Mapping[str, Any]] | None = None) -> MaterialLibrary:
+                     custom: Mapping[str, Mapping[str, Any]] | None = None,
+                     scattering: Sequence[float] | None = None) -> MaterialLibrary:
     """A built-in library with user materials added (a name equal to a library material
     replaces it).
 
@@ -237,6 +260,10 @@ def material_library(name: str = "sonicspec",
         Name -> ``{"absorption": [...], "scattering": [...], "transmission": [...],
         "description": "..."}``, seven values per coefficient on the octave bands
         125 Hz–8 kHz (the spec's ``materials.custom``, dumped).
+    scattering : sequence of float, optional
+        Seven values on the octave bands 125 Hz–8 kHz that replace every material's
+        scattering, custom ones included (the spec's ``materials.scattering_override``;
+        :meth:`MaterialLibrary.with_scattering`). None: each material's own.
 
     Raises
     ------
@@ -245,13 +272,13 @@ def material_library(name: str = "sonicspec",
         outside [0, 1].
     """
     library = load_library(name)
-    if not custom:
-        return library
-    return library.with_materials({
-        key: custom_material(key, m["absorption"], m["scattering"], m["transmission"],
-                             OCTAVE_BANDS_HZ, m.get("description", ""))
-        for key, m in custom.items()
-    })
+    if custom:
+        library = library.with_materials({
+            key: custom_material(key, m["absorption"], m["scattering"], m["transmission"],
+                                 OCTAVE_BANDS_HZ, m.get("description", ""))
+            for key, m in custom.items()
+        })
+    return library if scattering is None else library.with_scattering(scattering)
 
 
 def assign_materials(mesh: SceneMesh, library: MaterialLibrary,

@@ -414,8 +414,9 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     arrangement = shared({k: mixture[k] for k in ARRANGEMENT_FIELDS})
     placement_spec, trajectory = shared(_dump(spec.placement)), shared(_dump(spec.trajectory))
     acoustics = shared(_dump(spec.acoustics))
-    materials = shared({k: v for k, v in _dump(spec.materials).items()
-                        if k in MaterialTable.model_fields})
+    materials = shared(without_omitted({k: v for k, v in _dump(spec.materials).items()
+                                        if k in MaterialTable.model_fields},
+                                       MaterialTable.omitted_when))
     loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
     targets = shared(list(spec.mixture.targets))
     rir_files_shared = shared(rir_files)

@@ -33,6 +33,7 @@ from pydantic import (
 
 from sonicspec.errors import StageError
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.base import BandCoefficients
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
     FolderCorpusSpec,
@@ -245,9 +246,14 @@ class ArrangeParams(ShardParams):
     omitted_when: ClassVar[Mapping[str, Any]] = {"composition": None}
 
 
-MaterialTable = _subset(MaterialsSpec, ("library", "custom"),
-                        "The materials names resolve against (labels were resolved by "
-                        "the mesh job).")
+class MaterialTable(_subset(MaterialsSpec, ("library", "custom"), "")):  # type: ignore[misc]
+    """The materials names resolve against (labels were resolved by the mesh job), and the
+    scattering every surface gets in place of its material's (issue 30)."""
+
+    scattering_override: BandCoefficients | None = None
+    omitted_when: ClassVar[Mapping[str, Any]] = {"scattering_override": None}
+    """Left out at its default (added in issue 30), so specs that do not set it keep their
+    rir keys."""
 
 
 class WalkParams(StepParams):

@@ -62,3 +62,16 @@ class MaterialsSpec(SpecModel):
         description="Semantic label -> material name for every mesh scene (a scene's own "
         "map wins).",
     )
+    scattering_override: BandCoefficients | None = Field(
+        None,
+        description="Scattering coefficient per octave band 125 Hz–8 kHz (ISO 17497-1), 0–1 "
+        "(one value: every band), given to every surface in place of its material's own; "
+        "absorption and transmission stay the material's. null (the default): each "
+        "material's measured scattering. 1.0 makes every reflection fully diffuse (Lambert), "
+        "which is what RLR — the engine SonicSet was rendered with — computes whatever its "
+        "material table says: with SonicSet's table (scattering 0.10–0.15 on walls, carpet "
+        "and furniture) sonicspec's T30 in a furnished apartment is then RLR's, against "
+        "about 2.3x RLR's with the measured values (bench/bench_sonicset_scattering.py). "
+        "The 'sonicset' presets set 1.0 to give SonicSet's reverberation; leave it null "
+        "for realistic reverberation.",
+    )

@@ -32,6 +32,7 @@ from sonicspec.artifacts import (
     RirGroup,
     RirSource,
 )
+from sonicspec.audio.arrange import Segment
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -41,6 +42,7 @@ from sonicspec.export.metadata import (
     ImageSourceOrder,
     Loudness,
     MixtureRecord,
+    RirTail,
     SpeechTrack,
     TrackReference,
 )
@@ -86,8 +88,8 @@ class _GroupWriter:
         if not float_wav:
             rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
             self.rec_ids[name] = rec_id
-            self.recordings.append(RecordingEntry(rec_id, rel, self.rate, entry["num_samples"],
-                                                  entry["channels"], custom,
+            self.recordings.append(RecordingEntry(rec_id, rel, self.rate, int(x2.shape[1]),
+                                                  int(x2.shape[0]), custom,
                                                   scale).to_lhotse())
         return rel
 
@@ -147,7 +149,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     arranged = {t.name: t for t in arrange.tracks}
     track_file = TrackFile(out, w.folder)
     entries: dict[str, SpeechTrack | BackgroundTrack] = {}
-    spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
+    spoken: dict[str, tuple[str, list[Segment]]] = {}
     speech = group_speech(arrange.tracks)
     for name, track in tracks.items():
         role = track.role
@@ -171,22 +173,22 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             stack = np.asarray(rir_arrays[rir_source.array])
             for j in range(stack.shape[0]):
                 w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
-        segs = a.segments
+        segs = a.segment_list()
         common: dict[str, Any] = {
-            "audio": [a.files[s["id"]].path for s in segs],
-            "start_end_points": [(s["start"], s["end"]) for s in segs],
+            "audio": [a.files[s.id].path for s in segs],
+            "start_end_points": [(s.start, s.end) for s in segs],
             "file": audio_rel,
             "rir_points_m": [tuple(p) for p in geometry.rir_points_m],
             "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
             "direct_path": rir_source.direct,
-            "rir_tail": rir_source.tail,
+            "rir_tail": RirTail(**rir_source.tail.to_dict()),
             "image_source_order": _order(rir_source),
             "loudness": Loudness(**mix.components[name].model_dump()),
             "track": TrackReference(**track_labels),
         }
         if role == "speech":
             entries[name] = SpeechTrack(
-                **common, words=[s["text"] for s in segs], speaker=a.speaker,
+                **common, words=[s.text for s in segs], speaker=a.speaker,
                 trajectory_m=[tuple(p) for p in geometry.path_m],
                 path_length_m=geometry.path_length_m)
             spoken[name] = (a.speaker, segs)
@@ -198,7 +200,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             total = sum(gains[c] * np.asarray(arrays[tracks[c].arrays["reverberant"]],
                                               dtype=np.float64) for c in m.components)
             rel = w.audio("mixture", f"mixtures/{m.name}", total)
-            mixtures.append({**m.model_dump(mode="json"), "file": rel})
+            mixtures.append(MixtureRecord(**m.model_dump(mode="json"), file=rel))
     mic_ref = TrackReference(**track_file.add("microphone", *microphone_track(line, w.rate)))
     track_file.write()
     w.files.append({"kind": "tracks", "name": "tracks", **file_record(out, track_file.path)})
@@ -206,7 +208,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     metadata = GroupMetadata(
         group=group, split=split, scene_id=params.scene_id, mic_m=tuple(placement.mic_m),
         floor=placement.floor_index, sample_rate_hz=w.rate,
-        num_samples=render.clip_samples, mixtures=[MixtureRecord(**m) for m in mixtures],
+        num_samples=render.clip_samples, mixtures=mixtures,
         group_gain_db=mix.group_gain_db, keys=keys, microphone_track=mic_ref,
         noise=entries.get("noise"), music=entries.get("music"), **speech_entries,
         audio_scales=w.scales or None)
@@ -218,16 +220,15 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     # and each mixture that contains the source.
     rows = []
     for name, (speaker, segs) in spoken.items():
-        heard_in = [name] + [f"mixtures/{m['name']}" for m in mixtures
-                             if name in m["components"]]
+        heard_in = [name] + [f"mixtures/{m.name}" for m in mixtures if name in m.components]
         for rec_name in heard_in:
             if rec_name not in w.rec_ids:
                 continue
             rec = w.rec_ids[rec_name]
             # Unique across the split: a mixture holds several sources' utterances.
             stem = rec if rec_name == name else f"{rec}_{name}"
-            rows.extend(SupervisionEntry(f"{stem}_{k}", rec, seg["start"], seg["end"], w.rate,
-                                         seg["text"], speaker).to_lhotse()
+            rows.extend(SupervisionEntry(f"{stem}_{k}", rec, seg.start, seg.end, w.rate,
+                                         seg.text, speaker).to_lhotse()
                         for k, seg in enumerate(segs))
     return {"group": group, "split": split, "scene_id": params.scene_id,
             "metadata": {"path": f"{split}/{index}/metadata.json" if outputs.metadata

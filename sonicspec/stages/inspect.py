@@ -7,11 +7,13 @@ one group's placement with the spec's rules, so what a person inspects is what a
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sonicspec.artifacts import GroupPlacement
 from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
@@ -23,6 +25,9 @@ from sonicspec.stages.navigation import settings_from as nav_settings
 from sonicspec.stages.placement import place_group
 from sonicspec.stages.placement import settings_from as placement_settings
 
+if TYPE_CHECKING:
+    from sonicspec.acoustics.paths.edges import EdgeChoice
+    from sonicspec.geometry.navigation import WalkableGrid
 
 def scene_ids(loaded: LoadedSpec) -> list[str]:
     return [e.id for e in expand_scenes(loaded.spec, loaded.base_dir.resolve())]
@@ -47,7 +52,65 @@ def build_scene(loaded: LoadedSpec, scene_id: str):
     return mesh, report, mesh_job, nav_job, [str(w.message) for w in caught]
 
 
-def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> dict[str, Any]:
+@dataclass(frozen=True, eq=False)
+class SceneFacts:
+    """What ``sonicspec scene inspect`` says about one scene: the mesh and what its step did
+    to it, the materials, the floors, the diffracting edges and a sampled placement.
+    :meth:`to_dict` is what ``--json`` prints, :meth:`format` the text."""
+
+    scene_id: str
+    kind: str
+    bounds_m: tuple[tuple[float, ...], tuple[float, ...]]
+    vertices: int
+    faces: int
+    simplify_tolerance_m: float
+    traced_faces: int
+    diffraction_edges: EdgeChoice | None
+    surface_area_m2: float
+    air_volume_m3: float
+    weld: dict[str, Any] | None
+    """The mesh step's report of the seams welded on load (``WeldReport.to_dict``)."""
+    repair: dict[str, Any] | None
+    """Its repair report (``RepairReport.to_dict``)."""
+    leak: dict[str, Any] | None
+    """Its leak test (``LeakReport.to_dict``)."""
+    warnings: tuple[str, ...]
+    materials_m2: dict[str, float]
+    labels: tuple[str, ...]
+    floors: tuple[WalkableGrid, ...]
+    """Each floor's walkable grid."""
+    placement: GroupPlacement | None
+    placement_error: str | None
+    plot: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (``sonicspec scene inspect --json``)."""
+        out = {
+            "scene_id": self.scene_id, "kind": self.kind,
+            "bounds_m": [list(self.bounds_m[0]), list(self.bounds_m[1])],
+            "vertices": self.vertices, "faces": self.faces,
+            "simplify_tolerance_m": self.simplify_tolerance_m,
+            "traced_faces": self.traced_faces,
+            "diffraction_edges": (None if self.diffraction_edges is None
+                                  else self.diffraction_edges.to_dict()),
+            "surface_area_m2": self.surface_area_m2, "air_volume_m3": self.air_volume_m3,
+            "weld": self.weld, "repair": self.repair, "leak": self.leak,
+            "warnings": list(self.warnings), "materials_m2": self.materials_m2,
+            "labels": list(self.labels), "floors": [g.to_dict() for g in self.floors],
+            "placement": (None if self.placement is None
+                          else self.placement.model_dump(mode="json")),
+            "placement_error": self.placement_error,
+        }
+        if self.plot is not None:
+            out["plot"] = self.plot
+        return out
+
+    def format(self) -> str:
+        """The facts as a short report for a terminal."""
+        return format_facts(self)
+
+
+def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None) -> SceneFacts:
     """Facts about one scene (bounds, repair, materials, floors, walkable area, a placement)."""
     from sonicspec.acoustics.engine import traced_geometry  # the acoustics stack: only when asked
 
@@ -64,7 +127,7 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
         placement=spec.placement, trajectory=spec.trajectory, microphone=spec.microphone,
         speakers=spec.mixture.speakers, noise=spec.corpora.noise is not None,
         music=spec.corpora.music is not None)
-    placement: dict[str, Any] | None = None
+    placement: GroupPlacement | None = None
     placement_error = None
     try:
         placement = place_group(nav, placement_settings(params), params, "inspect",
@@ -77,47 +140,37 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
     if spec.acoustics.diffraction:
         edges = _edge_choice(traced_vertices, traced_faces, spec.acoustics.diffraction_max_edges,
                              placement)
-    facts = {
-        "scene_id": scene_id,
-        "kind": report["kind"],
-        "bounds_m": [lo.tolist(), hi.tolist()],
-        "vertices": int(mesh.vertices.shape[0]),
-        "faces": int(mesh.faces.shape[0]),
-        "simplify_tolerance_m": spec.acoustics.simplify_tolerance_m,
-        "traced_faces": len(traced_faces),
-        "diffraction_edges": edges,
-        "surface_area_m2": float(areas.sum()),
-        "air_volume_m3": float(mesh.air_volume()),
-        "weld": report.get("weld"),
-        "repair": report.get("repair"),
-        "leak": report.get("leak"),
-        "warnings": caught + report.get("warnings", []),
-        "materials_m2": dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
-        "labels": list(mesh.labels),
-        "floors": [g.to_dict() for g in nav.grids],
-        "placement": placement,
-        "placement_error": placement_error,
-    }
     if plot is not None:
         from sonicspec.export.plots import plot_floor_plan
 
         plot_floor_plan(mesh, nav, placement, plot, title=f"{spec.name}: {scene_id}")
-        facts["plot"] = str(plot)
-    return facts
+    return SceneFacts(
+        scene_id=scene_id, kind=report["kind"],
+        bounds_m=(tuple(lo.tolist()), tuple(hi.tolist())),
+        vertices=int(mesh.vertices.shape[0]), faces=int(mesh.faces.shape[0]),
+        simplify_tolerance_m=spec.acoustics.simplify_tolerance_m,
+        traced_faces=len(traced_faces), diffraction_edges=edges,
+        surface_area_m2=float(areas.sum()), air_volume_m3=float(mesh.air_volume()),
+        # the mesh step's report: untyped JSON (keys present as the step found them)
+        weld=report.get("weld"), repair=report.get("repair"), leak=report.get("leak"),
+        warnings=tuple(caught + report.get("warnings", [])),
+        materials_m2=dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
+        labels=tuple(mesh.labels), floors=tuple(nav.grids),
+        placement=placement, placement_error=placement_error,
+        plot=None if plot is None else str(plot))
 
 
 def _edge_choice(vertices: np.ndarray, faces: np.ndarray, max_edges: int,
-                 placement: dict[str, Any] | None) -> dict[str, Any]:
+                 placement: GroupPlacement | None) -> EdgeChoice:
     """The diffracting edges a group's RIRs would use (for the sampled group's microphone and
     RIR points, else by length and exposure), as the RIR facts report them."""
     from sonicspec.acoustics.paths.edges import diffracting_edges
 
     near = None
     if placement is not None:
-        sources = [*placement["speech"], placement.get("noise"), placement.get("music")]
-        near = np.array([*placement["mic_path_m"], *(p for s in sources if s is not None
-                                                     for p in s["rir_points_m"])],
-                        dtype=np.float64)
+        sources = [*placement.speech, placement.noise, placement.music]
+        near = np.array([*placement.mic_path_m, *(p for s in sources if s is not None
+                                                  for p in s.rir_points_m)], dtype=np.float64)
     cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                      vertices[faces[:, 2]] - vertices[faces[:, 0]])
     normals = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
@@ -131,61 +184,60 @@ def _leak_place(place: dict[str, Any]) -> str:
     return LeakPlace(**{**place, "where_m": tuple(place["where_m"])}).describe()
 
 
-def format_facts(facts: dict[str, Any]) -> str:
+def format_facts(facts: SceneFacts) -> str:
     """The facts as a short report for a terminal."""
-    lo, hi = facts["bounds_m"]
+    lo, hi = facts.bounds_m
     size = np.subtract(hi, lo)
     lines = [
-        f"scene {facts['scene_id']} ({facts['kind']}): {facts['faces']} faces, "
-        f"{facts['vertices']} vertices; the rir stage traces {facts['traced_faces']} "
-        f"(acoustics.simplify_tolerance_m {facts['simplify_tolerance_m']:g} m)",
+        f"scene {facts.scene_id} ({facts.kind}): {facts.faces} faces, "
+        f"{facts.vertices} vertices; the rir stage traces {facts.traced_faces} "
+        f"(acoustics.simplify_tolerance_m {facts.simplify_tolerance_m:g} m)",
         f"bounds [{', '.join(f'{v:.2f}' for v in lo)}] .. [{', '.join(f'{v:.2f}' for v in hi)}]"
         f" m (size {' x '.join(f'{v:.2f}' for v in size)} m)",
-        f"surface {facts['surface_area_m2']:.1f} m², air volume {facts['air_volume_m3']:.1f} m³",
+        f"surface {facts.surface_area_m2:.1f} m², air volume {facts.air_volume_m3:.1f} m³",
     ]
-    weld = facts.get("weld")
+    # weld, repair and leak: the mesh step's report as it stores it (JSON)
+    weld = facts.weld
     if weld is not None:
         lines.append(
             f"seams welded on load (weld_distance_m {weld['distance_m']:g} m): "
             f"{weld['merged_vertices']} vertices joined, {weld['t_junctions_stitched']} "
             f"T-junctions stitched; open edges {weld['open_edges_before']} -> "
             f"{weld['open_edges_after']}")
-    rep = facts["repair"]
+    rep = facts.repair
     if rep is not None:
         lines.append(
             f"repair: faces {rep['before']['faces']} -> {rep['after']['faces']}, merged "
             f"{rep['merged_vertices']} vertices, closed {rep['holes_closed']}/{rep['holes_found']}"
             f" holes, removed {rep['debris_components_removed']} debris pieces; watertight "
             f"{'yes' if rep['watertight'] else 'NO'}")
-    if facts["leak"] is not None:
-        leak = facts["leak"]
+    leak = facts.leak
+    if leak is not None:
         where = "; ".join(_leak_place(p) for p in leak.get("places", [])[:3])
         lines.append(f"leak test: {leak['fraction']:.4%} of {leak['rays']} rays from the "
                      f"{leak.get('origins', 'sampled')} air escape" + (f": {where}" if where
                                                                        else ""))
-    edges = facts.get("diffraction_edges")
+    edges = facts.diffraction_edges
     if edges is not None:
-        lines.append(f"diffraction: {edges['kept']} of {edges['found']} edges kept "
-                     f"({edges['rule']}); {edges['seams_left_out']} open edges left out as "
-                     "seams")
+        lines.append(f"diffraction: {edges.kept} of {edges.found} edges kept "
+                     f"({edges.rule}); {edges.seams_left_out} open edges left out as seams")
     lines.append("materials (area):")
-    total = sum(facts["materials_m2"].values()) or 1.0
-    for name, area in facts["materials_m2"].items():
+    total = sum(facts.materials_m2.values()) or 1.0
+    for name, area in facts.materials_m2.items():
         lines.append(f"  {name:<28} {area:9.1f} m²  {100 * area / total:5.1f} %")
-    for f in facts["floors"]:
-        lines.append(f"floor {f['floor']['index']} at z = {f['floor']['z_m']:.2f} m: walkable "
-                     f"{f['walkable_area_m2']:.1f} m² in {len(f['component_areas_m2'])} "
-                     "component(s)")
-    if facts["placement"] is not None:
-        p = facts["placement"]
-        lines.append(f"sampled group: mic at [{', '.join(f'{v:.2f}' for v in p['mic_m'])}], "
-                     + ", ".join(f"speaker {i + 1} walks {s['path_length_m']:.2f} m "
-                                 f"({len(s['rir_points_m'])} RIR points)"
-                                 for i, s in enumerate(p["speech"])))
+    for g in facts.floors:
+        lines.append(f"floor {g.floor.index} at z = {g.floor.z_m:.2f} m: walkable "
+                     f"{g.area_m2:.1f} m² in {len(g.component_areas_m2())} component(s)")
+    p = facts.placement
+    if p is not None:
+        lines.append(f"sampled group: mic at [{', '.join(f'{v:.2f}' for v in p.mic_m)}], "
+                     + ", ".join(f"speaker {i + 1} walks {s.path_length_m:.2f} m "
+                                 f"({len(s.rir_points_m)} RIR points)"
+                                 for i, s in enumerate(p.speech)))
     else:
-        lines.append(f"placement impossible: {facts['placement_error']}")
-    for w in facts["warnings"]:
+        lines.append(f"placement impossible: {facts.placement_error}")
+    for w in facts.warnings:
         lines.append(f"warning: {w}")
-    if "plot" in facts:
-        lines.append(f"floor plan: {facts['plot']}")
+    if facts.plot is not None:
+        lines.append(f"floor plan: {facts.plot}")
     return "\n".join(lines)

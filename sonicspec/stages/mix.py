@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 
 import numpy as np
 
@@ -44,7 +43,8 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
     signals: dict[str, np.ndarray] = {}
     gains: dict[str, float] = {}
     dry_gains: dict[str, float] = {}
-    report: dict[str, dict[str, Any]] = {}
+    levels: dict[str, tuple[str, float, float]] = {}
+    """Track -> (role, target, measured level), LUFS."""
     for track in render_group.tracks:
         name, role = track.name, track.role
         jitter = loud.jitter_lu
@@ -68,8 +68,7 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
                 limit = 10.0 ** (loud.peak_limit_dbfs / 20.0)
                 dry_gain = min(dry_gain, limit / float(np.max(np.abs(dry))))
             dry_gains[f"{name}_dry"] = dry_gain
-        report[name] = {"role": role, "target_lufs": target, "measured_lufs": measured,
-                        "measured_on": loud.stage}
+        levels[name] = (role, target, measured)
     speakers = [t.name for t in render_group.tracks if t.role == "speech"]
     available = [t.name for t in render_group.tracks if t.role != "speech"]
     try:
@@ -85,14 +84,14 @@ def mix_group(render_group: RenderGroup, arrays: dict[str, np.ndarray], params: 
     else:
         group_gain, peak = peak_guard(signals, gains, mixtures, loud.peak_limit_dbfs)
     final = {k: g * group_gain for k, g in gains.items()} | dry_gains
-    for name, entry in report.items():
-        entry["gain_db"] = _db(final[name])
-        entry["output_lufs"] = integrated_loudness(
+    components = {name: ComponentLevel(
+        role=role, target_lufs=target, measured_lufs=measured, measured_on=loud.stage,
+        gain_db=_db(final[name]), output_lufs=integrated_loudness(
             final[name] * (signals[name]), rate, where=f"group {group} {name}",
-            binaural=params.binaural and signals[name].shape[0] == 2)
+            binaural=params.binaural and signals[name].shape[0] == 2))
+        for name, (role, target, measured) in levels.items()}
     return MixGroup(group=group, gains=final, group_gain_db=_db(group_gain),
-                    peak_before_guard_dbfs=_db(peak),
-                    components={k: ComponentLevel(**v) for k, v in report.items()},
+                    peak_before_guard_dbfs=_db(peak), components=components,
                     mixtures=[Mixture(**m.to_dict()) for m in mixtures])
 
 

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import logging
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
+    RirFacts,
+    RirResult,
     SimulationSettings,
     acoustic_scene,
     check_inside,
@@ -28,6 +31,7 @@ from sonicspec.acoustics.engine import (
     simulate_rirs,
     with_diffraction_focus,
 )
+from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.image_sources import planar_regions
 from sonicspec.artifacts import (
@@ -48,11 +52,89 @@ log = logging.getLogger("sonicspec.stages.rir")
 
 
 def spec_materials(materials: MaterialsSpec | MaterialTable):
-    """The material library of a spec's ``materials`` section, custom ones added."""
-    return material_library(materials.library, materials.model_dump(mode="json")["custom"])
+    """The material library of a spec's ``materials`` section: custom ones added, every
+    surface's scattering replaced where ``scattering_override`` says."""
+    return material_library(materials.library,
+                            {k: m.model_dump(mode="json") for k, m in materials.custom.items()},
+                            materials.scattering_override)
 
 
-def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, dict[str, Any]]:
+@dataclass(frozen=True, eq=False)
+class RirReport:
+    """One RIR of ``sonicspec rir`` and what the command says about it: the engine's
+    :class:`~sonicspec.acoustics.engine.RirResult` (its facts and figures), the scene, the
+    warnings, and where the RIR and its plot were written. :meth:`to_dict` is what
+    ``--json`` prints, :meth:`format` the text."""
+
+    result: RirResult
+    scene_id: str
+    mesh_triangles: int
+    warnings: tuple[str, ...] = ()
+    materials_m2: dict[str, float] | None = None
+    """Surface area of each material (a scene built through the Python API), m²."""
+    output: str | None = None
+    plot: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The facts, JSON-ready (``sonicspec rir --json``)."""
+        out = {"scene_id": self.scene_id, **self.result.to_dict(),
+               "mesh_triangles": self.mesh_triangles}
+        if self.materials_m2 is not None:
+            out["materials_m2"] = self.materials_m2
+        out["warnings"] = list(self.warnings)
+        if self.output is not None:
+            out["output"] = self.output
+        if self.plot is not None:
+            out["plot"] = self.plot
+        return out
+
+    def format(self) -> str:
+        """The facts as a short report for a terminal."""
+        r = self.result
+        fig = r.figures
+
+        def num(v, fmt):
+            return "—" if v is None or not np.isfinite(v) else format(v, fmt)
+
+        def per_band(t30, edt, c50) -> list[str]:
+            return [f"{label:>10} " + " ".join(num(v, fmt) for v in values)
+                    for label, values, fmt in (("T30 (s)", t30, "7.3f"), ("EDT (s)", edt, "7.3f"),
+                                               ("C50 (dB)", c50, "7.2f"))]
+
+        samples = int(r.rir.shape[-1])
+        channels = int(r.rir.shape[0])
+        lines = [
+            f"RIR in {self.scene_id}: source {list(r.source_m)} -> mic {list(r.mic_m)} "
+            f"({r.distance_m:.2f} m), {channels} channel{'s' * (channels != 1)} x {samples} "
+            f"samples at {r.sample_rate_hz} Hz, {r.arrivals} early arrivals (image sources to "
+            f"order {r.image_source_order}), direct path {r.direct}",
+            f"mesh: {self.mesh_triangles:,} triangles, traced as {r.traced_faces:,} "
+            "(flat areas merged within acoustics.simplify_tolerance_m)",
+            *_material_lines(self.materials_m2),
+            f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig.bands_hz),
+            *per_band(fig.t30_s, fig.edt_s, fig.c50_db),
+        ]
+        if r.expected:  # the same fits on the energy the RIR was synthesised to have
+            lines.append("expected (the energy it was synthesised to have, without the noise "
+                         "draw):")
+            lines += per_band(*(np.array(r.expected[k], dtype=float)  # None -> NaN
+                                for k in ("t30_s", "edt_s", "c50_db")))
+        broadband = fig.broadband
+        lines += [
+            _tail_line(r.tail, fig.bands_hz, samples / r.sample_rate_hz),
+            f"broadband: T30 {num(broadband['t30_s'], '.3f')} s, EDT "
+            f"{num(broadband['edt_s'], '.3f')} s, C50 {num(broadband['c50_db'], '.2f')}"
+            f" dB, DRR {num(fig.drr_db, '.2f')} dB; escaped rays "
+            f"{r.escaped_ray_fraction:.2e}",
+        ]
+        if self.output is not None:
+            lines.append(f"written: {self.output}")
+        if self.plot is not None:
+            lines.append(f"plot: {self.plot}")
+        return "\n".join(lines)
+
+
+def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> RirReport:
     """One RIR in a spec's scene (``sonicspec rir``), and the facts to report with it."""
     from sonicspec.hashing import rng_for
     from sonicspec.stages.inspect import build_scene
@@ -76,10 +158,9 @@ def rir_from_spec(loaded, scene_id: str, source_m, mic_m) -> tuple[np.ndarray, d
     for w in caught:
         if not issubclass(w.category, SonicspecWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    facts = {"scene_id": scene_id, **result.to_dict(), "mesh_triangles": mesh.n_faces,
-             "warnings": scene_warnings + [str(w.message) for w in caught
-                                           if issubclass(w.category, SonicspecWarning)]}
-    return result.rir, facts
+    return RirReport(result, scene_id, mesh.n_faces, tuple(
+        scene_warnings + [str(w.message) for w in caught
+                          if issubclass(w.category, SonicspecWarning)]))
 
 
 def _material_lines(areas: dict[str, float] | None) -> list[str]:
@@ -91,60 +172,19 @@ def _material_lines(areas: dict[str, float] | None) -> list[str]:
                                       for name, area in areas.items())]
 
 
-def format_rir_facts(facts: dict[str, Any]) -> str:
-    fig = facts["figures"]
-
-    def num(v, fmt):
-        return "—" if v is None else format(v, fmt)
-
-    def per_band(figures: dict[str, Any]) -> list[str]:
-        return [f"{label:>10} " + " ".join(num(v, fmt) for v in figures[key])
-                for label, key, fmt in (("T30 (s)", "t30_s", "7.3f"), ("EDT (s)", "edt_s", "7.3f"),
-                                        ("C50 (dB)", "c50_db", "7.2f"))]
-
-    lines = [
-        f"RIR in {facts['scene_id']}: source {facts['source_m']} -> mic {facts['mic_m']} "
-        f"({facts['distance_m']:.2f} m), {facts['channels']} channel"
-        f"{'s' * (facts['channels'] != 1)} x {facts['samples']} samples at "
-        f"{facts['sample_rate_hz']} Hz, {facts['arrivals']} early arrivals (image sources to "
-        f"order {facts['image_source_order']}), direct path {facts['direct']}",
-        f"mesh: {facts['mesh_triangles']:,} triangles, traced as {facts['traced_triangles']:,} "
-        "(flat areas merged within acoustics.simplify_tolerance_m)",
-        *_material_lines(facts.get("materials_m2")),
-        f"{'band (Hz)':>10} " + " ".join(f"{b:>7g}" for b in fig["bands_hz"]),
-        *per_band(fig),
-    ]
-    if "expected" in facts:  # the same fits on the energy the RIR was synthesised to have
-        lines.append("expected (the energy it was synthesised to have, without the noise draw):")
-        lines += per_band(facts["expected"])
-    lines += [
-        _tail_line(facts),
-        f"broadband: T30 {num(fig['broadband']['t30_s'], '.3f')} s, EDT "
-        f"{num(fig['broadband']['edt_s'], '.3f')} s, C50 {num(fig['broadband']['c50_db'], '.2f')}"
-        f" dB, DRR {num(fig['drr_db'], '.2f')} dB; escaped rays "
-        f"{facts['escaped_ray_fraction']:.2e}",
-    ]
-    if "output" in facts:
-        lines.append(f"written: {facts['output']}")
-    if "plot" in facts:
-        lines.append(f"plot: {facts['plot']}")
-    return "\n".join(lines)
-
-
-def _tail_line(facts: dict[str, Any]) -> str:
+def _tail_line(tail: TailFacts | None, bands_hz, length_s: float) -> str:
     """How the RIR's length was chosen, on one line."""
-    tail = facts["tail"]
-    bands = facts["figures"]["bands_hz"]
-    rule = ("max_rir_length_s: auto, every band's decay 60 dB down" if tail["rule"] == "auto"
-            else f"max_rir_length_s: {tail['limit_s']:g}, every band's decay 60 dB down")
-    line = (f"length: {facts['samples'] / facts['sample_rate_hz']:.3f} s ({rule}, at most "
-            f"{tail['limit_s']:g} s)")
-    continued = [f"{b:g} Hz from {t:.2f} s" for b, t in zip(bands, tail["continued_from_s"],
+    if tail is None:
+        return f"length: {length_s:.3f} s"
+    rule = ("max_rir_length_s: auto, every band's decay 60 dB down" if tail.rule == "auto"
+            else f"max_rir_length_s: {tail.limit_s:g}, every band's decay 60 dB down")
+    line = f"length: {length_s:.3f} s ({rule}, at most {tail.limit_s:g} s)"
+    continued = [f"{b:g} Hz from {t:.2f} s" for b, t in zip(bands_hz, tail.continued_from_s,
                                                            strict=True) if t is not None]
     if continued:
         line += "; rays ran out, decay fitted to its last 20 dB continued: " + ", ".join(
             continued)
-    cut = [f"{b:g} Hz at {v:.0f} dB" for b, v in zip(bands, tail["level_at_limit_db"],
+    cut = [f"{b:g} Hz at {v:.0f} dB" for b, v in zip(bands_hz, tail.level_at_limit_db,
                                                    strict=True) if v is not None]
     if cut:
         line += "; cut at the limit: " + ", ".join(cut)
@@ -258,9 +298,9 @@ def run(ctx) -> None:
             choice = scene_edges(scene, settings.diffraction_max_edges,
                                  group_settings.diffraction_focus_m).choice()
             log.info("group %s: diffraction keeps %d of %d edges (%s; %d seam edges and %d "
-                     "buried wedges left out)", placement.group, choice["kept"],
-                     choice["found"], choice["rule"], choice["seams_left_out"],
-                     choice["buried_left_out"])
+                     "buried wedges left out)", placement.group, choice.kept,
+                     choice.found, choice.rule, choice.seams_left_out,
+                     choice.buried_left_out)
         rng = ctx.rng("rir", ctx.job.key, placement.group)
         results = []
         # A decay cut short by the longest RIR allowed is a warning in the job's log,
@@ -300,9 +340,9 @@ def run(ctx) -> None:
             paths = None
             if params.early_paths:
                 paths = f"{key}_paths"
-                from_mic = [f["early_arrivals"] for f in facts]
-                at_mic = [f["early_arrivals_at_mic"] for f in facts]
-                directional = microphone["kind"] != "mono"
+                from_mic = [f.early_arrivals for f in facts]
+                at_mic = [f.early_arrivals_at_mic for f in facts]
+                directional = params.microphone.kind != "mono"
                 src_m = np.asarray(sources[s][1]) if line is None else line.source_m
                 mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
                          if line is None else line.mic_m)
@@ -310,7 +350,7 @@ def run(ctx) -> None:
                 fine = refined_early_paths(
                     scene, group_settings, src_m, mic_m, from_mic, at_mic, regions=regions,
                     directional=directional,
-                    image_source_order=facts[0]["image_source_order"])
+                    image_source_order=facts[0].image_source_order)
                 if line is None:
                     found = PathSet.identify(fine.sources_m, fine.from_mic,
                                              at_mic=fine.at_mic if directional else None)
@@ -330,8 +370,8 @@ def run(ctx) -> None:
             entries.append(RirSource(
                 name=name, array=key, points=len(block),
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
-                direct=facts[0]["direct"], tail=facts[0]["tail"],
-                escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths,
+                direct=facts[0].direct, tail=facts[0].tail,
+                escaped_ray_fraction=facts[0].escaped_ray_fraction, paths=paths,
                 **_order_reached(facts, settings.image_source_order)))
         groups.append(RirGroup(group=placement.group, sources=entries,
                                diffraction_edges=choice))
@@ -343,45 +383,44 @@ def run(ctx) -> None:
         groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
 
 
-def _order_reached(facts: list[dict[str, Any]], asked: int) -> dict[str, Any]:
+def _order_reached(facts: list[RirFacts], asked: int) -> dict[str, Any]:
     """The image-source order a source's RIRs reached (the lowest over its points), the order
-    asked and why it is lower."""
-    low = min(facts, key=lambda f: f["image_source_order"])
-    return {"image_source_order": low["image_source_order"], "image_source_order_asked": asked,
-            "image_source_order_stopped": low.get("image_source_order_stopped")}
+    asked and why it is lower: :class:`RirSource`'s fields."""
+    low = min(facts, key=lambda f: f.image_source_order)
+    return dict(image_source_order=low.image_source_order, image_source_order_asked=asked,
+                image_source_order_stopped=low.image_source_order_stopped)
 
 
 def _warn_lower_order(scene_name: str, group: str, asked: int,
-                      facts: list[dict[str, Any]]) -> None:
+                      facts: list[RirFacts]) -> None:
     """One warning line (the job's log, which the build summary collects) when the image-source
     search stopped below the asked order for some of a group's RIRs."""
-    low = [f for f in facts if f["image_source_order"] < asked]
+    low = [f for f in facts if f.image_source_order < asked]
     if not low:
         return
-    worst = min(low, key=lambda f: f["image_source_order"])
+    worst = min(low, key=lambda f: f.image_source_order)
     log.warning("%s, group %s: image-source order %d asked, %d reached in %d "
                 "of %d RIRs (%s); the ray tracer covers the higher orders, less exactly; lower "
                 "acoustics.image_source_order for this scene or simplify its mesh "
                 "(acoustics.simplify_tolerance_m)", scene_name, group, asked,
-                worst["image_source_order"], len(low), len(facts),
-                worst.get("image_source_order_stopped") or "the candidate limit")
+                worst.image_source_order, len(low), len(facts),
+                worst.image_source_order_stopped or "the candidate limit")
 
 
-def fixed_cut_warning(facts: list[dict], bands_hz, where: str) -> str | None:
+def fixed_cut_warning(facts: list[RirFacts], bands_hz, where: str) -> str | None:
     """The job log's warning for RIRs a fixed ``max_rir_length_s`` cut while still decaying
     (the library reports such a cut in the facts only: the length was asked for; ``auto``
     cuts warn there). A dataset of such RIRs understates its reverberation, so the build
     summary and the report say so (issue 28 item 8)."""
-    tails = [f["tail"] for f in facts if f["tail"]["rule"] == "fixed"
-             and any(v is not None for v in f["tail"]["level_at_limit_db"])]
+    tails = [f.tail for f in facts if f.tail.cut_at_limit]
     if not tails:
         return None
-    worst = max(tails, key=lambda t: max(v for v in t["level_at_limit_db"] if v is not None))
+    worst = max(tails, key=lambda t: max(v for v in t.level_at_limit_db if v is not None))
     levels = ", ".join(f"{b:g} Hz at {v:.0f} dB" for b, v in
-                       zip(bands_hz, worst["level_at_limit_db"], strict=True) if v is not None)
-    t60 = [v for t in tails for v in t["fitted_t60_s"] if v is not None]
+                       zip(bands_hz, worst.level_at_limit_db, strict=True) if v is not None)
+    t60 = [v for t in tails for v in t.fitted_t60_s if v is not None]
     needs = f"; its decay needs about {max(t60):.1f} s" if t60 else ""
-    return (f"{where}: {len(tails)} of {len(facts)} RIRs cut at {worst['limit_s']:g} s "
+    return (f"{where}: {len(tails)} of {len(facts)} RIRs cut at {worst.limit_s:g} s "
             f"(acoustics.max_rir_length_s) while still decaying ({levels}, 60 dB down is the "
             f"end){needs}; T30 and the band figures understate it: raise "
             "acoustics.max_rir_length_s or set it to auto")

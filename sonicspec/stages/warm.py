@@ -56,7 +56,7 @@ def warm() -> None:
     points = np.array([[1.0, 1.0, 1.5], [1.25, 1.0, 1.5], [1.5, 1.0, 1.5]])
     rirs, facts = simulate_rirs(scene, np.array([3.0, 2.0, 1.2]), points, settings,
                                 np.random.default_rng(0), keep_arrivals=True)
-    paths = PathSet.identify(points, [f["early_arrivals"] for f in facts])
+    paths = PathSet.identify(points, [f.early_arrivals for f in facts])
     dry = np.random.default_rng(1).standard_normal(fs // 4)
     index = np.linspace(0.0, len(points) - 1.0, len(dry))
     bank = OctaveFilterBank(fs, settings.bands_hz)

@@ -43,7 +43,7 @@ import numpy as np
 
 from sonicspec.acoustics.arrivals import EnergyHistogram
 
-__all__ = ["DECAY_RANGE_DB", "FIT_RANGE_DB", "BandDecay", "TailReport", "band_decay",
+__all__ = ["DECAY_RANGE_DB", "FIT_RANGE_DB", "BandDecay", "TailFacts", "TailReport", "band_decay",
            "cut_warning", "shape_tail"]
 
 #: How far below its early level a band's decay must fall before the RIR may end, dB.
@@ -241,29 +241,77 @@ class TailReport:
         return [b for b, d in zip(self.bands_hz, self.decays, strict=True)
                 if d.continued_from_bin is not None]
 
+    def facts(self) -> TailFacts:
+        """The summary the RIR facts keep (:class:`TailFacts`), rounded as stored."""
+
+        def per_band(fn) -> tuple:
+            return tuple(fn(d) for d in self.decays)
+
+        return TailFacts(
+            rule=self.rule, limit_s=self.limit_s, limit_field=self.limit_field,
+            decay_end_s=round(self.end_s, 6),
+            decay_60db_s=per_band(lambda d: None if d.status in ("cut", "empty")
+                                  else round(d.end_bin * self.bin_s, 6)),
+            continued_from_s=per_band(lambda d: None if d.continued_from_bin is None
+                                      else round(d.continued_from_bin * self.bin_s, 6)),
+            level_at_limit_db=per_band(lambda d: None if d.level_at_end_db is None
+                                       else round(d.level_at_end_db, 2)),
+            fitted_t60_s=per_band(lambda d: round(-60.0 / d.slope_db_per_s, 4)
+                                  if d.slope_db_per_s and d.status in ("continued", "cut")
+                                  else None),
+        )
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the rule, the limit, where the last band's decay ends, and per band
-        the time its decay is 60 dB down (None: not within the limit), where a fitted
-        continuation starts (None: traced to the end), the level it reached where the limit
-        cut it, and the 60 dB time of the line fitted to its last 20 dB where that line was
-        used (a continuation, a cut)."""
+        """JSON-ready: :meth:`facts` as a dict."""
+        return self.facts().to_dict()
 
-        def per_band(fn) -> list:
-            return [fn(d) for d in self.decays]
 
-        return {
-            "rule": self.rule, "limit_s": self.limit_s, "limit_field": self.limit_field,
-            "decay_end_s": round(self.end_s, 6),
-            "decay_60db_s": per_band(lambda d: None if d.status in ("cut", "empty")
-                                     else round(d.end_bin * self.bin_s, 6)),
-            "continued_from_s": per_band(lambda d: None if d.continued_from_bin is None
-                                         else round(d.continued_from_bin * self.bin_s, 6)),
-            "level_at_limit_db": per_band(lambda d: None if d.level_at_end_db is None
-                                          else round(d.level_at_end_db, 2)),
-            "fitted_t60_s": per_band(lambda d: round(-60.0 / d.slope_db_per_s, 4)
-                                     if d.slope_db_per_s and d.status in ("continued", "cut")
-                                     else None),
-        }
+@dataclass(frozen=True)
+class TailFacts:
+    """How a RIR's length was chosen, as the RIR facts, the rir artifact and a dataset's
+    ``metadata.json`` (``rir_tail``) keep it: the rule, the limit, where the last band's decay
+    ends, and per band the time its decay is 60 dB down (None: not within the limit), where a
+    fitted continuation starts (None: traced to the end), the level it reached where the limit
+    cut it, and the 60 dB time of the line fitted to its last 20 dB where that line was used
+    (a continuation, a cut). A plain frozen dataclass, so the artifact models
+    (:mod:`sonicspec.artifacts`) validate and store it field by field.
+
+    Attributes
+    ----------
+    rule : {"auto", "fixed"}
+        ``max_rir_length_s: auto`` or a number of seconds.
+    limit_s : float
+        The longest RIR allowed, seconds.
+    limit_field : str
+        The spec field that sets it (``max_rir_cap_s`` or ``max_rir_length_s``).
+    decay_end_s : float
+        Where the last band's late decay ends, seconds (rounded to 1 µs).
+    decay_60db_s, continued_from_s, level_at_limit_db, fitted_t60_s : tuple of float or None
+        Per band: seconds, seconds, dB (0.01), seconds (0.1 ms).
+    """
+
+    rule: str
+    limit_s: float
+    limit_field: str
+    decay_end_s: float
+    decay_60db_s: tuple[float | None, ...]
+    continued_from_s: tuple[float | None, ...]
+    level_at_limit_db: tuple[float | None, ...]
+    fitted_t60_s: tuple[float | None, ...]
+
+    @property
+    def cut_at_limit(self) -> bool:
+        """A fixed limit cut some band while it still decayed (the rule ``auto`` warns
+        where it cuts; a number of seconds is taken as asked, and reported here)."""
+        return self.rule == "fixed" and any(v is not None for v in self.level_at_limit_db)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (lists for the per-band tuples)."""
+        return {"rule": self.rule, "limit_s": self.limit_s, "limit_field": self.limit_field,
+                "decay_end_s": self.decay_end_s, "decay_60db_s": list(self.decay_60db_s),
+                "continued_from_s": list(self.continued_from_s),
+                "level_at_limit_db": list(self.level_at_limit_db),
+                "fitted_t60_s": list(self.fitted_t60_s)}
 
 
 def shape_tail(histogram: EnergyHistogram, bands_hz: Sequence[float], rule: str,

@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from sonicspec.errors import AcousticsError
 
 __all__ = ["HIDDEN_WEIGHT", "MIN_TURN_DEG", "NEAR_SCALE_M", "DiffractingEdges",
-           "diffracting_edges", "edge_importance"]
+           "EdgeChoice", "diffracting_edges", "edge_importance"]
 
 #: Smallest turn of the surface (θ_w − π, degrees) that counts as a diffracting edge.
 MIN_TURN_DEG = 15.0
@@ -159,18 +160,52 @@ class DiffractingEdges:
                                 self.n_found - gone, importance, self.near_points, self.seams,
                                 self.by_sight, self.buried + gone)
 
-    def choice(self) -> dict:
-        """How the edges were chosen, JSON-ready (the RIR facts' ``diffraction_edges``)."""
+    def choice(self) -> EdgeChoice:
+        """How the edges were chosen (the RIR facts' ``diffraction_edges``)."""
         kept = len(self)
         sight = (f" x ({HIDDEN_WEIGHT:g} + {1 - HIDDEN_WEIGHT:g} x share of them in sight)"
                  if self.by_sight else "")
         rule = ("importance: length x exposure / (1 m + distance to the nearest of "
                 f"{self.near_points} source and receiver positions)^2{sight}"
                 if self.near_points else "importance: length x exposure")
-        return {"found": int(self.n_found), "kept": kept, "rule": rule,
-                "near_points": int(self.near_points), "seams_left_out": int(self.seams),
-                "buried_left_out": int(self.buried),
-                "length_kept_m": float(self.length_m.sum()) if kept else 0.0}
+        return EdgeChoice(found=int(self.n_found), kept=kept, rule=rule,
+                          near_points=int(self.near_points), seams_left_out=int(self.seams),
+                          buried_left_out=int(self.buried),
+                          length_kept_m=float(self.length_m.sum()) if kept else 0.0)
+
+
+@dataclass(frozen=True)
+class EdgeChoice:
+    """How a set of diffracting edges was chosen, as the RIR facts and the rir artifact keep
+    it (a plain frozen dataclass: the artifact models validate and store it field by field).
+
+    Attributes
+    ----------
+    found : int
+        Diffracting edges of the scene (seams and buried wedges not counted).
+    kept : int
+        Edges kept (at most ``acoustics.diffraction_max_edges``).
+    rule : str
+        The importance the kept ones rank highest by.
+    near_points : int
+        Source and receiver positions the importance measured distances to (0: none).
+    seams_left_out, buried_left_out : int
+        Edges left out as seams between coplanar faces, and as wedges buried in geometry.
+    length_kept_m : float
+        Total length of the kept edges, metres.
+    """
+
+    found: int
+    kept: int
+    rule: str
+    near_points: int
+    seams_left_out: int
+    buried_left_out: int
+    length_kept_m: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return dict(vars(self))
 
 
 def _empty(n_found: int = 0, near_points: int = 0, seams: int = 0) -> DiffractingEdges:
