@@ -22,6 +22,7 @@ from sonicspec.acoustics.engine import (
     check_receiver,
     early_part,
     load_hrirs,
+    needs_directions,
     refined_early_paths,
     rir_results,
     scene_edges,
@@ -302,7 +303,7 @@ def run(ctx) -> None:
                 paths = f"{key}_paths"
                 from_mic = [f["early_arrivals"] for f in facts]
                 at_mic = [f["early_arrivals_at_mic"] for f in facts]
-                directional = microphone["kind"] != "mono"
+                directional = needs_directions(microphone)
                 src_m = np.asarray(sources[s][1]) if line is None else line.source_m
                 mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
                          if line is None else line.mic_m)
