@@ -65,6 +65,7 @@ __all__ = [
     "RirResult",
     "SimulationSettings",
     "acoustic_scene",
+    "capsule_facts",
     "check_inside",
     "check_receiver",
     "diffraction_arrivals",
@@ -836,6 +837,27 @@ def microphone_capsules(microphone: Mapping[str, Any]):
     axes = np.array([_capsule_axis(c, o) for c, o in zip(specs, offsets, strict=True)])
     alphas = np.array([pattern_alpha(c.get("pattern", "omni")) for c in specs])
     return Capsules(offsets, axes, alphas)
+
+
+def capsule_facts(microphone: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The microphone's capsules as plain data, in its own frame: ``device`` (the preset or
+    None), ``sphere_radius_m`` (None in free field) and ``capsules``, per channel a
+    ``position_m``, a ``pattern`` name and an ``axis`` (rounded to 1 µm / 1e-6); None when
+    every capsule is omni in free field and no device is named (nothing to record)."""
+    from sonicspec.acoustics.receivers.capsules import PATTERNS
+
+    caps = microphone_capsules(microphone)
+    if caps is None or (caps.omni and microphone["kind"] != "device"):
+        return None
+    names = {alpha: name for name, alpha in PATTERNS.items()}
+
+    def vec(v: np.ndarray) -> list[float]:
+        return [round(float(x), 6) + 0.0 for x in v]
+
+    return {"device": microphone.get("device"), "sphere_radius_m": caps.sphere_radius_m,
+            "capsules": [{"position_m": vec(p), "pattern": names[float(a)], "axis": vec(u)}
+                         for p, a, u in zip(caps.offsets_m, caps.alphas, caps.axes,
+                                            strict=True)]}
 
 
 def scene_capsules(microphone: Mapping[str, Any]):

@@ -18,6 +18,7 @@ from sonicspec import artifacts
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
+    capsule_facts,
     check_inside,
     check_receiver,
     early_part,
@@ -341,7 +342,8 @@ def run(ctx) -> None:
         if cut:
             log.warning("%s", cut)
     ctx.write(arrays, artifacts.encode("rir", RirData(
-        groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
+        groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz,
+        capsules=capsule_facts(microphone))))
 
 
 def _order_reached(facts: list[dict[str, Any]], asked: int) -> dict[str, Any]:
