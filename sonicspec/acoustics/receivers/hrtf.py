@@ -575,8 +575,12 @@ def sphere_responses(capsules: Capsules, freqs_hz: np.ndarray, sample_rate_hz: f
     cos_t = capsules.axes @ np.asarray(directions, dtype=np.float64).reshape(-1, 3).T  # (M, N)
     tau = woodworth_delays_s(cos_t, radius, speed_of_sound_m_s)
     alpha = shadow_alpha(cos_t)
-    return (np.exp(-2j * math.pi * f[:, None, None] * tau[None])
-            * (lp[:, None, None] + alpha[None] * hp[:, None, None]))
+    # e^{−jωτ} from its cosine and sine (numpy's complex exp is several times slower)
+    phase = (2 * math.pi) * f[:, None, None] * tau[None]
+    delay = np.empty(phase.shape, dtype=np.complex128)
+    delay.real = np.cos(phase)
+    delay.imag = -np.sin(phase)
+    return delay * (lp[:, None, None] + alpha[None] * hp[:, None, None])
 
 
 def sphere_cross_spectra(capsules: Capsules, freqs_hz: np.ndarray, sample_rate_hz: float,
