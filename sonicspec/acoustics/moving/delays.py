@@ -664,7 +664,22 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             path(out[0, start:])
             continue
         mirror = None if edge else _image_map(paths, k, points, receiver.center_m)
-        if receiver.kind == "array" and mirror is not None and receiver.capsule_axes is None:
+        capsule_gains = None
+        if receiver.kind == "array" and receiver.capsule_axes is not None and not static:
+            # Directional capsules: gains from directions every _GAIN_STEP samples, linear
+            # between (a direction turns by a fraction of a degree in 2 ms of walking).
+            at = _coarse_rows(stop - start)
+            if mirror is not None:
+                d_at = np.empty((at.size, 3))
+                image_directions(np.ascontiguousarray(source[at]), paths.images_m[k], mirror,
+                                 d_at)
+            else:
+                d_at = _directions_at(paths.directions[k], lo[part][at], hi[part][at],
+                                      frac[part][at], False)
+            capsule_gains = _interp_rows(receiver.capsule_gains(d_at), at, stop - start)
+            d = (None if mirror is not None or not np.any(receiver.offsets_m)
+                 else _interp_rows(d_at, at, stop - start))  # for the capsules' leads
+        elif receiver.kind == "array" and mirror is not None and receiver.capsule_axes is None:
             d = None  # each capsule hears its own image: no direction needed
         elif mirror is not None:  # exact: the direction the image sees the source in, mapped back
             away = np.atleast_2d(source)
@@ -704,11 +719,13 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 out[ear, start:] += both[0]
                 shaded[ear, start:] += both[1]
         else:
-            gains = receiver.capsule_gains(d)
+            gains = capsule_gains if capsule_gains is not None else receiver.capsule_gains(d)
             for m, offset in enumerate(receiver.offsets_m):
                 g = 1.0 if gains is None else gains[:, m]
                 if mirror is not None:  # the capsule's own image: exact
                     path(out[m, start:], g, image=paths.images_m[k] + mirror @ offset)
+                elif gains is not None and not np.any(offset):  # a capsule at the centre
+                    path(out[m, start:], g)
                 else:
                     lead = -np.einsum("ij,j->i", d, offset) / speed_of_sound_m_s
                     path(out[m, start:], g, extra_delay_s=np.broadcast_to(lead, x.shape))
@@ -729,6 +746,21 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
 #: Directions are read every this many samples for the HRIR weights (linear between):
 #: 2 ms at 16 kHz, where a source walking 1 m from the head turns by 0.2°.
 _HRIR_STEP = 32
+#: ... and for directional capsules' gains (:meth:`Receiver.capsule_gains`).
+_GAIN_STEP = 32
+
+
+def _coarse_rows(n: int) -> np.ndarray:
+    """Every ``_GAIN_STEP``-th of ``n`` rows, and the last."""
+    at = np.arange(0, n, _GAIN_STEP)
+    return at if at[-1] == n - 1 else np.append(at, n - 1)
+
+
+def _interp_rows(values: np.ndarray, at: np.ndarray, n: int) -> np.ndarray:
+    """``values`` ``(len(at), C)`` given at rows ``at``, linear in between: ``(n, C)``."""
+    rows = np.arange(n)
+    return np.stack([np.interp(rows, at, values[:, c]) for c in range(values.shape[1])],
+                    axis=1)
 
 
 def _hrir_accumulate(buffers: dict[int, np.ndarray], y: np.ndarray, local: np.ndarray,
