@@ -22,9 +22,10 @@ form (``r = p_i − p_j``, ``x = k|r|``, ``r̂ = r/|r|``, ``b = 1 − a``, ``j_n
            + b_i b_j [(u_i·u_j) j1(x)/x − (u_i·r̂)(u_j·r̂) j2(x)],
 
 from ``⟨e^{jq·d}⟩ = j0``, ``⟨d e^{jq·d}⟩ = j j1 q̂`` and ``⟨d dᵀ e^{jq·d}⟩ = (j1/q) I − j2 q̂q̂ᵀ``
-(derivatives of ``j0(|q|)``; :func:`diffuse_cross_spectra_numeric` checks it by averaging over a
-lattice). Its diagonal is the pattern's diffuse-field power ``a² + b²/3`` (a cardioid hears a
-third of a diffuse field's energy, −4.8 dB; its random-energy efficiency). Omni capsules give
+(derivatives of ``j0(|q|)``; tested against the quadrature of
+:func:`sonicspec.acoustics.theory.diffuse_cross_spectrum_quadrature`). Its diagonal is the
+pattern's diffuse-field power ``a² + b²/3`` (a cardioid hears a third of a diffuse field's
+energy, −4.8 dB; its random-energy efficiency). Omni capsules give
 ``sinc(kd)``, what :func:`~sonicspec.acoustics.receivers.arrays.diffuse_coherence` mixes.
 """
 
