@@ -394,7 +394,9 @@ def compute_rir(scene: Scene, source: Sequence[float], mic: Sequence[float],
         One of the spec's microphone models (``MonoMicSpec``, ``AmbisonicsMicSpec``, ...) or
         its fields as a mapping, e.g. ``{"kind": "ambisonics", "order": 1}`` or
         ``{"kind": "binaural"}`` (the rigid-sphere head; ``{"kind": "binaural", "hrtf":
-        {"kind": "sofa", "path": "subject.sofa"}}`` reads a SOFA file). Default: mono.
+        {"kind": "sofa", "path": "subject.sofa"}}`` reads a SOFA file), directional capsules
+        (``{"kind": "mono", "capsule": {"pattern": "cardioid"}}``) or a device preset
+        (``{"kind": "device", "device": "em32"}``). Default: mono.
     seed : int or numpy.random.Generator
         The simulation's only randomness (rays, the late noise): the same seed, settings and
         scene give the same bytes.

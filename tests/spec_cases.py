@@ -99,6 +99,12 @@ CASES = [
     ("mic-kind", "kind: circular_array", "kind: circular", "microphone.kind", 21, True),
     ("mic-one-capsule", "  n: 4", "  n: 1", "microphone.n", 22, True),
     ("mic-radius-zero", "radius_m: 0.05", "radius_m: 0", "microphone.radius_m", 23, True),
+    ("mic-capsule-pattern", "radius_m: 0.05", "radius_m: 0.05\n  capsule: {pattern: shotgun}",
+     "microphone.capsule.pattern", 24, True),
+    ("mic-capsule-axis-and-azimuth", "radius_m: 0.05", "radius_m: 0.05\n  capsule: {pattern: "
+     "cardioid, axis: [1, 0, 0], azimuth_deg: 30}", "microphone.capsule", 24, False),
+    ("mic-device-unknown", "kind: circular_array\n  n: 4\n  radius_m: 0.05",
+     "kind: device\n  device: echo_dot", "microphone.device", 22, True),
     ("mic-line-open", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: line, start_m: [1, 1, "
      "1.5]}", "microphone.trajectory.end_m", 24, True),
     ("mic-shortest-path", "radius_m: 0.05", "radius_m: 0.05\n  trajectory: {kind: shortest_path}",

@@ -25,9 +25,10 @@ source positions, with the subpackage that does each step::
                 paths as time-varying            band-shaped noise (mono)
                 delays while a source            arrays: capsule delays; ambisonics
                 or the microphone                hrtf: sphere head, SOFA HRIRs (binaural)
-                moves (Doppler; the              → RIR (channels, samples)
-                render stage's                   → metrics: T30, EDT, C50, DRR
-                ``interpolation: paths``)
+                moves (Doppler; the              capsules: first-order patterns
+                render stage's                   devices: presets (arrays, em32)
+                ``interpolation: paths``)        → RIR (channels, samples)
+                                                 → metrics: T30, EDT, C50, DRR
 
 Shared basics at the top: :mod:`.bands` (octave bands, a filter bank that sums to one),
 :mod:`.air` (ISO 9613-1), :mod:`.arrivals` (the result types every step hands on),

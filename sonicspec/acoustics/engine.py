@@ -8,7 +8,11 @@ so they are computed per position. Each position's RIR is then synthesised
 
 Receivers: mono, linear/circular/custom arrays and ambisonics
 (:mod:`sonicspec.acoustics.receivers.arrays`), and binaural through the rigid-sphere head or a
-measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.receivers.hrtf`). A receiver is
+measured HRIR set read from a SOFA file (:mod:`sonicspec.acoustics.receivers.hrtf`); capsules
+of mono microphones and arrays with first-order patterns
+(:mod:`sonicspec.acoustics.receivers.capsules`), and device presets
+(:mod:`sonicspec.acoustics.receivers.devices`: free-field arrays, or capsules on a rigid
+sphere rendered by the sphere head's model). A receiver is
 described by a mapping with the spec's microphone fields (``{"kind": "ambisonics", "order":
 1, ...}``, what ``MicrophoneSpec.model_dump()`` gives).
 
@@ -61,15 +65,19 @@ __all__ = [
     "RirResult",
     "SimulationSettings",
     "acoustic_scene",
+    "capsule_facts",
     "check_inside",
     "check_receiver",
     "diffraction_arrivals",
     "early_part",
     "late_envelope",
     "load_hrirs",
+    "microphone_capsules",
+    "needs_directions",
     "ray_trace_settings",
     "receiver_renderer",
     "rir_results",
+    "scene_capsules",
     "scene_edges",
     "simulate_rirs",
     "traced_geometry",
@@ -324,7 +332,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     air = settings.air()
     regions = regions if regions is not None else planar_regions(scene)
     early = early_arrivals(scene, mic, points, settings, regions,
-                           directional=microphone["kind"] != "mono")
+                           directional=needs_directions(microphone))
     traces = trace_rays(scene, mic, points, rng,
                         ray_trace_settings(settings, early.image_source_order),
                         air, n_threads=n_threads, progress=progress)
@@ -560,6 +568,16 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
 
     bank = OctaveFilterBank(settings.sample_rate_hz, settings.bands_hz)
     kind = microphone["kind"]
+    capsules = scene_capsules(microphone)
+    if capsules is not None and capsules.sphere_radius_m is not None:
+        from sonicspec.acoustics.receivers.hrtf import SphereHead, sphere_capsules_early
+
+        return sphere_capsules_early(arrivals, SphereHead(head_radius_m=capsules.sphere_radius_m),
+                                     capsules.axes, bank, n_samples,
+                                     speed_of_sound_m_s=settings.speed_of_sound_m_s)
+    if capsules is not None:
+        return array_early(arrivals, capsules.offsets_m, bank, n_samples,
+                           settings.speed_of_sound_m_s, capsules=capsules)
     if kind == "mono":
         return synthesize_early(arrivals, bank, n_samples)[None, :]
     if kind == "ambisonics":
@@ -781,6 +799,16 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
     common = {"max_length_s": settings.rir_limit_s, "bands_hz": settings.bands_hz}
     fs = settings.sample_rate_hz
     kind = microphone["kind"]
+    capsules = scene_capsules(microphone)
+    if capsules is not None and capsules.sphere_radius_m is not None:
+        from sonicspec.acoustics.receivers.hrtf import synthesize_sphere_array_rir
+
+        return lambda a, h, rng: synthesize_sphere_array_rir(
+            a, h, capsules, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s, **common)
+    if capsules is not None:  # directional capsules in free field (a mono one too)
+        return lambda a, h, rng: synthesize_array_rir(
+            a, h, capsules.offsets_m, fs, rng, speed_of_sound_m_s=settings.speed_of_sound_m_s,
+            capsules=capsules, **common)
     if kind == "mono":
         return lambda a, h, rng: synthesize_rir(a, h, fs, rng, **common)[None, :]
     if kind == "ambisonics":
@@ -810,16 +838,96 @@ def receiver_renderer(microphone: Mapping[str, Any], settings: SimulationSetting
 def array_offsets(microphone: Mapping[str, Any]) -> np.ndarray:
     """Where an array microphone's capsules are, ``(M, 3)`` offsets from its centre in the
     scene's frame, metres."""
-    from sonicspec.acoustics.receivers.arrays import capsule_offsets
+    from sonicspec.acoustics.receivers.arrays import capsule_offsets, rotation
 
+    if microphone["kind"] == "device":
+        return microphone_capsules(microphone).rotated(
+            rotation(microphone["yaw_deg"], microphone["pitch_deg"])).offsets_m
     return capsule_offsets(
         microphone["kind"], n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
         radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()),
         yaw_deg=microphone["yaw_deg"], pitch_deg=microphone["pitch_deg"])
 
 
+def _capsule_axis(capsule: Mapping[str, Any], offset: np.ndarray) -> np.ndarray:
+    """A capsule's axis in the array's frame from the spec's ``capsule`` fields."""
+    from sonicspec.acoustics.receivers.capsules import unit_axis
+
+    if capsule.get("axis") is not None:
+        axis = np.asarray(capsule["axis"], dtype=np.float64)
+        return axis / np.linalg.norm(axis)
+    base = 0.0
+    if capsule.get("facing", "front") == "outward" and np.hypot(offset[0], offset[1]) > 1e-9:
+        base = float(np.degrees(np.arctan2(offset[1], offset[0])))
+    return unit_axis(base + float(capsule.get("azimuth_deg", 0.0)),
+                     float(capsule.get("elevation_deg", 0.0)))
+
+
+def microphone_capsules(microphone: Mapping[str, Any]):
+    """The :class:`~sonicspec.acoustics.receivers.capsules.Capsules` of a mono, array or
+    device microphone (the spec's fields) in its own frame (not yet turned by its yaw and
+    pitch): offsets, axes and patterns; a device's from its preset
+    (:func:`~sonicspec.acoustics.receivers.devices.device`). None for binaural and
+    ambisonic receivers."""
+    from sonicspec.acoustics.receivers.arrays import capsule_offsets
+    from sonicspec.acoustics.receivers.capsules import Capsules, pattern_alpha
+    from sonicspec.acoustics.receivers.devices import device
+
+    kind = microphone["kind"]
+    if kind == "device":
+        return device(microphone["device"]).capsules
+    if kind not in ("mono", "linear_array", "circular_array", "custom"):
+        return None
+    offsets = capsule_offsets(
+        kind, n=microphone.get("n", 0), spacing_m=microphone.get("spacing_m", 0.0),
+        radius_m=microphone.get("radius_m", 0.0), positions_m=microphone.get("positions_m", ()))
+    specs = microphone.get("capsules") or [microphone.get("capsule") or {}] * len(offsets)
+    axes = np.array([_capsule_axis(c, o) for c, o in zip(specs, offsets, strict=True)])
+    alphas = np.array([pattern_alpha(c.get("pattern", "omni")) for c in specs])
+    return Capsules(offsets, axes, alphas)
+
+
+def capsule_facts(microphone: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The microphone's capsules as plain data, in its own frame: ``device`` (the preset or
+    None), ``sphere_radius_m`` (None in free field) and ``capsules``, per channel a
+    ``position_m``, a ``pattern`` name and an ``axis`` (rounded to 1 µm / 1e-6); None when
+    every capsule is omni in free field and no device is named (nothing to record)."""
+    from sonicspec.acoustics.receivers.capsules import PATTERNS
+
+    caps = microphone_capsules(microphone)
+    if caps is None or (caps.omni and microphone["kind"] != "device"):
+        return None
+    names = {alpha: name for name, alpha in PATTERNS.items()}
+
+    def vec(v: np.ndarray) -> list[float]:
+        return [round(float(x), 6) + 0.0 for x in v]
+
+    return {"device": microphone.get("device"), "sphere_radius_m": caps.sphere_radius_m,
+            "capsules": [{"position_m": vec(p), "pattern": names[float(a)], "axis": vec(u)}
+                         for p, a, u in zip(caps.offsets_m, caps.alphas, caps.axes,
+                                            strict=True)]}
+
+
+def scene_capsules(microphone: Mapping[str, Any]):
+    """:func:`microphone_capsules` turned into the scene's frame by the microphone's yaw and
+    pitch; None where the receiver has no capsules or every capsule is omni in free field
+    (the plain array renderer's case, bit for bit as before capsules had patterns)."""
+    from sonicspec.acoustics.receivers.arrays import rotation
+
+    capsules = microphone_capsules(microphone)
+    if capsules is None or capsules.omni:
+        return None
+    return capsules.rotated(rotation(microphone["yaw_deg"], microphone["pitch_deg"]))
+
+
+def needs_directions(microphone: Mapping[str, Any]) -> bool:
+    """Whether the receiver needs each path's direction of arrival: all but a mono
+    microphone with an omni capsule."""
+    return microphone["kind"] != "mono" or scene_capsules(microphone) is not None
+
+
 PATH_RECEIVERS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
-                  "binaural")
+                  "binaural", "device")
 """Receivers whose early paths a moving source's renderer follows (``keep_arrivals``):
 every kind (binaural with the sphere head or a SOFA HRTF set)."""
 
@@ -834,7 +942,7 @@ def sphere_head(microphone: Mapping[str, Any]):
 
 
 RENDERED_KINDS = ("mono", "linear_array", "circular_array", "custom", "ambisonics",
-                  "binaural")
+                  "binaural", "device")
 
 
 def load_hrirs(path: str | Path) -> HrirSet:

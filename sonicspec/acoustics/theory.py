@@ -26,6 +26,14 @@
   a point source, Biot–Tolstoy–Medwin in time (:func:`wedge_diffraction_ir`) and its Fourier
   transform, Macdonald's solution (:func:`wedge_diffraction_spectrum`), with the geometric field
   and Keller's asymptote. The reference edge diffraction is measured against (issue 19).
+* First-order microphone capsules (:func:`first_order_gain`): a plane wave from angle ``θ`` off
+  the axis is heard with ``a + (1 − a) cos θ``, exactly (an ideal pressure/pressure-gradient
+  capsule, the same at every frequency); a cardioid (``a = ½``) is silent at 180°, a
+  figure-eight (``a = 0``) at 90°. The diffuse field such capsules hear
+  (:func:`diffuse_cross_spectrum_quadrature`): the average over the sphere of
+  ``g_i g_j e^{jk d·(p_i − p_j)}`` by Gauss–Legendre quadrature in ``cos θ`` and the trapezoid
+  rule in azimuth (exact for the band-limited integrand as the orders grow), the reference the
+  closed form of :mod:`~sonicspec.acoustics.receivers.capsules` is measured against (issue 30).
 """
 
 from __future__ import annotations
@@ -673,3 +681,40 @@ def keller_wedge_diffraction(wedge: Wedge, source_m, receiver_m, frequencies_hz,
                                                              * sin_b0) * bracket
     incident = np.exp(-1j * k * s_src) / (4 * math.pi * s_src)
     return incident * d * math.sqrt(s_src / (s_rcv * (s_src + s_rcv))) * np.exp(-1j * k * s_rcv)
+
+
+# --- first-order capsules (issue 30) ----------------------------------------------------------
+
+def first_order_gain(alpha, theta_rad):
+    """The gain of an ideal first-order capsule, ``a + (1 − a) cos θ``, for a plane wave
+    ``θ`` radians off its axis (``a``: 1 omni, ½ cardioid, 0 figure-eight)."""
+    a = np.asarray(alpha, dtype=np.float64)
+    if np.any((a < 0) | (a > 1)):
+        raise AcousticsError(f"alpha: expected 0 <= a <= 1, got {alpha!r}")
+    return a + (1.0 - a) * np.cos(np.asarray(theta_rad, dtype=np.float64))
+
+
+def diffuse_cross_spectrum_quadrature(offsets_m, axes, alphas, frequencies_hz, *,
+                                      n_polar: int = 64, n_azimuth: int = 128,
+                                      speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
+                                      ) -> np.ndarray:
+    """``(F, M, M)``: ``(1/4π) ∮ g_i(d) g_j(d) e^{jk d·(p_i − p_j)} dΩ`` for first-order
+    capsules at ``offsets_m`` ``(M, 3)`` with unit ``axes`` ``(M, 3)`` and omni parts
+    ``alphas`` ``(M,)``: the cross-spectrum of a spherically isotropic field of unit power
+    (per direction, a plane wave of random phase). Gauss–Legendre nodes in ``cos θ``
+    (``n_polar``), equally spaced azimuths (``n_azimuth``)."""
+    p = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    a = np.asarray(alphas, dtype=np.float64).reshape(-1)
+    z, wz = np.polynomial.legendre.leggauss(n_polar)
+    phi = 2 * math.pi * np.arange(n_azimuth) / n_azimuth
+    rho = np.sqrt(1 - z**2)
+    d = np.stack([np.outer(rho, np.cos(phi)), np.outer(rho, np.sin(phi)),
+                  np.repeat(z[:, None], n_azimuth, axis=1)], axis=-1).reshape(-1, 3)
+    w = np.repeat(wz / 2, n_azimuth) / n_azimuth  # sums to one
+    g = a[:, None] + (1 - a[:, None]) * (u @ d.T)  # (M, N)
+    k = 2 * math.pi * np.asarray(frequencies_hz, dtype=np.float64).reshape(-1) \
+        / speed_of_sound_m_s
+    h = g[None] * np.exp(1j * k[:, None, None] * (p @ d.T)[None])  # (F, M, N)
+    return (h * w) @ np.conj(np.swapaxes(h, 1, 2))

@@ -40,7 +40,7 @@ import json
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 
 from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
@@ -270,6 +270,18 @@ class RirData(_Data):
     groups: list[RirGroup]
     bands_hz: list[float]
     sample_rate_hz: int
+    capsules: dict[str, Any] | None = None
+    """The microphone's capsules (:func:`sonicspec.acoustics.engine.capsule_facts`: device,
+    sphere radius, per channel position, pattern and axis in the microphone's frame) when
+    any is directional, on a sphere or from a device; left out of the data when None, so
+    omni arrays keep their bytes."""
+
+    @model_serializer(mode="wrap")
+    def _omit_capsules(self, handler: Any) -> Any:
+        data = handler(self)
+        if isinstance(data, dict) and data.get("capsules", 0) is None:
+            del data["capsules"]
+        return data
 
 
 # ------------------------------------------------------------------------------ render

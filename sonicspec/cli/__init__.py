@@ -6,6 +6,7 @@ One module per command group; each registers its commands' arguments beside thei
 * ``plan``  -- ``plan`` (the jobs a spec compiles to)
 * ``build`` -- ``build``, ``job``, ``verify`` (building through Snakemake, checking a store)
 * ``scene`` -- ``scene inspect``, ``rir`` (looking at a room)
+* ``microphones`` -- ``microphones`` (the device presets and their layouts)
 * ``data``  -- ``report``, ``evaluate``, ``export`` (using a built dataset)
 * ``common`` -- exit codes and the steps the groups share (load a spec, compile, preflight)
 
@@ -21,13 +22,13 @@ import sys
 from collections.abc import Sequence
 
 from sonicspec import __version__
-from sonicspec.cli import build, data, plan, scene, spec
+from sonicspec.cli import build, data, microphones, plan, scene, spec
 from sonicspec.cli.common import EXIT_FAILURE, EXIT_INVALID
 
 # The commands in the order ``sonicspec --help`` lists them.
 COMMANDS = (spec.add_validate, spec.add_schema, spec.add_init, plan.add_plan, build.add_build,
-            scene.add_scene, scene.add_rir, data.add_report, build.add_job, build.add_verify,
-            data.add_evaluate, data.add_export)
+            scene.add_scene, scene.add_rir, microphones.add_microphones, data.add_report,
+            build.add_job, build.add_verify, data.add_evaluate, data.add_export)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -145,6 +145,32 @@ class MixtureRecord(_Record):
     file: str = Field(description="Its audio file, relative to the dataset folder.")
 
 
+class CapsuleRecord(BaseModel):
+    """One capsule of the microphone, in its own frame (x where it faces, y its left, z up:
+    turned into the scene by its yaw and pitch, ``microphone_track``'s ``yaw_deg`` when it
+    moves)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    position_m: Vector3 = Field(description="Offset from the microphone's centre, metres.")
+    pattern: str = Field(description=(
+        "First-order pattern a + (1 - a) cos(theta): omni, subcardioid, cardioid, "
+        "supercardioid, hypercardioid or figure_eight (ideal: the same at every frequency)."))
+    axis: Vector3 = Field(description="Unit vector the capsule points to.")
+
+
+class CapsulesRecord(BaseModel):
+    """The microphone's capsules when they are not all omni in free field, or a device."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    device: str | None = Field(description="The device preset, if the spec named one.")
+    sphere_radius_m: float | None = Field(description=(
+        "Radius of the rigid sphere the capsules sit on (rendered with the sphere head's "
+        "model), metres; null in free field."))
+    capsules: list[CapsuleRecord] = Field(description="Per channel, in channel order.")
+
+
 class GroupMetadata(BaseModel):
     """One group's ``metadata.json``. Speech tracks are the keys ``source1`` … ``sourceN``."""
 
@@ -154,7 +180,7 @@ class GroupMetadata(BaseModel):
                                               "mic_m", "floor", "sample_rate_hz",
                                               "num_samples", "mixtures", "group_gain_db",
                                               "keys", "microphone_track", "noise", "music",
-                                              "audio_scales"]}]}})
+                                              "audio_scales", "capsules"]}]}})
     __pydantic_extra__: dict[str, SpeechTrack] = Field(init=False)  # type: ignore[assignment]
 
     version: Literal[2] = Field(METADATA_VERSION, description="Version of this record's form.")
@@ -174,15 +200,19 @@ class GroupMetadata(BaseModel):
         "when it moves."))
     noise: BackgroundTrack | None = Field(None, description="The noise track, if any.")
     music: BackgroundTrack | None = Field(None, description="The music track, if any.")
+    capsules: CapsulesRecord | None = Field(None, description=(
+        "The microphone's capsules (patterns, axes, positions) when any is directional, on a "
+        "rigid sphere, or from a device preset; absent for omni capsules in free field."))
     audio_scales: dict[str, float] | None = Field(None, description=(
         "With outputs.scale: per_file, each audio file (relative to the group's folder) -> "
         "its scale: the signal is the decoded samples times it (the file's sonicspec_scale "
         "tag says the same)."))
 
     def to_json(self) -> str:
-        """Compact JSON, keys sorted, final newline; absent backgrounds and scales left out."""
+        """Compact JSON, keys sorted, final newline; absent backgrounds, scales and capsules
+        left out."""
         data = self.model_dump(mode="json")
-        for name in ("noise", "music", "audio_scales"):
+        for name in ("noise", "music", "audio_scales", "capsules"):
             if data[name] is None:
                 del data[name]
         return json.dumps(data, sort_keys=True, separators=(",", ":"),

@@ -152,3 +152,53 @@ def plot_rir(rir: np.ndarray, sample_rate_hz: float, bands_hz, path: Path, *, ti
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_device_layout(name: str, path: Path) -> Path:
+    """A device preset's capsules seen from above (x its front, y its left) and from the
+    side (x, z), numbered as its channels; directional capsules with their axes, a rigid
+    sphere drawn as its outline. Written atomically."""
+    from sonicspec.acoustics.receivers.devices import device
+    from sonicspec.atomic import atomic_path
+
+    dev = device(name)
+    plt = _pyplot()
+    caps = dev.capsules
+    p_mm = caps.offsets_m * 1000.0
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+    reach = max(float(np.abs(p_mm).max()), 5.0) * 1.3
+    for ax, (i, j), label in ((axes[0], (0, 1), ("x: front (mm)", "y: left (mm)")),
+                              (axes[1], (0, 2), ("x: front (mm)", "z: up (mm)"))):
+        if caps.sphere_radius_m is not None:
+            ax.add_patch(plt.Circle((0, 0), caps.sphere_radius_m * 1000.0, fill=False,
+                                    ls="--", color="0.5", label="rigid sphere"))
+        order = np.argsort(p_mm[:, 3 - i - j]) if caps.sphere_radius_m is not None else \
+            np.arange(len(p_mm))
+        ax.scatter(p_mm[order, i], p_mm[order, j], s=40, zorder=3, color="tab:blue")
+        for m in range(len(p_mm)):
+            ax.annotate(str(m + 1), (p_mm[m, i], p_mm[m, j]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7)
+            if caps.alphas[m] != 1.0:
+                ax.annotate("", (p_mm[m, i] + 0.15 * reach * caps.axes[m, i],
+                                 p_mm[m, j] + 0.15 * reach * caps.axes[m, j]),
+                            (p_mm[m, i], p_mm[m, j]),
+                            arrowprops={"arrowstyle": "->", "color": "tab:red"})
+        ax.annotate("", (0.6 * reach, 0), (0, 0),
+                    arrowprops={"arrowstyle": "-|>", "color": "0.6"})
+        ax.set_xlim(-reach, reach)
+        ax.set_ylim(-reach, reach)
+        ax.set_aspect("equal")
+        ax.grid(alpha=0.3)
+        ax.set_xlabel(label[0])
+        ax.set_ylabel(label[1])
+    axes[0].set_title("from above")
+    axes[1].set_title("from the side")
+    fig.suptitle(f"{dev.name}: {dev.title}\n{len(caps)} capsules, aperture "
+                 f"{dev.aperture_m * 1000:.1f} mm, {dev.body}", fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return path

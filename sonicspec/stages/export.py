@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import artifacts
+from sonicspec.acoustics.engine import capsule_facts
 from sonicspec.acoustics.receivers.arrays import local_directions
 from sonicspec.artifacts import (
     ArrangedGroup,
@@ -38,6 +39,8 @@ from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.export.metadata import (
     BackgroundTrack,
+    CapsuleRecord,
+    CapsulesRecord,
     GroupMetadata,
     ImageSourceOrder,
     Loudness,
@@ -135,6 +138,17 @@ def _order(source: RirSource) -> ImageSourceOrder | None:
                             stopped=source.image_source_order_stopped)
 
 
+def capsules_record(microphone) -> CapsulesRecord | None:
+    """What ``metadata.json`` says of the microphone's capsules
+    (:func:`~sonicspec.acoustics.engine.capsule_facts`); None for omni capsules in free
+    field, whose records keep their bytes."""
+    facts = capsule_facts(microphone.model_dump(mode="json"))
+    if facts is None:
+        return None
+    return CapsulesRecord(device=facts["device"], sphere_radius_m=facts["sphere_radius_m"],
+                          capsules=[CapsuleRecord(**c) for c in facts["capsules"]])
+
+
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
@@ -211,7 +225,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         num_samples=render.clip_samples, mixtures=mixtures,
         group_gain_db=mix.group_gain_db, keys=keys, microphone_track=mic_ref,
         noise=entries.get("noise"), music=entries.get("music"), **speech_entries,
-        audio_scales=w.scales or None)
+        audio_scales=w.scales or None, capsules=capsules_record(walk.microphone))
     if outputs.metadata:
         metadata.write(w.folder / "metadata.json")
         w.files.append({"kind": "metadata", "name": "metadata",

@@ -28,9 +28,15 @@ import numpy as np
 
 from sonicspec import artifacts
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.engine import array_offsets, load_hrirs, sphere_head
+from sonicspec.acoustics.engine import (
+    array_offsets,
+    load_hrirs,
+    microphone_capsules,
+    sphere_head,
+)
 from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
-from sonicspec.acoustics.receivers.hrtf import ear_axes
+from sonicspec.acoustics.receivers.arrays import rotation
+from sonicspec.acoustics.receivers.hrtf import SphereHead, ear_axes
 from sonicspec.artifacts import (
     ArrangedTrack,
     RenderData,
@@ -143,6 +149,9 @@ def path_receiver(microphone, center_m, line: Timeline | None = None, hrirs=None
                  if line is not None and line.mic_moves else {"yaw_deg": microphone.yaw_deg})
         return Receiver("hrir", hrirs=hset, hrir_radius_rad=hrir_radius(hrirs),
                         pitch_deg=microphone.pitch_deg, **frame)
+    capsules = _capsule_receiver(microphone, center_m, line)
+    if capsules is not None:
+        return capsules
     if line is not None and line.mic_moves:
         moving = {"mic_track_m": line.mic_m, "yaw_deg": line.yaw_deg,
                   "pitch_deg": line.pitch_deg}
@@ -170,6 +179,30 @@ def path_receiver(microphone, center_m, line: Timeline | None = None, hrirs=None
                         ear_axes=ear_axes(head, microphone.yaw_deg, microphone.pitch_deg))
     return Receiver("array", offsets_m=array_offsets(microphone.model_dump(mode="json")),
                     center_m=np.asarray(center_m, dtype=np.float64))
+
+
+def _capsule_receiver(microphone, center_m, line: Timeline | None) -> Receiver | None:
+    """The receiver of a device or of directional capsules (None for the others, which
+    :func:`path_receiver` builds as before): capsules on a rigid sphere as the sphere head's
+    ears, free-field ones as an array whose capsules weight each path by their pattern.
+    Static: offsets and axes in the scene's frame; moving: in the microphone's own frame,
+    turned along ``line``."""
+    mic = microphone.model_dump(mode="json")
+    capsules = microphone_capsules(mic)
+    if capsules is None or (capsules.omni and microphone.kind != "device"):
+        return None
+    if line is not None and line.mic_moves:
+        where = {"mic_track_m": line.mic_m, "yaw_deg": line.yaw_deg,
+                 "pitch_deg": line.pitch_deg}
+    else:
+        where = {"center_m": np.asarray(center_m, dtype=np.float64)}
+        capsules = capsules.rotated(rotation(microphone.yaw_deg, microphone.pitch_deg))
+    if capsules.sphere_radius_m is not None:
+        return Receiver("sphere_head", head=SphereHead(head_radius_m=capsules.sphere_radius_m),
+                        ear_axes=capsules.axes, **where)
+    directional = {} if capsules.omni else {"capsule_axes": capsules.axes,
+                                            "capsule_alphas": capsules.alphas}
+    return Receiver("array", offsets_m=capsules.offsets_m, **directional, **where)
 
 
 #: A SOFA set's HRIRs are blended over this many times its covering angle (so every

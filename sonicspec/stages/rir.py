@@ -21,10 +21,12 @@ from sonicspec.acoustics.engine import (
     RirResult,
     SimulationSettings,
     acoustic_scene,
+    capsule_facts,
     check_inside,
     check_receiver,
     early_part,
     load_hrirs,
+    needs_directions,
     refined_early_paths,
     rir_results,
     scene_edges,
@@ -342,7 +344,7 @@ def run(ctx) -> None:
                 paths = f"{key}_paths"
                 from_mic = [f.early_arrivals for f in facts]
                 at_mic = [f.early_arrivals_at_mic for f in facts]
-                directional = params.microphone.kind != "mono"
+                directional = needs_directions(microphone)
                 src_m = np.asarray(sources[s][1]) if line is None else line.source_m
                 mic_m = (np.repeat(np.asarray(placement.mic_m)[None], len(src_m), 0)
                          if line is None else line.mic_m)
@@ -380,7 +382,8 @@ def run(ctx) -> None:
         if cut:
             log.warning("%s", cut)
     ctx.write(arrays, artifacts.encode("rir", RirData(
-        groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz)))
+        groups=groups, bands_hz=list(settings.bands_hz), sample_rate_hz=settings.sample_rate_hz,
+        capsules=capsule_facts(microphone))))
 
 
 def _order_reached(facts: list[RirFacts], asked: int) -> dict[str, Any]:

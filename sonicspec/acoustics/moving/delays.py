@@ -664,7 +664,22 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             path(out[0, start:])
             continue
         mirror = None if edge else _image_map(paths, k, points, receiver.center_m)
-        if receiver.kind == "array" and mirror is not None:
+        capsule_gains = None
+        if receiver.kind == "array" and receiver.capsule_axes is not None and not static:
+            # Directional capsules: gains from directions every _GAIN_STEP samples, linear
+            # between (a direction turns by a fraction of a degree in 2 ms of walking).
+            at = _coarse_rows(stop - start)
+            if mirror is not None:
+                d_at = np.empty((at.size, 3))
+                image_directions(np.ascontiguousarray(source[at]), paths.images_m[k], mirror,
+                                 d_at)
+            else:
+                d_at = _directions_at(paths.directions[k], lo[part][at], hi[part][at],
+                                      frac[part][at], False)
+            capsule_gains = _interp_rows(receiver.capsule_gains(d_at), at, stop - start)
+            d = (None if mirror is not None or not np.any(receiver.offsets_m)
+                 else _interp_rows(d_at, at, stop - start))  # for the capsules' leads
+        elif receiver.kind == "array" and mirror is not None and receiver.capsule_axes is None:
             d = None  # each capsule hears its own image: no direction needed
         elif mirror is not None:  # exact: the direction the image sees the source in, mapped back
             away = np.atleast_2d(source)
@@ -704,12 +719,16 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
                 out[ear, start:] += both[0]
                 shaded[ear, start:] += both[1]
         else:
+            gains = capsule_gains if capsule_gains is not None else receiver.capsule_gains(d)
             for m, offset in enumerate(receiver.offsets_m):
+                g = 1.0 if gains is None else gains[:, m]
                 if mirror is not None:  # the capsule's own image: exact
-                    path(out[m, start:], image=paths.images_m[k] + mirror @ offset)
+                    path(out[m, start:], g, image=paths.images_m[k] + mirror @ offset)
+                elif gains is not None and not np.any(offset):  # a capsule at the centre
+                    path(out[m, start:], g)
                 else:
                     lead = -np.einsum("ij,j->i", d, offset) / speed_of_sound_m_s
-                    path(out[m, start:], extra_delay_s=np.broadcast_to(lead, x.shape))
+                    path(out[m, start:], g, extra_delay_s=np.broadcast_to(lead, x.shape))
     if receiver.kind == "sphere_head":  # H = LP + α·HP, linear in α: filter the two sums
         from scipy import signal
 
@@ -727,6 +746,21 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
 #: Directions are read every this many samples for the HRIR weights (linear between):
 #: 2 ms at 16 kHz, where a source walking 1 m from the head turns by 0.2°.
 _HRIR_STEP = 32
+#: ... and for directional capsules' gains (:meth:`Receiver.capsule_gains`).
+_GAIN_STEP = 32
+
+
+def _coarse_rows(n: int) -> np.ndarray:
+    """Every ``_GAIN_STEP``-th of ``n`` rows, and the last."""
+    at = np.arange(0, n, _GAIN_STEP)
+    return at if at[-1] == n - 1 else np.append(at, n - 1)
+
+
+def _interp_rows(values: np.ndarray, at: np.ndarray, n: int) -> np.ndarray:
+    """``values`` ``(len(at), C)`` given at rows ``at``, linear in between: ``(n, C)``."""
+    rows = np.arange(n)
+    return np.stack([np.interp(rows, at, values[:, c]) for c in range(values.shape[1])],
+                    axis=1)
 
 
 def _hrir_accumulate(buffers: dict[int, np.ndarray], y: np.ndarray, local: np.ndarray,
@@ -810,9 +844,10 @@ def _image_map(paths: PathSet, k: int, points: np.ndarray, center_m) -> np.ndarr
 @dataclass(frozen=True)
 class Receiver:
     """What :func:`render_paths` renders for: ``mono``, ``ambisonics`` of ``order``, an
-    ``array`` of omni capsules at ``offsets_m`` (``(M, 3)`` from the centre ``center_m``,
-    scene frame), a ``sphere_head`` (Brown–Duda: Woodworth delays and the head-shadow
-    filter per ear, as the binaural RIRs have; ``head`` and the ``ear_axes``, ``(2, 3)``),
+    ``array`` of capsules at ``offsets_m`` (``(M, 3)`` from the centre ``center_m``,
+    scene frame; omni, or directional with ``capsule_axes``), a ``sphere_head`` (Brown–Duda:
+    Woodworth delays and the head-shadow filter per ear, as the binaural RIRs have; ``head``
+    and the ``ear_axes``, ``(2, 3)`` for two ears, ``(M, 3)`` for a spherical array),
     or measured HRIRs (``hrir``: ``hrirs``, turned by ``yaw_deg`` and ``pitch_deg``)."""
 
     kind: str = "mono"
@@ -840,6 +875,12 @@ class Receiver:
     """A moving microphone's yaw at each point, ``(N,)`` degrees (linear between points);
     for a static ambisonic microphone, the one yaw of its frame."""
     pitch_deg: float = 0.0
+    capsule_axes: np.ndarray | None = None
+    """``array``: directional capsules' axes ``(M, 3)`` (unit vectors, in the frame of
+    ``offsets_m``), each weighting a path by ``a + (1 − a) cos θ`` of its direction of
+    arrival (:mod:`~sonicspec.acoustics.receivers.capsules`); None: omni capsules."""
+    capsule_alphas: np.ndarray | None = None
+    """The omni part ``a`` of each directional capsule's pattern, ``(M,)``."""
 
     @property
     def channels(self) -> int:
@@ -847,9 +888,23 @@ class Receiver:
             return (self.order + 1) ** 2
         if self.kind == "array":
             return len(self.offsets_m)
-        if self.kind in ("sphere_head", "hrir"):
+        if self.kind == "sphere_head":
+            return len(self.ear_axes)
+        if self.kind == "hrir":
             return 2
         return 1
+
+    def capsule_gains(self, directions: np.ndarray | None) -> np.ndarray | None:
+        """Gains ``(T, M)`` of directional capsules for directions of arrival ``(T, 3)``
+        (0 where a direction is unknown, a zero row); None for omni capsules."""
+        if self.capsule_axes is None:
+            return None
+        from sonicspec.acoustics.receivers.capsules import pattern_gain
+
+        d = np.asarray(directions, dtype=np.float64)
+        known = np.any(d != 0, axis=1, keepdims=True)
+        return pattern_gain(np.asarray(self.capsule_alphas)[None, :],
+                            np.einsum("ti,mi->tm", d, self.capsule_axes)) * known
 
 
 def _directions_at(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, frac: np.ndarray,
@@ -955,12 +1010,15 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
                 out[ear] += heard(mic, extra_delay_s=delay)
                 shaded[ear] += heard(mic, gain=alpha, extra_delay_s=delay)
         else:
+            gains = receiver.capsule_gains(local)  # axes in the microphone's own frame
             for ch, offset in enumerate(receiver.offsets_m):
+                g = 1.0 if gains is None else gains[:, ch]
                 place = frames @ offset  # the capsule's offset in the scene, (T, 3)
                 if edge:  # the plane-wave lead of the capsule, as the array's RIRs have
-                    out[ch] += heard(mic, extra_delay_s=-np.einsum("ti,ti->t", d, place) / c)
+                    out[ch] += heard(mic, gain=g,
+                                     extra_delay_s=-np.einsum("ti,ti->t", d, place) / c)
                 else:
-                    out[ch] += heard(mic + place)
+                    out[ch] += heard(mic + place, gain=g)
     if receiver.kind == "sphere_head":
         from scipy import signal
 

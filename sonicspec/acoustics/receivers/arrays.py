@@ -20,10 +20,18 @@ microphone* (unit vectors from the mic towards where the sound comes from, scene
 Capsule offsets follow the spec: linear arrays along the array's local y axis (its left, looking
 along +x), circular arrays in the horizontal plane, custom offsets as given; all rotated by yaw
 (about z) and pitch.
+
+* **Directional capsules** (:class:`~sonicspec.acoustics.receivers.capsules.Capsules`, first-order
+  patterns with an axis each): every arrival is also weighted by each capsule's gain for its
+  direction of arrival, and the late tail is mixed to the capsules' diffuse-field
+  cross-spectral matrix (:func:`directional_diffuse`), complex where a capsule's axis has a
+  component along the line to another, with each capsule's diffuse-field power on the
+  diagonal. All-omni arrays keep the renderer above, bit for bit.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -31,6 +39,11 @@ import numpy as np
 
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.receivers.capsules import (
+    Capsules,
+    diffuse_cross_spectra,
+    hermitian_root,
+)
 from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
     _fractional_taps,
@@ -121,15 +134,19 @@ def _scaled(arrivals: Arrivals, gains: np.ndarray, delays_s: np.ndarray) -> Arri
 
 def array_early(arrivals: Arrivals, offsets_m: np.ndarray, bank: OctaveFilterBank,
                 n_samples: int, speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
-                taps: int = DEFAULT_TAPS) -> np.ndarray:
+                taps: int = DEFAULT_TAPS, *, capsules: Capsules | None = None) -> np.ndarray:
     """The early part of an array's RIRs, ``(M, n_samples)``: each arrival reaches capsule
-    ``p`` earlier by ``d · p / c`` (a plane wave from its direction ``d``)."""
+    ``p`` earlier by ``d · p / c`` (a plane wave from its direction ``d``), weighted by the
+    capsule's gain for ``d`` when ``capsules`` (in the scene's frame, their offsets
+    ``offsets_m``) are directional."""
     offsets = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
     out = np.zeros((len(offsets), n_samples))
+    gains = (None if capsules is None or capsules.omni or not len(arrivals)
+             else capsules.gains(arrivals.directions))
     for m, p in enumerate(offsets):
         delays = -(arrivals.directions @ p) / speed_of_sound_m_s
-        out[m] = synthesize_early(_scaled(arrivals, np.ones(len(arrivals)), delays), bank,
-                                  n_samples, taps)
+        g = np.ones(len(arrivals)) if gains is None else gains[:, m]
+        out[m] = synthesize_early(_scaled(arrivals, g, delays), bank, n_samples, taps)
     return out
 
 
@@ -158,18 +175,84 @@ def synthesize_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
                          rng: np.random.Generator, *,
                          speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                          max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
-                         taps: int = DEFAULT_TAPS) -> np.ndarray:
-    """RIRs of omni capsules at ``offsets_m`` around the centre, ``(M, n_samples)``."""
+                         taps: int = DEFAULT_TAPS, capsules: Capsules | None = None
+                         ) -> np.ndarray:
+    """RIRs of capsules at ``offsets_m`` around the centre, ``(M, n_samples)``: omni, or
+    the directional ``capsules`` (scene frame, at ``offsets_m``)."""
     offsets = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
+    directional = capsules is not None and not capsules.omni
     bank = OctaveFilterBank(sample_rate_hz, bands_hz)
     reach = float(np.max(np.linalg.norm(offsets, axis=1))) / speed_of_sound_m_s
     n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s + reach, taps,
                            bank.padding() // 4)
-    out = array_early(arrivals, offsets, bank, n, speed_of_sound_m_s, taps)
+    out = array_early(arrivals, offsets, bank, n, speed_of_sound_m_s, taps,
+                      capsules=capsules if directional else None)
     if histogram is not None:
         tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in offsets])
-        out += diffuse_coherence(tails, offsets, sample_rate_hz, speed_of_sound_m_s)
+        if directional:
+            out += directional_diffuse(tails, capsules, sample_rate_hz, speed_of_sound_m_s)
+        else:
+            out += diffuse_coherence(tails, offsets, sample_rate_hz, speed_of_sound_m_s)
     return out
+
+
+def directional_diffuse(signals: np.ndarray, capsules: Capsules, sample_rate_hz: float,
+                        speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
+    """Independent signals ``(M, n)`` of one power spectrum mixed into the diffuse field the
+    free-field ``capsules`` hear: per frequency ``Y = conj(R)ᵀ X`` with ``R = S^½``
+    (:func:`~sonicspec.acoustics.receivers.capsules.hermitian_root`) of the capsules'
+    cross-spectral matrix ``S``
+    (:func:`~sonicspec.acoustics.receivers.capsules.diffuse_cross_spectra`), so
+    ``E[Y_i Y_j*] = S_ij`` times the inputs' spectrum: each capsule gets its pattern's
+    diffuse-field power, each pair its cross-spectrum. ``R`` is computed on a grid fine
+    enough for the array's largest delay and interpolated (cached per capsules)."""
+    x = np.asarray(signals, dtype=np.float64)
+    if x.ndim != 2 or x.shape[0] != len(capsules):
+        raise AcousticsError(f"directional_diffuse: expected one signal (M, n) per capsule "
+                             f"({len(capsules)}), got {x.shape}")
+    p = capsules.offsets_m
+    span_s = float(np.max(np.linalg.norm(p[:, None] - p[None], axis=-1))) / speed_of_sound_m_s
+    grid, roots = _diffuse_roots(capsules, float(sample_rate_hz), float(speed_of_sound_m_s),
+                                 span_s)
+    pad = seconds_to_samples_ceil(4 * span_s, sample_rate_hz) + 16
+    return mix_by_roots(x, grid, roots, sample_rate_hz, pad)
+
+
+@functools.lru_cache(maxsize=16)
+def _diffuse_roots(capsules: Capsules, sample_rate_hz: float, speed_of_sound_m_s: float,
+                   span_s: float) -> tuple[np.ndarray, np.ndarray]:
+    n_grid = max(2048, 1 << math.ceil(math.log2(max(16 * span_s * sample_rate_hz, 1.0))))
+    grid = np.fft.rfftfreq(n_grid, 1.0 / sample_rate_hz)
+    return grid, hermitian_root(diffuse_cross_spectra(capsules, grid, speed_of_sound_m_s))
+
+
+#: Frequencies per block of :func:`mix_by_roots` (bounds the memory: block × M² complex).
+_MIX_BLOCK = 2048
+
+
+def mix_by_roots(signals: np.ndarray, grid_hz: np.ndarray, roots: np.ndarray,
+                 sample_rate_hz: float, pad_samples: int) -> np.ndarray:
+    """Zero-phase mixing of ``(M, n)`` signals by ``Y_j = Σ_i conj(R_ij) X_i`` with the
+    Hermitian roots ``R`` ``(G, M, M)`` given on the uniform grid ``grid_hz`` (from 0 Hz)
+    and interpolated linearly between its points; blocks of frequencies at a time, so the
+    memory is that of a block, not of every frequency. Padding as
+    :func:`mix_per_frequency`."""
+    n = signals.shape[1]
+    n_fft = 1 << math.ceil(math.log2(n + 2 * pad_samples))
+    frame = np.zeros((signals.shape[0], n_fft))
+    frame[:, pad_samples:pad_samples + n] = signals
+    spectrum = np.fft.rfft(frame, axis=-1)  # (M, F)
+    freqs = np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz)
+    step = grid_hz[1] - grid_hz[0]
+    mixed = np.empty_like(spectrum)
+    for i in range(0, len(freqs), _MIX_BLOCK):
+        pos = np.clip(freqs[i:i + _MIX_BLOCK] / step, 0.0, len(grid_hz) - 1.0)
+        lo = np.minimum(np.floor(pos).astype(np.int64), len(grid_hz) - 2)
+        w = (pos - lo)[:, None, None]
+        root = roots[lo] * (1.0 - w) + roots[lo + 1] * w
+        mixed[:, i:i + _MIX_BLOCK] = np.einsum("fij,if->jf", np.conj(root),
+                                               spectrum[:, i:i + _MIX_BLOCK])
+    return np.fft.irfft(mixed, n=n_fft, axis=-1)[:, pad_samples:pad_samples + n]
 
 
 def diffuse_coherence(signals: np.ndarray, positions_m: np.ndarray, sample_rate_hz: float,

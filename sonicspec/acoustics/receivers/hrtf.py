@@ -50,7 +50,12 @@ from scipy.spatial import QhullError, SphericalVoronoi, cKDTree
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank
 from sonicspec.acoustics.directions import fibonacci_sphere
-from sonicspec.acoustics.receivers.arrays import mix_per_frequency, rotation
+from sonicspec.acoustics.receivers.arrays import mix_by_roots, mix_per_frequency, rotation
+from sonicspec.acoustics.receivers.capsules import (
+    Capsules,
+    diffuse_cross_spectra_numeric,
+    hermitian_root,
+)
 from sonicspec.acoustics.receivers.synthesis import (
     DEFAULT_TAPS,
     _fractional_taps,
@@ -196,9 +201,20 @@ def sphere_binaural_early(arrivals: Arrivals, head: SphereHead, bank: OctaveFilt
     """The early part of a sphere-head binaural RIR, ``(2, n_samples)``: each arrival at each
     ear delayed by Woodworth's path round the head, through the Brown–Duda shadow filter
     ``H = LP + α(θ)·HP`` (:func:`shadow_filters`)."""
+    return sphere_capsules_early(arrivals, head, ear_axes(head, yaw_deg, pitch_deg), bank,
+                                 n_samples, speed_of_sound_m_s=speed_of_sound_m_s, taps=taps)
+
+
+def sphere_capsules_early(arrivals: Arrivals, head: SphereHead, axes: np.ndarray,
+                          bank: OctaveFilterBank, n_samples: int, *,
+                          speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                          taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """The early part at capsules flush on a rigid sphere (``head``'s radius), one per unit
+    vector of ``axes`` ``(M, 3)`` (scene frame), ``(M, n_samples)``: the ears of
+    :func:`sphere_binaural_early`, as many as asked (a spherical array such as the em32)."""
     (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(head, bank.sample_rate_hz, speed_of_sound_m_s)
-    out = np.zeros((2, n_samples))
-    for ear, axis in enumerate(ear_axes(head, yaw_deg, pitch_deg)):
+    out = np.zeros((len(axes), n_samples))
+    for ear, axis in enumerate(axes):
         if len(arrivals):
             cos_t = arrivals.directions @ axis
             delays = woodworth_delays_s(cos_t, head.head_radius_m, speed_of_sound_m_s)
@@ -538,3 +554,86 @@ def diffuse_binaural_tails(tails: np.ndarray, model: SphereHead | HrirSet,
         # Γ of a measured set has no structure finer than its HRIRs' length.
         pad = 2 * math.ceil(model.hrirs.shape[-1] * sample_rate_hz / model.sample_rate_hz) + 16
     return mix_per_frequency(x, mixing, sample_rate_hz, pad)
+
+
+# --- spherical arrays: capsules flush on a rigid sphere (the em32) ----------------------------
+
+def sphere_responses(capsules: Capsules, freqs_hz: np.ndarray, sample_rate_hz: float,
+                     directions: np.ndarray,
+                     speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S) -> np.ndarray:
+    """``(F, M, N)``: what capsules on a rigid sphere hear of unit plane waves from
+    ``directions`` ``(N, 3)`` as the renderer models it (Woodworth delay round the sphere and
+    the Brown–Duda shadow filter ``LP + α HP``, each capsule an ear on its axis)."""
+    radius = capsules.sphere_radius_m
+    if radius is None:
+        raise AcousticsError("sphere_responses: the capsules are not on a rigid sphere")
+    f = np.asarray(freqs_hz, dtype=np.float64)
+    (b_lp, a_lp), (b_hp, a_hp) = shadow_filters(SphereHead(head_radius_m=radius),
+                                                sample_rate_hz, speed_of_sound_m_s)
+    lp = signal.freqz(b_lp, a_lp, worN=f, fs=sample_rate_hz)[1]
+    hp = signal.freqz(b_hp, a_hp, worN=f, fs=sample_rate_hz)[1]
+    cos_t = capsules.axes @ np.asarray(directions, dtype=np.float64).reshape(-1, 3).T  # (M, N)
+    tau = woodworth_delays_s(cos_t, radius, speed_of_sound_m_s)
+    alpha = shadow_alpha(cos_t)
+    # e^{−jωτ} from its cosine and sine (numpy's complex exp is several times slower)
+    phase = (2 * math.pi) * f[:, None, None] * tau[None]
+    delay = np.empty(phase.shape, dtype=np.complex128)
+    delay.real = np.cos(phase)
+    delay.imag = -np.sin(phase)
+    return delay * (lp[:, None, None] + alpha[None] * hp[:, None, None])
+
+
+def sphere_cross_spectra(capsules: Capsules, freqs_hz: np.ndarray, sample_rate_hz: float,
+                         speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S, *,
+                         n_directions: int = 1024, chunk: int = 32) -> np.ndarray:
+    """Diffuse-field cross-spectra ``(F, M, M)`` of capsules on a rigid sphere: their
+    :func:`sphere_responses` averaged over ``n_directions`` uniform (Fibonacci) directions,
+    ``chunk`` frequencies at a time (memory ``chunk × M × N``). For two ears this is the
+    cross-spectrum :func:`sphere_head_coherence` normalises."""
+    f = np.asarray(freqs_hz, dtype=np.float64).reshape(-1)
+    dirs = fibonacci_sphere(n_directions)
+    out = np.zeros((len(f), len(capsules), len(capsules)), dtype=np.complex128)
+    for i in range(0, len(f), chunk):
+        h = sphere_responses(capsules, f[i:i + chunk], sample_rate_hz, dirs,
+                             speed_of_sound_m_s)
+        out[i:i + chunk] = diffuse_cross_spectra_numeric(h)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _sphere_roots(capsules: Capsules, sample_rate_hz: float, speed_of_sound_m_s: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    grid = np.fft.rfftfreq(_GRID_FFT // 2, 1.0 / sample_rate_hz)
+    return grid, hermitian_root(sphere_cross_spectra(capsules, grid, sample_rate_hz,
+                                                     speed_of_sound_m_s))
+
+
+def synthesize_sphere_array_rir(arrivals: Arrivals, histogram: EnergyHistogram | None,
+                                capsules: Capsules, sample_rate_hz: float,
+                                rng: np.random.Generator, *,
+                                speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                                max_length_s: float = 2.0, bands_hz: tuple[float, ...] = (),
+                                taps: int = DEFAULT_TAPS) -> np.ndarray:
+    """RIRs of capsules on a rigid sphere (``capsules`` in the scene's frame, with their
+    ``sphere_radius_m``), ``(M, n_samples)``: the early arrivals as the sphere head's ears
+    (:func:`sphere_capsules_early`), the late tail as independent noises mixed to the
+    sphere's diffuse-field cross-spectra (:func:`sphere_cross_spectra`, on a grid
+    ``fs/1024`` apart, cached per capsules).
+
+    Parameters are those of :func:`synthesize_sphere_binaural_rir`, with ``capsules`` for
+    the head and its orientation (already turned into the scene)."""
+    _check(sample_rate_hz)
+    head = SphereHead(head_radius_m=float(capsules.sphere_radius_m))
+    bank = OctaveFilterBank(sample_rate_hz, bands_hz)
+    reach = 2 * head.head_radius_m / speed_of_sound_m_s
+    n = rir_length_samples(arrivals, histogram, sample_rate_hz, max_length_s + reach, taps,
+                           bank.padding() // 4)
+    out = sphere_capsules_early(arrivals, head, capsules.axes, bank, n,
+                                speed_of_sound_m_s=speed_of_sound_m_s, taps=taps)
+    if histogram is not None:
+        tails = np.stack([synthesize_late(histogram, bank, n, rng) for _ in capsules.axes])
+        grid, roots = _sphere_roots(capsules, float(sample_rate_hz), float(speed_of_sound_m_s))
+        itd_s = head.head_radius_m / speed_of_sound_m_s * (math.pi / 2 + 1)
+        pad = seconds_to_samples_ceil(4 * itd_s, sample_rate_hz) + 16
+        out += mix_by_roots(tails, grid, roots, sample_rate_hz, pad)
+    return out
