@@ -39,7 +39,6 @@ from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
 from sonicspec.export.metadata import (
     BackgroundTrack,
-    CapsuleRecord,
     CapsulesRecord,
     GroupMetadata,
     ImageSourceOrder,
@@ -145,8 +144,7 @@ def capsules_record(microphone) -> CapsulesRecord | None:
     facts = capsule_facts(microphone.model_dump(mode="json"))
     if facts is None:
         return None
-    return CapsulesRecord(device=facts["device"], sphere_radius_m=facts["sphere_radius_m"],
-                          capsules=[CapsuleRecord(**c) for c in facts["capsules"]])
+    return CapsulesRecord.model_validate(facts)
 
 
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
