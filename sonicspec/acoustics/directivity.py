@@ -37,8 +37,9 @@ from sonicspec.acoustics.directions import fibonacci_sphere
 from sonicspec.errors import AcousticsError
 
 __all__ = ["CARDIOID_ALPHA", "SPEECH", "CardioidPattern", "DirectivityPattern", "SofaPattern",
-           "TabulatedPattern", "cardioid_gain", "local_directions", "pattern_by_name",
-           "rotation"]
+           "SourceDirectivity", "TabulatedPattern", "cardioid_gain", "departure_directions",
+           "directional_arrivals", "emission_gains", "local_directions", "pattern_by_name",
+           "rotation", "split_gains"]
 
 #: α of the first-order patterns ``α + (1 − α) cos θ`` by name.
 CARDIOID_ALPHA: dict[str, float] = {
@@ -347,3 +348,75 @@ def emission_gains(pattern: DirectivityPattern, directions, yaw_deg, bands_hz: S
     g = pattern.gains(local_directions(d, yaw_deg, pitch_deg), bands_hz)
     known = np.linalg.norm(d, axis=1) > 0
     return np.where(known[:, None], g, 1.0)
+
+
+# --- a directional source's paths ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SourceDirectivity:
+    """A directional source: its pattern and where it faces. ``yaw_deg`` is one yaw or one
+    per position (:func:`~sonicspec.acoustics.engine.simulate_rirs`: per source point;
+    :func:`~sonicspec.acoustics.moving.delays.render_paths`: per dry sample), degrees
+    counter-clockwise from +x seen from above; ``pitch_deg`` up from horizontal."""
+
+    pattern: DirectivityPattern
+    yaw_deg: Any = 0.0
+    pitch_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        yaw = np.asarray(self.yaw_deg, dtype=np.float64)
+        if not np.all(np.isfinite(yaw)) or not math.isfinite(self.pitch_deg):
+            raise AcousticsError("SourceDirectivity: expected finite yaw_deg and pitch_deg")
+        yaw.setflags(write=False)
+        object.__setattr__(self, "yaw_deg", yaw)
+
+    def yaw_at(self, k) -> np.ndarray:
+        """The yaw at position(s) ``k`` (any yaw when only one is given)."""
+        return self.yaw_deg if self.yaw_deg.ndim == 0 else self.yaw_deg[k]
+
+
+def departure_directions(arrivals, source_m, receiver_m, traced_from: str = "receiver"
+                         ) -> np.ndarray:
+    """Unit direction ``(n, 3)`` in which each arrival's path leaves the source: towards its
+    first reflection point, which is where the receiver's image lies seen from the source
+    (arrivals traced from the receiver, ``traced_from="receiver"``: ``M r + b − s``) or the
+    receiver seen from the source's image, mapped back by the mirrors (traced from the source:
+    ``Mᵀ (r − (M s + b))``); an edge-diffracted path's own ``departures`` (towards its first
+    edge); zero where neither is known (gain 1 then)."""
+    if traced_from not in ("receiver", "source"):
+        raise AcousticsError(f"traced_from: expected 'receiver' or 'source', got "
+                             f"{traced_from!r}")
+    s = np.asarray(source_m, dtype=np.float64).reshape(3)
+    r = np.asarray(receiver_m, dtype=np.float64).reshape(3)
+    iso = arrivals.isometry
+    out = np.array(arrivals.departures, dtype=np.float64)
+    mirrored = np.all(np.isfinite(iso.reshape(len(iso), -1)), axis=1)
+    if np.any(mirrored):
+        m, b = iso[mirrored, :, :3], iso[mirrored, :, 3]
+        if traced_from == "receiver":
+            d = np.einsum("nij,j->ni", m, r) + b - s
+        else:
+            d = np.einsum("nji,nj->ni", m, r - (np.einsum("nij,j->ni", m, s) + b))
+        out[mirrored] = _unit(d)
+    return out
+
+
+def directional_arrivals(arrivals, gains: np.ndarray):
+    """``arrivals`` with each path's amplitudes times its per-band ``gains`` ``(n, B)``."""
+    from dataclasses import replace
+
+    return replace(arrivals, amplitudes=arrivals.amplitudes * gains)
+
+
+def split_gains(gains: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(n, B)`` gains as a broadband part ``(n,)`` (their mean over bands, signed: a rear
+    lobe keeps its polarity) times a spectral tilt ``(n, B)`` (1 where the mean is 0); a
+    pattern that is the same in every band has tilt exactly 1."""
+    g = np.asarray(gains, dtype=np.float64)
+    broad = g.mean(axis=1)
+    ok = np.abs(broad) > 1e-12
+    tilt = np.ones_like(g)
+    tilt[ok] = g[ok] / broad[ok, None]
+    if g.shape[1] and np.all(g == g[:, :1]):
+        tilt[:] = 1.0
+    return broad, tilt
