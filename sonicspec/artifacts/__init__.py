@@ -329,7 +329,8 @@ class MixData(_Data):
 
 def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
     """A source's :class:`~sonicspec.acoustics.moving.delays.PathSet` as arrays ``<prefix>_images``,
-    ``_weights``, ``_order`` and, for directional receivers, ``_directions``."""
+    ``_weights``, ``_order`` and, for directional receivers, ``_directions``; for a
+    directional source with edge paths, ``_departures``."""
     out = {f"{prefix}_images": paths.images_m, f"{prefix}_weights": paths.weights,
            f"{prefix}_order": paths.order}
     if paths.directions is not None:
@@ -340,6 +341,8 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
         out[f"{prefix}_lengths"] = paths.lengths_m
     if paths.at_index is not None:
         out[f"{prefix}_at_index"] = paths.at_index
+    if paths.departures is not None:  # a directional source's edge paths
+        out[f"{prefix}_departures"] = paths.departures
     return out
 
 
@@ -355,7 +358,9 @@ def read_path_set(arrays, prefix: str) -> PathSet:
                    None if isometries is None else np.asarray(isometries, dtype=np.float64),
                    None if lengths is None else np.asarray(lengths, dtype=np.float64),
                    None if f"{prefix}_at_index" not in arrays else
-                   np.asarray(arrays[f"{prefix}_at_index"], dtype=np.float64))
+                   np.asarray(arrays[f"{prefix}_at_index"], dtype=np.float64),
+                   None if f"{prefix}_departures" not in arrays else
+                   np.asarray(arrays[f"{prefix}_departures"], dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {
