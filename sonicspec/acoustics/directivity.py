@@ -420,3 +420,102 @@ def split_gains(gains: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if g.shape[1] and np.all(g == g[:, :1]):
         tilt[:] = 1.0
     return broad, tilt
+
+
+# --- where a source faces ----------------------------------------------------------------------
+
+#: Below this speed (m/s) a source counts as standing: it keeps the last direction it walked in.
+STANDING_M_S = 0.05
+
+
+def _gaussian_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Rows of ``x`` smoothed along axis 0 by a Gaussian of ``sigma`` frames (edges held)."""
+    if sigma <= 0 or len(x) < 2:
+        return x
+    half = int(np.ceil(3 * sigma))
+    k = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma) ** 2)
+    k /= k.sum()
+    padded = np.concatenate([np.repeat(x[:1], half, 0), x, np.repeat(x[-1:], half, 0)])
+    return np.stack([np.convolve(padded[:, j], k, mode="valid") for j in range(x.shape[1])],
+                    axis=1)
+
+
+def _bearing_deg(from_m: np.ndarray, to_m) -> np.ndarray:
+    d = np.asarray(to_m, dtype=np.float64) - from_m
+    return np.degrees(np.arctan2(d[..., 1], d[..., 0]))
+
+
+def facing_yaw_deg(positions_m, hop_s: float, facing, mic_m, smoothing_s: float = 0.5
+                   ) -> np.ndarray:
+    """Where a source faces at each frame ``(F,)``, degrees, unwrapped (continuous).
+
+    ``facing``: ``"walk"`` — the horizontal direction of travel (the velocity of
+    ``positions_m`` ``(F, 3)``, one every ``hop_s``, averaged by a Gaussian of
+    ``smoothing_s``); while the source stands (slower than :data:`STANDING_M_S`) it keeps
+    the direction it last walked in (before it first walks: the first one), and a source that
+    never walks faces ``mic_m``; ``"toward_mic"``; or a fixed yaw (degrees).
+    """
+    p = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+    n = len(p)
+    if not isinstance(facing, str):
+        return np.full(n, float(facing))
+    toward = _bearing_deg(p, mic_m)
+    if facing == "toward_mic":
+        return np.degrees(np.unwrap(np.radians(toward)))
+    if facing != "walk":
+        raise AcousticsError(f"facing: expected 'walk', 'toward_mic' or a yaw in degrees, got "
+                             f"{facing!r}")
+    if n < 2:
+        return toward
+    v = np.gradient(p[:, :2], hop_s, axis=0)
+    v = _gaussian_smooth(v, smoothing_s / hop_s)
+    moving = np.linalg.norm(v, axis=1) >= STANDING_M_S
+    if not np.any(moving):
+        return np.degrees(np.unwrap(np.radians(toward)))
+    # hold the last direction walked in: forward fill, the first one before it
+    last = np.maximum.accumulate(np.where(moving, np.arange(n), -1))
+    last[last < 0] = int(np.argmax(moving))
+    v = v[last]
+    return np.degrees(np.unwrap(np.arctan2(v[:, 1], v[:, 0])))
+
+
+def point_yaws_deg(points_m, facing, mic_m) -> np.ndarray:
+    """Where a source faces at each of its RIR points ``(N,)``: along the path (the mean of
+    the segments either side; a single point faces ``mic_m``), towards ``mic_m``, or a fixed
+    yaw (:func:`facing_yaw_deg`'s ``facing``)."""
+    p = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    if not isinstance(facing, str):
+        return np.full(len(p), float(facing))
+    toward = _bearing_deg(p, mic_m)
+    if facing == "toward_mic" or len(p) < 2:
+        return toward
+    if facing != "walk":
+        raise AcousticsError(f"facing: expected 'walk', 'toward_mic' or a yaw in degrees, got "
+                             f"{facing!r}")
+    seg = np.diff(p[:, :2], axis=0)
+    seg /= np.maximum(np.linalg.norm(seg, axis=1, keepdims=True), 1e-12)
+    t = np.concatenate([seg[:1], seg[:-1] + seg[1:], seg[-1:]])
+    return np.degrees(np.arctan2(t[:, 1], t[:, 0]))
+
+
+def head_turns_deg(n_frames: int, hop_s: float, std_deg: float, time_constant_s: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """A head's yaw deviation around its facing ``(n_frames,)``, degrees: a stationary
+    Ornstein–Uhlenbeck process (standard deviation ``std_deg``, correlation time
+    ``time_constant_s``) sampled every ``hop_s``, drawn from ``rng``."""
+    if not (std_deg >= 0 and time_constant_s > 0 and hop_s > 0):
+        raise AcousticsError(f"head turns: expected std_deg >= 0, time_constant_s > 0 and "
+                             f"hop_s > 0, got {std_deg!r}, {time_constant_s!r}, {hop_s!r}")
+    a = math.exp(-hop_s / time_constant_s)
+    e = rng.standard_normal(n_frames) * std_deg
+    e[1:] *= math.sqrt(1.0 - a * a)
+    from scipy.signal import lfilter
+
+    return lfilter([1.0], [1.0, -a], e) if n_frames else e
+
+
+def yaw_per_sample(frames_deg: np.ndarray, hop: int, n_samples: int) -> np.ndarray:
+    """Frame yaws (one every ``hop`` samples from sample 0, unwrapped) read at every sample,
+    linearly between frames, held after the last."""
+    f = np.asarray(frames_deg, dtype=np.float64)
+    return np.interp(np.arange(n_samples), np.arange(len(f)) * hop, f)
