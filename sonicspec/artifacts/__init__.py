@@ -40,7 +40,7 @@ import json
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.audio.arrange import Segment
@@ -240,6 +240,9 @@ class RirSource(_Data):
     image_source_order_stopped: str | None = None
     """Why the order reached is lower than asked (``"order 3 needs more than 2,000,000
     candidates"``: the ray tracer covers the rest), None when it is not."""
+    facing_yaw_deg: list[float] | None = None
+    """A directional source: where it faced at each RIR point (degrees counter-clockwise
+    from +x), as its RIRs were computed; left out (None) for an omnidirectional one."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
@@ -247,6 +250,14 @@ class RirSource(_Data):
     added between the RIR points: a
     :class:`~sonicspec.acoustics.moving.delays.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
+
+
+    @model_serializer(mode="wrap")
+    def _omni_left_out(self, handler):
+        data = handler(self)
+        if self.facing_yaw_deg is None:  # an omni source's record as before directivity
+            data.pop("facing_yaw_deg", None)
+        return data
 
 
 class RirGroup(_Data):

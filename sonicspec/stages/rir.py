@@ -8,6 +8,7 @@ it, and writes the RIRs.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import warnings
 from typing import Any
@@ -15,6 +16,12 @@ from typing import Any
 import numpy as np
 
 from sonicspec import artifacts
+from sonicspec.acoustics.directivity import (
+    DirectivityPattern,
+    SourceDirectivity,
+    pattern_by_name,
+    point_yaws_deg,
+)
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
@@ -22,6 +29,7 @@ from sonicspec.acoustics.engine import (
     check_receiver,
     early_part,
     load_hrirs,
+    load_source_directivity,
     refined_early_paths,
     rir_results,
     scene_edges,
@@ -40,6 +48,7 @@ from sonicspec.artifacts import (
 from sonicspec.errors import SonicspecWarning, StageError
 from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
+from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
@@ -162,6 +171,33 @@ def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+def track_role(name: str) -> str:
+    """The source role of a track name (``noise``, ``music``; the talkers ``source<k>``)."""
+    return name if name in ("noise", "music") else "speech"
+
+
+def source_patterns(directivity: SourcesDirectivitySpec | None, paths, bands_hz
+                    ) -> dict[str, DirectivityPattern]:
+    """The pattern of every role that is not omnidirectional; a SOFA set read from the job's
+    ``directivity_<role>`` path."""
+    out: dict[str, DirectivityPattern] = {}
+    if directivity is None:
+        return out
+    for role in ("speech", "noise", "music"):
+        d = directivity.role(role)
+        if d.is_omni:
+            continue
+        if d.pattern == "sofa":
+            key = f"directivity_{role}"
+            if key not in paths:
+                raise StageError(f"directivity.{role}: pattern sofa but the job has no "
+                                 f"{key} file")
+            out[role] = load_source_directivity(paths[key], bands_hz, d.sofa_path)
+        else:
+            out[role] = pattern_by_name(d.pattern)
+    return out
+
+
 #: The closest a source may come to a moving microphone (the rir step refuses closer).
 MIN_MOVING_GAP_M = 0.1
 
@@ -219,6 +255,7 @@ def run(ctx) -> None:
     regions = planar_regions(scene)
     placements = artifacts.read(ctx, "placement").groups
     scene_name = f"scene {mesh_art.data.get('scene_id', '?')!r}"
+    patterns = source_patterns(params.directivity, ctx.job.paths, settings.bands_hz)
     walk = arranged = None
     if params.walk is not None:
         walk = Walk(params.walk.speed_m_s, params.walk.walk_span, params.microphone)
@@ -248,6 +285,19 @@ def run(ctx) -> None:
                         f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
                         "microphone's path (microphone.trajectory) or the sources' rules")
         traces, refs = _traces(sources, lines, placement.mic_m, params.microphone.yaw_deg)
+        # a directional source: its pattern at every point, facing as the spec says
+        point_dirs: list[list[SourceDirectivity | None]] = [[None] * len(p) for *_, p in traces]
+        facings: list[np.ndarray | None] = []
+        for (name, pts), ref in zip(sources, refs, strict=True):
+            role = track_role(name)
+            if role not in patterns:
+                facings.append(None)
+                continue
+            d = params.directivity.role(role)
+            yaws = point_yaws_deg(pts, d.facing, placement.mic_m)
+            facings.append(yaws)
+            for (t, i), yaw in zip(ref, yaws, strict=True):
+                point_dirs[t][i] = SourceDirectivity(patterns[role], float(yaw), d.pitch_deg)
         # one set of diffracting edges for the group: the most important for all of its
         # source and microphone positions
         group_settings, choice = settings, None
@@ -277,7 +327,8 @@ def run(ctx) -> None:
                 results.append(simulate_rirs(
                     scene, mic_m, np.asarray(points), group_settings, rng, regions,
                     {**microphone, "yaw_deg": yaw}, hrirs, progress=progress,
-                    where=scene_name, keep_arrivals=params.early_paths))
+                    where=scene_name, keep_arrivals=params.early_paths,
+                    directivity=point_dirs[t] if patterns else None))
         for w in caught:
             if issubclass(w.category, SonicspecWarning):
                 if not str(w.message).startswith("image sources: order"):
@@ -318,6 +369,8 @@ def run(ctx) -> None:
                     found = PathSet.identify_moving(fine.sources_m, fine.mics_m, fine.from_mic)
                 added = len(fine.at_index) > len(src_m)
                 found = found.with_index(fine.at_index if added else None)
+                if facings[s] is None:  # an omni source's paths: stored as before
+                    found = dataclasses.replace(found, departures=None)
                 arrays.update(artifacts.path_set_arrays(paths, found))
                 late = stack.astype(np.float64)
                 for i, early in enumerate(at_mic):  # each as long as its own RIR was made
@@ -332,6 +385,8 @@ def run(ctx) -> None:
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
                 direct=facts[0]["direct"], tail=facts[0]["tail"],
                 escaped_ray_fraction=facts[0]["escaped_ray_fraction"], paths=paths,
+                facing_yaw_deg=None if facings[s] is None else [
+                    round(float(y), 2) for y in facings[s]],
                 **_order_reached(facts, settings.image_source_order)))
         groups.append(RirGroup(group=placement.group, sources=entries,
                                diffraction_edges=choice))
