@@ -73,6 +73,7 @@ def test_a_walking_head_turning_cardioid_is_the_exact_turning_source(tmp_path: P
                   "time_constant_s: 0.5}}")
     meta = json.loads((group / "metadata.json").read_text())["source1"]
     dry, fs = sf.read(group / "source1_dry.wav")
+    assert fs == FS
     direct, _ = sf.read(group / "source1_direct.wav")
     track = read_track(group.parent.parent, meta["track"])
     hop = round(track["hop_s"] * FS)

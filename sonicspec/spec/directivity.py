@@ -44,13 +44,16 @@ class DirectivitySpec(SpecModel):
         description=("With pattern sofa: a SOFA file of the FreeFieldDirectivityTF convention, "
                      "relative to the spec file (its magnitude averaged per octave band, "
                      "normalised on-axis: azimuth 0, elevation 0)."))
-    facing: Literal["walk", "toward_mic"] | float = Field(
+    facing: Literal["walk", "toward_mic", "fixed"] = Field(
         "walk",
         description=(
             "Where the source's front points: walk (the direction of travel, smoothed over "
             "facing_smoothing_s; a source that does not move faces the microphone), "
-            "toward_mic, or a fixed yaw in degrees (counter-clockwise from +x seen from "
-            "above)."))
+            "toward_mic, or fixed (yaw_deg)."))
+    yaw_deg: float = Field(
+        0.0,
+        description=("With facing fixed: the yaw of the front, degrees counter-clockwise from "
+                     "+x seen from above."))
     facing_smoothing_s: float = Field(
         0.5, ge=0, le=10,
         description=("With facing walk: the time over which the direction of travel is "
@@ -77,6 +80,12 @@ class DirectivitySpec(SpecModel):
     def is_omni(self) -> bool:
         """Radiates the same everywhere (then where it faces does not matter)."""
         return self.pattern == "omni"
+
+    @property
+    def facing_rule(self) -> str | float:
+        """``walk``, ``toward_mic`` or the fixed yaw (degrees), as
+        :func:`sonicspec.acoustics.directivity.facing_yaw_deg` takes it."""
+        return self.yaw_deg if self.facing == "fixed" else self.facing
 
 
 class SourcesDirectivitySpec(SpecModel):

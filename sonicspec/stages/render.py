@@ -152,7 +152,7 @@ def facing_frames(d: DirectivitySpec, line: Timeline, mic_m, rate: int,
     ``rng`` is given: ``(hop in samples, yaw per frame)``."""
     hop = max(1, round(FACING_HOP_S * rate))
     positions = line.at(line.source_m, line.index[::hop])
-    yaw = facing_yaw_deg(positions, hop / rate, d.facing, mic_m, d.facing_smoothing_s)
+    yaw = facing_yaw_deg(positions, hop / rate, d.facing_rule, mic_m, d.facing_smoothing_s)
     if d.head_turn is not None and rng is not None:
         yaw = yaw + head_turns_deg(len(yaw), hop / rate, d.head_turn.std_deg,
                                    d.head_turn.time_constant_s, rng)

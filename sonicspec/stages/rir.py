@@ -294,7 +294,7 @@ def run(ctx) -> None:
                 facings.append(None)
                 continue
             d = params.directivity.role(role)
-            yaws = point_yaws_deg(pts, d.facing, placement.mic_m)
+            yaws = point_yaws_deg(pts, d.facing_rule, placement.mic_m)
             facings.append(yaws)
             for (t, i), yaw in zip(ref, yaws, strict=True):
                 point_dirs[t][i] = SourceDirectivity(patterns[role], float(yaw), d.pitch_deg)
