@@ -797,8 +797,16 @@ def _source_gains(source: SourceDirectivity, paths: PathSet, k: int, edge: bool,
     if not source.pattern.frequency_independent:
         if static:
             tilt[:] = tilt_q.mean(axis=0)
-        else:
-            nearest = np.argmin(np.abs(index[q][None, :] - np.arange(n_points)[:, None]), axis=1)
+        else:  # the evaluated emission nearest to each point
+            at, p = index[q], np.arange(n_points, dtype=np.float64)
+            if np.all(np.diff(at) >= 0):
+                right = np.clip(np.searchsorted(at, p), 1, max(1, at.size - 1))
+                left = right - 1
+                nearest = np.where(np.abs(at[np.minimum(right, at.size - 1)] - p)
+                                   < np.abs(at[left] - p), np.minimum(right, at.size - 1),
+                                   left)
+            else:
+                nearest = np.argmin(np.abs(at[None, :] - p[:, None]), axis=1)
             tilt = tilt_q[nearest]
     return broad, tilt
 
