@@ -119,3 +119,34 @@ def test_the_talker_pattern_per_band_matches_the_exact_solution_band_by_band() -
     ours_b, exact_b = bank.split(ours[core]), bank.split(exact[core])
     level = 10 * np.log10(np.sum(ours_b ** 2, axis=1) / np.sum(exact_b ** 2, axis=1))
     assert np.all(np.abs(level) < 0.5), level
+
+
+def test_every_diffracted_path_leaves_the_source_towards_its_first_edge() -> None:
+    """Over the screen's top edge the apex is known; with reflections and two edges, the
+    departure still points at a point the path passes (its first apex or reflection point):
+    walking along it by the path's first leg stays within the room."""
+    from test_acoustics_diffraction_engine import BANDS as EDGE_BANDS
+    from test_acoustics_diffraction_engine import C as EDGE_C
+    from test_acoustics_diffraction_engine import screen_room
+
+    from sonicspec.acoustics import engine
+    from sonicspec.acoustics.directivity import departure_directions
+    from sonicspec.acoustics.paths.edge_paths import diffracted_sound
+
+    src, mic = np.array([[2.5, 2.0, 1.0]]), np.array([6.0, 2.0, 1.2])
+    scene = screen_room()
+    edges = engine.scene_edges(scene, 256)
+    (a,) = diffracted_sound(scene, edges, src, mic, EDGE_BANDS, None, EDGE_C)
+    assert len(a) > 3 and set(a.order) >= {1, 2}
+    d = departure_directions(a, src[0], mic)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
+    k = int(np.argmin(a.times_s))  # over the top edge, at the apex (4, 2, 1.8)
+    apex = np.array([4.0, 2.0, 1.8])
+    np.testing.assert_allclose(d[k], (apex - src[0]) / np.linalg.norm(apex - src[0]), atol=1e-9)
+    # first-order paths without a reflection: the departure and the arrival direction meet at
+    # one apex, at the path's length
+    for i in np.flatnonzero(a.order == 1):
+        length = a.path_length_m[i]
+        u = np.linalg.norm(src[0] - mic + length * d[i]) / np.linalg.norm(a.directions[i] + d[i])
+        meet = mic + u * a.directions[i]
+        np.testing.assert_allclose(np.linalg.norm(meet - src[0]) + u, length, atol=1e-6)

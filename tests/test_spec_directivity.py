@@ -70,3 +70,32 @@ def _moving_trajectory():
 
     return MicrophoneLineTrajectorySpec(kind="line", start_m=(1.0, 1.0, 1.5),
                                         end_m=(2.0, 1.0, 1.5))
+
+
+def test_a_sofa_talker_is_keyed_by_its_file_and_read_by_the_steps(tmp_path: Path) -> None:
+    """A SOFA FreeFieldDirectivityTF file the test writes: its digest keys the rir step, both
+    steps that need it get its path, and the steps read it as a measured pattern."""
+    import numpy as np
+    from test_directivity import _write_sofa
+
+    from sonicspec.acoustics.directivity import SofaPattern
+    from sonicspec.plan.params import RirParams
+    from sonicspec.stages.rir import source_patterns
+
+    def cardioid(dirs, f):
+        return np.repeat(0.5 + 0.5 * dirs[:, :1], len(f), axis=1)
+
+    _write_sofa(tmp_path / "talker.sofa", cardioid, np.geomspace(50, 7000, 100))
+    spec = _spec(tmp_path, "directivity:\n  speech: {pattern: sofa, sofa_path: talker.sofa}\n")
+    plan = compile_spec(load_spec(spec), cache=False)
+    rir = next(j for j in plan.jobs if j.step == "rir")
+    render = next(j for j in plan.jobs if j.step == "render")
+    assert len(rir.params["files"]["directivity_speech"]) == 64
+    assert rir.paths["directivity_speech"] == str(tmp_path / "talker.sofa")
+    if render.params["interpolation"] == "paths":
+        assert render.paths["directivity_speech"] == str(tmp_path / "talker.sofa")
+    params = RirParams.model_validate(rir.params)
+    patterns = source_patterns(params.directivity, rir.paths, (250.0, 1000.0, 4000.0))
+    assert set(patterns) == {"speech"} and isinstance(patterns["speech"], SofaPattern)
+    back = patterns["speech"].gains(np.array([[-1.0, 0, 0], [0, 1.0, 0]]), (1000.0,))[:, 0]
+    np.testing.assert_allclose(back, [0.0, 0.5], atol=0.02)
