@@ -150,3 +150,46 @@ def test_every_diffracted_path_leaves_the_source_towards_its_first_edge() -> Non
         u = np.linalg.norm(src[0] - mic + length * d[i]) / np.linalg.norm(a.directions[i] + d[i])
         meet = mic + u * a.directions[i]
         np.testing.assert_allclose(np.linalg.norm(meet - src[0]) + u, length, atol=1e-6)
+
+
+def test_a_talkers_rir_has_its_pattern_in_the_direct_sound_and_its_power_in_the_tail() -> None:
+    """The engine's RIR of a talker facing away from the microphone: the direct sound carries
+    the pattern's gain behind it in every band (the microphone straight behind, level with
+    the mouth), the floor's and the ceiling's reflections the gains down- and upwards-behind,
+    the late tail the pattern's diffuse-field power (the same noise draw)."""
+    import sonicspec as ss
+    from sonicspec.acoustics.bands import OctaveFilterBank
+    from sonicspec.acoustics.directivity import SPEECH
+    from sonicspec.acoustics.engine import acoustic_scene, simulate_rirs
+
+    room = ss.Scene.shoebox([6.0, 5.0, 3.0], {"walls": "plaster_on_brick"})
+    settings = ss.RirSettings(rays=1500, image_source_order=1, max_rir_length_s=0.4,
+                              sample_rate_hz=FS, diffraction=False).simulation_settings()
+    scene = acoustic_scene(room.mesh, room.library, settings)
+    mic, point = np.array([4.5, 2.5, 1.5]), np.array([[1.5, 2.5, 1.5]])
+
+    def rir(directivity):
+        rirs, facts = simulate_rirs(scene, mic, point, settings, np.random.default_rng(0),
+                                    directivity=directivity, keep_arrivals=True)
+        return rirs[0][0].astype(np.float64), facts[0]["early_arrivals_at_mic"]
+
+    (omni, omni_paths), (away, away_paths) = rir(None), rir([SourceDirectivity(SPEECH, 180.0)])
+    bands = settings.bands_hz
+    ratio = away_paths.amplitudes / omni_paths.amplitudes
+    direct = int(np.argmin(omni_paths.times_s))
+    np.testing.assert_allclose(ratio[direct], SPEECH.gains(np.array([[-1.0, 0, 0]]), bands)[0],
+                               rtol=1e-12)
+    # floor and ceiling (1.5 m below and above): reflection points halfway, down or up behind
+    for sign in (-1.0, 1.0):
+        (k,) = np.flatnonzero(np.isclose(omni_paths.path_length_m, np.hypot(3.0, 3.0))
+                              & (np.sign(omni_paths.directions[:, 2]) == sign))
+        leaving = np.array([[-1.0, 0.0, sign]]) / np.sqrt(2.0)
+        np.testing.assert_allclose(ratio[k], SPEECH.gains(leaving, bands)[0], rtol=1e-12)
+    bank = OctaveFilterBank(FS, bands)
+    tail = slice(int(0.1 * FS), omni.size)
+
+    def level(x):
+        return 10 * np.log10(np.sum(bank.split(x[tail]) ** 2, axis=1))
+
+    power = 10 * np.log10(SPEECH.diffuse_power(bands))
+    np.testing.assert_allclose(level(away) - level(omni), power, atol=0.3)

@@ -356,15 +356,19 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         raise AcousticsError(f"directivity: expected one per source position ({len(points)}), "
                              f"got {len(directivity)}")
     rirs, facts, reports = [], [], []
+    powers: dict[int, np.ndarray] = {}
     for k in range(len(points)):
         arrivals = early.at_mic[k]
         late, report = late_envelope(traces[k].histogram, settings)
         reports.append(report)
         source = None if directivity is None else directivity[k]
         if source is not None:
+            if id(source.pattern) not in powers:  # once per pattern, not per point
+                powers[id(source.pattern)] = source.pattern.diffuse_power(settings.bands_hz)
             arrivals, late = directional_paths(arrivals, late, source, points[k], mic,
                                                settings.bands_hz,
-                                               arrivals is early.from_mic[k])
+                                               arrivals is early.from_mic[k],
+                                               powers[id(source.pattern)])
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
             "through walls" if len(early.direct[k]) else
@@ -390,16 +394,19 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
 
 def directional_paths(arrivals: Arrivals, late: EnergyHistogram, source: SourceDirectivity,
                       source_m: np.ndarray, mic_m: np.ndarray, bands_hz,
-                      traced_from_mic: bool) -> tuple[Arrivals, EnergyHistogram]:
+                      traced_from_mic: bool, diffuse_power: np.ndarray | None = None
+                      ) -> tuple[Arrivals, EnergyHistogram]:
     """One source position's early ``arrivals`` and ``late`` envelope as a directional
     source radiates them: each path times the pattern's gains for its departure direction
     (``traced_from_mic``: the arrivals were traced from the microphone), the late energy
-    times the pattern's diffuse-field power per band."""
+    times the pattern's diffuse-field power per band (``diffuse_power``, when the caller
+    has it)."""
     d = departure_directions(arrivals, source_m, mic_m,
                              "receiver" if traced_from_mic else "source")
     gains = emission_gains(source.pattern, d, float(source.yaw_deg.reshape(-1)[0]), bands_hz,
                            source.pitch_deg)
-    power = source.pattern.diffuse_power(bands_hz)
+    power = (source.pattern.diffuse_power(bands_hz) if diffuse_power is None
+             else np.asarray(diffuse_power, dtype=np.float64))
     return (directional_arrivals(arrivals, gains),
             replace(late, energy=late.energy * power[None, :]))
 
