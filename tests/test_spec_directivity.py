@@ -80,7 +80,7 @@ def test_a_sofa_talker_is_keyed_by_its_file_and_read_by_the_steps(tmp_path: Path
 
     from sonicspec.acoustics.directivity import SofaPattern
     from sonicspec.plan.params import RirParams
-    from sonicspec.stages.rir import source_patterns
+    from sonicspec.stages.directivity import source_patterns
 
     def cardioid(dirs, f):
         return np.repeat(0.5 + 0.5 * dirs[:, :1], len(f), axis=1)

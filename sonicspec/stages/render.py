@@ -52,8 +52,8 @@ from sonicspec.spec.directivity import DirectivitySpec
 from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
+from sonicspec.stages.directivity import source_patterns
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
-from sonicspec.stages.rir import source_patterns
 
 
 class _AudioCache:

@@ -16,12 +16,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import artifacts
-from sonicspec.acoustics.directivity import (
-    DirectivityPattern,
-    SourceDirectivity,
-    pattern_by_name,
-    point_yaws_deg,
-)
+from sonicspec.acoustics.directivity import SourceDirectivity, point_yaws_deg
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     acoustic_scene,
@@ -29,7 +24,6 @@ from sonicspec.acoustics.engine import (
     check_receiver,
     early_part,
     load_hrirs,
-    load_source_directivity,
     refined_early_paths,
     rir_results,
     scene_edges,
@@ -48,9 +42,9 @@ from sonicspec.artifacts import (
 from sonicspec.errors import SonicspecWarning, StageError
 from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
-from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import SofaHrtfSpec
+from sonicspec.stages.directivity import source_patterns, track_role
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")
@@ -168,33 +162,6 @@ def _source_points(placement: GroupPlacement) -> list[tuple[str, np.ndarray]]:
         source = getattr(placement, kind)
         if source is not None:
             out.append((kind, np.asarray(source.rir_points_m, dtype=np.float64)))
-    return out
-
-
-def track_role(name: str) -> str:
-    """The source role of a track name (``noise``, ``music``; the talkers ``source<k>``)."""
-    return name if name in ("noise", "music") else "speech"
-
-
-def source_patterns(directivity: SourcesDirectivitySpec | None, paths, bands_hz
-                    ) -> dict[str, DirectivityPattern]:
-    """The pattern of every role that is not omnidirectional; a SOFA set read from the job's
-    ``directivity_<role>`` path."""
-    out: dict[str, DirectivityPattern] = {}
-    if directivity is None:
-        return out
-    for role in ("speech", "noise", "music"):
-        d = directivity.role(role)
-        if d.is_omni:
-            continue
-        if d.pattern == "sofa":
-            key = f"directivity_{role}"
-            if key not in paths:
-                raise StageError(f"directivity.{role}: pattern sofa but the job has no "
-                                 f"{key} file")
-            out[role] = load_source_directivity(paths[key], bands_hz, d.sofa_path)
-        else:
-            out[role] = pattern_by_name(d.pattern)
     return out
 
 
