@@ -755,8 +755,9 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
 
 
 #: A directional source's gains are evaluated every this many emissions (linear between):
-#: 1 ms at 16 kHz, where a talker turning 90° per second turns by 0.09°.
-_SOURCE_STEP = 16
+#: 4 ms at 16 kHz, where a talker turning 120° per second turns by 0.5° (a cardioid's gain
+#: then departs from its chord by < 1e-4: tests/test_acoustics_moving_directivity.py).
+_SOURCE_STEP = 64
 
 
 def _source_gains(source: SourceDirectivity, paths: PathSet, k: int, edge: bool,
