@@ -131,3 +131,29 @@ def test_supercardioid_has_the_best_front_to_back_ratio():
     best = max(np.linspace(0.2, 0.6, 81), key=ratio)
     assert best == pytest.approx(CARDIOID_ALPHA["supercardioid"], abs=0.01)
     assert math.isclose(CARDIOID_ALPHA["supercardioid"], 0.366, abs_tol=1e-3)
+
+
+def test_compute_rir_takes_a_talker_that_faces_away() -> None:
+    """The Python API: the same RIR (one seed) of a cardioid talker facing the microphone and
+    facing away — the direct sound the same and gone, the tail the cardioid's diffuse power."""
+    import sonicspec as ss
+    from sonicspec.acoustics.directivity import SourceDirectivity
+
+    room = ss.Scene.shoebox([5.0, 4.0, 3.0], {"walls": "plaster_on_brick"})
+    settings = ss.RirSettings(rays=500, image_source_order=1, max_rir_length_s=0.3,
+                              sample_rate_hz=16000, diffraction=False)
+    src, mic = [1.0, 2.0, 1.5], [4.0, 2.0, 1.5]
+    cardioid = pattern_by_name("cardioid")
+
+    def rir(directivity):
+        return ss.compute_rir(room, src, mic, settings, directivity=directivity).rir[0]
+
+    omni = rir(None)
+    toward, away = rir(SourceDirectivity(cardioid, 0.0)), rir(SourceDirectivity(cardioid, 180.0))
+    arrive = round(3.0 / 343.0 * 16000)
+    direct = slice(arrive - 3, arrive + 4)  # the first reflection (the floor) is 58 samples later
+    np.testing.assert_allclose(toward[direct], omni[direct], atol=1e-6)
+    assert np.max(np.abs(away[direct])) < 0.02 * np.max(np.abs(omni[direct]))
+    tail = slice(int(0.1 * 16000), omni.size)
+    ratio = np.sum(away[tail] ** 2) / np.sum(omni[tail] ** 2)
+    assert ratio == pytest.approx(1 / 3, rel=0.05)

@@ -736,11 +736,13 @@ class RirResult:
 def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                 settings: SimulationSettings, rng: np.random.Generator,
                 microphone: Mapping[str, Any] | None = None, hrirs: HrirSet | None = None,
-                n_threads: int = 1, where: str = "the scene") -> list[RirResult]:
+                n_threads: int = 1, where: str = "the scene",
+                directivity: SourceDirectivity | None = None) -> list[RirResult]:
     """:func:`simulate_rirs` for a few positions, each RIR with its facts and figures.
 
     Parameters and randomness as :func:`simulate_rirs` (with ``expected_figures``), whose
-    RIRs these are, byte for byte.
+    RIRs these are, byte for byte; ``directivity``: one directional source at every position
+    (its ``yaw_deg`` one yaw, or one per position).
 
     Returns
     -------
@@ -748,9 +750,13 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
         One per source position.
     """
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    per_point = None if directivity is None else [
+        SourceDirectivity(directivity.pattern, directivity.yaw_at(k) if
+                          directivity.yaw_deg.ndim else directivity.yaw_deg,
+                          directivity.pitch_deg) for k in range(len(points))]
     rirs, facts = simulate_rirs(scene, mic_m, points, settings, rng, microphone=microphone,
                                 hrirs=hrirs, n_threads=n_threads, expected_figures=True,
-                                where=where)
+                                where=where, directivity=per_point)
     mic = tuple(float(v) for v in np.asarray(mic_m, dtype=np.float64).reshape(3))
     return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
                       bands_hz=tuple(settings.bands_hz),
