@@ -90,8 +90,8 @@ def render_cost(walk, facts, microphone, seconds: float) -> tuple[float, float]:
     from sonicspec.acoustics.receivers.hrtf import SphereHead
 
     mic = np.array([3.0, 2.5, 1.5])
-    paths = PathSet.identify(walk, [f["early_arrivals"] for f in facts],
-                             at_mic=[f["early_arrivals_at_mic"] for f in facts])
+    paths = PathSet.identify(walk, [f.early_arrivals for f in facts],
+                             at_mic=[f.early_arrivals_at_mic for f in facts])
     caps = scene_capsules(microphone)
     if microphone["kind"] == "mono" and caps is None:
         receiver = Receiver()

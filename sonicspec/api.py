@@ -354,7 +354,7 @@ def compute_rirs(scene: Scene, sources: Sequence[Sequence[float]] | np.ndarray,
                  mic: Sequence[float], settings: RirSettings | None = None, *,
                  receiver: BaseModel | Mapping[str, Any] | None = None,
                  seed: int | np.random.Generator = 0, hrirs=None,
-                 n_threads: int = 1) -> list[RirResult]:
+                 n_threads: int = 1, directivity=None) -> list[RirResult]:
     """RIRs from several source positions to one microphone, from one trace.
 
     Parameters and results as :func:`compute_rir`, with ``sources`` of shape (N, 3).
@@ -371,14 +371,15 @@ def compute_rirs(scene: Scene, sources: Sequence[Sequence[float]] | np.ndarray,
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     traced = acoustic_scene(scene.mesh, scene.library, sim)
     return rir_results(traced, mic_m, points, sim, rng, microphone=microphone, hrirs=hrirs,
-                       n_threads=n_threads, where=f"scene {scene.name!r}")
+                       n_threads=n_threads, where=f"scene {scene.name!r}",
+                       directivity=directivity)
 
 
 def compute_rir(scene: Scene, source: Sequence[float], mic: Sequence[float],
                 settings: RirSettings | None = None, *,
                 receiver: BaseModel | Mapping[str, Any] | None = None,
                 seed: int | np.random.Generator = 0, hrirs=None,
-                n_threads: int = 1) -> RirResult:
+                n_threads: int = 1, directivity=None) -> RirResult:
     """The RIR from ``source`` to ``mic`` in ``scene``, with its figures.
 
     Parameters
@@ -404,6 +405,10 @@ def compute_rir(scene: Scene, source: Sequence[float], mic: Sequence[float],
         A measured HRIR set already loaded (instead of the receiver's SOFA path).
     n_threads : int
         Threads for the ray trace (the bytes do not depend on it).
+    directivity : SourceDirectivity, optional
+        A directional source: its pattern and where it faces
+        (:class:`sonicspec.acoustics.directivity.SourceDirectivity`, e.g.
+        ``SourceDirectivity(pattern_by_name("speech"), yaw_deg=90.0)``); default omni.
 
     Returns
     -------
@@ -419,5 +424,5 @@ def compute_rir(scene: Scene, source: Sequence[float], mic: Sequence[float],
         A position outside the scene's bounds, or a receiver this version cannot render.
     """
     (result,) = compute_rirs(scene, [source], mic, settings, receiver=receiver, seed=seed,
-                             hrirs=hrirs, n_threads=n_threads)
+                             hrirs=hrirs, n_threads=n_threads, directivity=directivity)
     return result

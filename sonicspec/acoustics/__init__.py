@@ -32,7 +32,8 @@ source positions, with the subpackage that does each step::
 
 Shared basics at the top: :mod:`.bands` (octave bands, a filter bank that sums to one),
 :mod:`.air` (ISO 9613-1), :mod:`.arrivals` (the result types every step hands on),
-:mod:`.directions` (sphere lattices), :mod:`.metrics` (ISO 3382-1 figures) and
+:mod:`.directions` (sphere lattices), :mod:`.directivity` (source and capsule patterns per
+band, where a talker faces), :mod:`.metrics` (ISO 3382-1 figures) and
 :mod:`.engine` (runs the steps above; the one module that reads the geometry library's types).
 
 **References**: :mod:`sonicspec.acoustics.theory` holds the exact answers the engine is

@@ -74,6 +74,11 @@ class Arrivals:
         Which geometric path an edge-diffracted arrival takes (its edges and reflector, the
         same for every source and receiver position: :mod:`~sonicspec.acoustics.paths.edge_paths`),
         so it is followed along a walk; -1 for other arrivals.
+    departures : (n, 3) float64
+        Unit direction in which an edge-diffracted path leaves the source (towards its first
+        edge apex or reflection point), for a directional source; zero for other arrivals,
+        whose departure their isometry gives (:func:`~sonicspec.acoustics.directivity.
+        departure_directions`).
     """
 
     times_s: np.ndarray
@@ -84,14 +89,17 @@ class Arrivals:
     path_length_m: np.ndarray
     isometry: np.ndarray | None = None
     path_id: np.ndarray | None = None
+    departures: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.isometry is None:
             object.__setattr__(self, "isometry", np.full((len(self.times_s), 3, 4), np.nan))
         if self.path_id is None:
             object.__setattr__(self, "path_id", np.full(len(self.times_s), -1, dtype=np.int64))
+        if self.departures is None:
+            object.__setattr__(self, "departures", np.zeros((len(self.times_s), 3)))
         for name in ("times_s", "amplitudes", "directions", "order", "kind", "path_length_m",
-                     "isometry", "path_id"):
+                     "isometry", "path_id", "departures"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
 
     @property
@@ -129,6 +137,7 @@ class Arrivals:
             path_length_m=np.concatenate([p.path_length_m for p in parts])[order],
             isometry=np.concatenate([p.isometry for p in parts])[order],
             path_id=np.concatenate([p.path_id for p in parts])[order],
+            departures=np.concatenate([p.departures for p in parts])[order],
         )
 
     def energy_histogram(self, bin_s: float, n_bins: int) -> np.ndarray:

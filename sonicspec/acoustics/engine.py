@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -38,6 +38,12 @@ import numpy as np
 from sonicspec.acoustics.air import air_energy_coefficient_per_m
 from sonicspec.acoustics.arrivals import Arrivals, EnergyHistogram
 from sonicspec.acoustics.bands import OctaveFilterBank, default_bands
+from sonicspec.acoustics.directivity import (
+    SourceDirectivity,
+    departure_directions,
+    directional_arrivals,
+    emission_gains,
+)
 from sonicspec.acoustics.late.raytrace import RayTraceSettings, trace_rays
 from sonicspec.acoustics.late.tails import TailFacts, TailReport, cut_warning, shape_tail
 from sonicspec.acoustics.metrics import (
@@ -69,9 +75,11 @@ __all__ = [
     "check_inside",
     "check_receiver",
     "diffraction_arrivals",
+    "directional_paths",
     "early_part",
     "late_envelope",
     "load_hrirs",
+    "load_source_directivity",
     "microphone_capsules",
     "needs_directions",
     "ray_trace_settings",
@@ -255,6 +263,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
                   hrirs: HrirSet | None = None, n_threads: int = 1,
                   expected_figures: bool = False, progress=None, where: str = "the scene",
                   keep_arrivals: bool = False,
+                  directivity: Sequence[SourceDirectivity | None] | None = None,
                   ) -> tuple[list[np.ndarray], list[RirFacts]]:
     """RIRs from every source position to the microphone, and facts about each.
 
@@ -299,7 +308,15 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
         paths are rendered from them (:class:`~sonicspec.acoustics.moving.delays.PathSet`), its late
         part is the RIR less :func:`early_part` of the latter. Edge-diffracted paths are in
         both lists (directions at the microphone), identified by their ``path_id``.
-        Receivers of :data:`PATH_RECEIVERS`.
+        Receivers of :data:`PATH_RECEIVERS`. With ``directivity``, ``"early_arrivals"``
+        stay omnidirectional (a moving source's pattern is applied as it turns,
+        :func:`~sonicspec.acoustics.moving.delays.render_paths`) and
+        ``"early_arrivals_at_mic"`` carry the pattern, as the RIR does.
+    directivity : sequence of SourceDirectivity or None, optional
+        One per source position (None: omnidirectional), its ``yaw_deg`` one yaw: each
+        early path weighted by the pattern's gain for the direction it leaves the source in
+        (:func:`~sonicspec.acoustics.directivity.departure_directions`), the late envelope
+        by the pattern's diffuse-field power per band.
 
     Returns
     -------
@@ -340,11 +357,23 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     edge_choice = (_diffraction_edges(scene, settings, mic, points)[0].choice()
                    if settings.diffraction else None)
     render = receiver_renderer(microphone, settings, hrirs)
+    if directivity is not None and len(directivity) != len(points):
+        raise AcousticsError(f"directivity: expected one per source position ({len(points)}), "
+                             f"got {len(directivity)}")
     rirs, facts, reports = [], [], []
+    powers: dict[int, np.ndarray] = {}
     for k in range(len(points)):
         arrivals = early.at_mic[k]
         late, report = late_envelope(traces[k].histogram, settings)
         reports.append(report)
+        source = None if directivity is None else directivity[k]
+        if source is not None:
+            if id(source.pattern) not in powers:  # once per pattern, not per point
+                powers[id(source.pattern)] = source.pattern.diffuse_power(settings.bands_hz)
+            arrivals, late = directional_paths(arrivals, late, source, points[k], mic,
+                                               settings.bands_hz,
+                                               arrivals is early.from_mic[k],
+                                               powers[id(source.pattern)])
         rirs.append(render(arrivals, late, rng).astype(np.float32))
         path = "visible" if not blocked[k] else (
             "through walls" if len(early.direct[k]) else
@@ -362,9 +391,29 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
             diffracted_paths=len(early.diffracted[k]) if settings.diffraction else 0,
             diffraction_edges=edge_choice, expected=expected,
             early_arrivals=early.from_mic[k] if keep_arrivals else None,
-            early_arrivals_at_mic=early.at_mic[k] if keep_arrivals else None))
+            # as rendered: with the source's pattern
+            early_arrivals_at_mic=arrivals if keep_arrivals else None))
     warn_cut_tails(reports, where)
     return rirs, facts
+
+
+def directional_paths(arrivals: Arrivals, late: EnergyHistogram, source: SourceDirectivity,
+                      source_m: np.ndarray, mic_m: np.ndarray, bands_hz,
+                      traced_from_mic: bool, diffuse_power: np.ndarray | None = None
+                      ) -> tuple[Arrivals, EnergyHistogram]:
+    """One source position's early ``arrivals`` and ``late`` envelope as a directional
+    source radiates them: each path times the pattern's gains for its departure direction
+    (``traced_from_mic``: the arrivals were traced from the microphone), the late energy
+    times the pattern's diffuse-field power per band (``diffuse_power``, when the caller
+    has it)."""
+    d = departure_directions(arrivals, source_m, mic_m,
+                             "receiver" if traced_from_mic else "source")
+    gains = emission_gains(source.pattern, d, float(source.yaw_deg.reshape(-1)[0]), bands_hz,
+                           source.pitch_deg)
+    power = (source.pattern.diffuse_power(bands_hz) if diffuse_power is None
+             else np.asarray(diffuse_power, dtype=np.float64))
+    return (directional_arrivals(arrivals, gains),
+            replace(late, energy=late.energy * power[None, :]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -754,11 +803,13 @@ class RirResult:
 def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
                 settings: SimulationSettings, rng: np.random.Generator,
                 microphone: Mapping[str, Any] | None = None, hrirs: HrirSet | None = None,
-                n_threads: int = 1, where: str = "the scene") -> list[RirResult]:
+                n_threads: int = 1, where: str = "the scene",
+                directivity: SourceDirectivity | None = None) -> list[RirResult]:
     """:func:`simulate_rirs` for a few positions, each RIR with its facts and figures.
 
     Parameters and randomness as :func:`simulate_rirs` (with ``expected_figures``), whose
-    RIRs these are, byte for byte.
+    RIRs these are, byte for byte; ``directivity``: one directional source at every position
+    (its ``yaw_deg`` one yaw, or one per position).
 
     Returns
     -------
@@ -766,9 +817,13 @@ def rir_results(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray,
         One per source position.
     """
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
+    per_point = None if directivity is None else [
+        SourceDirectivity(directivity.pattern, directivity.yaw_at(k) if
+                          directivity.yaw_deg.ndim else directivity.yaw_deg,
+                          directivity.pitch_deg) for k in range(len(points))]
     rirs, facts = simulate_rirs(scene, mic_m, points, settings, rng, microphone=microphone,
                                 hrirs=hrirs, n_threads=n_threads, expected_figures=True,
-                                where=where)
+                                where=where, directivity=per_point)
     mic = tuple(float(v) for v in np.asarray(mic_m, dtype=np.float64).reshape(3))
     return [RirResult(rir=rir, sample_rate_hz=settings.sample_rate_hz,
                       bands_hz=tuple(settings.bands_hz),
@@ -972,6 +1027,23 @@ def load_hrirs(path: str | Path) -> HrirSet:
         return hrir_set_from_sofa(sofa)
     except AcousticsError as exc:
         raise AcousticsError(f"microphone.hrtf.path: {path}: {exc}") from exc
+
+
+def load_source_directivity(path: str | Path, bands_hz, name: str | None = None):
+    """A measured source pattern from a SOFA ``FreeFieldDirectivityTF`` file
+    (:meth:`~sonicspec.acoustics.directivity.SofaPattern.from_sofa`) at ``bands_hz``."""
+    from sonicspec.acoustics.directivity import SofaPattern
+
+    try:
+        import sofar
+    except ImportError as err:  # pragma: no cover - sofar is a dependency
+        raise AcousticsError("a SOFA source directivity needs sofar (pip install sofar)"
+                             ) from err
+    try:
+        sofa = sofar.read_sofa(str(path), verbose=False)
+    except Exception as err:  # sofar raises many kinds for a file that is not SOFA
+        raise AcousticsError(f"{path}: cannot read it as a SOFA file ({err})") from None
+    return SofaPattern.from_sofa(sofa, bands_hz, name=name or Path(path).name)
 
 
 def check_inside(vertices: np.ndarray, where: str, **points: Any) -> None:

@@ -22,6 +22,9 @@
   sample arrives at its retarded time with 1/(4π r), Doppler included; with
   :func:`shoebox_moving_images`, the exact time-varying image-source sum of a shoebox. The
   reference the moving-source renderer is measured against (issue 18).
+* A moving, turning directional source in free field and above one reflecting plane
+  (:func:`directional_source_with_plane`): the same sums with the pattern's gain applied at
+  each emission time for the direction each path leaves in (issue 30).
 * The infinite rigid wedge and thin half-plane (:class:`Wedge`): the exact diffracted field of
   a point source, Biot–Tolstoy–Medwin in time (:func:`wedge_diffraction_ir`) and its Fourier
   transform, Macdonald's solution (:func:`wedge_diffraction_spectrum`), with the geometric field
@@ -365,6 +368,88 @@ def moving_point_source(dry, source_m, receiver_m, sample_rate_hz: float, *,
         idx = base + offset
         keep = (idx >= 0) & (idx < n_out) & (amp != 0)
         np.add.at(out, idx[keep], amp[keep] * windowed_sinc(idx[keep] - tau[keep]))
+    return out
+
+
+def _mirror(points: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Points (or, with ``point`` 0, vectors) mirrored in the plane through ``point`` with
+    unit ``normal``."""
+    return points - 2.0 * ((points - point) @ normal)[:, None] * normal[None, :]
+
+
+def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rate_hz: float,
+                                  gain, *, plane_point_m=None, plane_normal=None,
+                                  reflection: float = 1.0,
+                                  speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                                  n_out: int | None = None) -> np.ndarray:
+    """The exact pressure at a static receiver of a moving, *turning* directional point
+    source, in free field or above one reflecting plane, ``(n_out,)``.
+
+    Each emitted sample leaves with the pattern's gain for the direction it leaves in, in the
+    source's frame at that emission time: towards the receiver for the direct sound, towards
+    the reflection point for the plane's reflection — the direction from the source to the
+    receiver's mirror image, i.e. the mirror of the direction from the source's image to the
+    receiver. Both are :func:`moving_point_source` sums (retarded time, 1/(4πr), Doppler) with
+    that gain per emitted sample; the reflection is the source's image with pressure factor
+    ``reflection``.
+
+    Parameters
+    ----------
+    dry : (n,) float
+        Source signal at the emission times ``k / fs``.
+    source_m : (3,) or (n, 3) float
+        Source position at each emission time, metres.
+    yaw_deg : float or (n,) float
+        Where the source faces at each emission time: degrees counter-clockwise from +x
+        seen from above (the front is horizontal).
+    receiver_m : (3,) float
+        The receiver, metres (static).
+    sample_rate_hz : float
+    gain : callable
+        ``gain(local) -> (n,)``: the pattern's pressure gain for unit directions ``(n, 3)``
+        in the source's frame (+x its front, +z up).
+    plane_point_m, plane_normal : (3,) float, optional
+        The reflecting plane (a point on it, its normal); none: free field.
+    reflection : float
+        The plane's pressure reflection factor.
+    speed_of_sound_m_s : float
+    n_out : int, optional
+        Output length; default: long enough for the last arrival.
+    """
+    s = np.asarray(dry, dtype=np.float64)
+    fs = _positive("sample_rate_hz", sample_rate_hz)
+    src = _track(source_m, len(s), "source_m")
+    rcv = np.asarray(receiver_m, dtype=np.float64)
+    if rcv.shape != (3,):
+        raise AcousticsError(f"receiver_m: expected a static point (3,), got {rcv.shape}")
+    yaw = np.radians(np.broadcast_to(np.asarray(yaw_deg, dtype=np.float64), s.shape))
+    cos_y, sin_y = np.cos(yaw), np.sin(yaw)
+
+    def gains(d: np.ndarray) -> np.ndarray:
+        d = d / np.linalg.norm(d, axis=1)[:, None]
+        local = np.stack([cos_y * d[:, 0] + sin_y * d[:, 1], -sin_y * d[:, 0] + cos_y * d[:, 1],
+                          d[:, 2]], axis=1)
+        return np.asarray(gain(local), dtype=np.float64).reshape(len(s))
+
+    paths = [(src, gains(rcv[None] - src))]
+    if plane_point_m is not None:
+        p0 = np.asarray(plane_point_m, dtype=np.float64).reshape(3)
+        nrm = np.asarray(plane_normal, dtype=np.float64).reshape(3)
+        if not np.linalg.norm(nrm) > 0:
+            raise AcousticsError(f"plane_normal: expected a non-zero vector, got {plane_normal!r}")
+        nrm = nrm / np.linalg.norm(nrm)
+        image = _mirror(src, p0, nrm)
+        leaving = _mirror(rcv[None] - image, np.zeros(3), nrm)  # mirrored back to the source
+        paths.append((image, reflection * gains(leaving)))
+    if n_out is None:
+        c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
+        last = max(float(np.max(np.arange(len(s)) + np.linalg.norm(p - rcv, axis=1) / c * fs))
+                   for p, _ in paths) if len(s) else 0.0
+        n_out = int(np.ceil(last)) + FRACTIONAL_DELAY_HALF_WIDTH + 1
+    out = np.zeros(n_out)
+    for position, g in paths:
+        out += moving_point_source(s, position, rcv, fs, speed_of_sound_m_s=speed_of_sound_m_s,
+                                   gain=g, n_out=n_out)
     return out
 
 

@@ -242,6 +242,9 @@ class RirSource(_Data):
     image_source_order_stopped: str | None = None
     """Why the order reached is lower than asked (``"order 3 needs more than 2,000,000
     candidates"``: the ray tracer covers the rest), None when it is not."""
+    facing_yaw_deg: list[float] | None = None
+    """A directional source: where it faced at each RIR point (degrees counter-clockwise
+    from +x), as its RIRs were computed; left out (None) for an omnidirectional one."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving
@@ -249,6 +252,14 @@ class RirSource(_Data):
     added between the RIR points: a
     :class:`~sonicspec.acoustics.moving.delays.PathSet`) and late RIRs (``<paths>_late``, shaped
     like the RIRs: the RIRs less their early paths)."""
+
+
+    @model_serializer(mode="wrap")
+    def _omni_left_out(self, handler):
+        data = handler(self)
+        if self.facing_yaw_deg is None:  # an omni source's record as before directivity
+            data.pop("facing_yaw_deg", None)
+        return data
 
 
 class RirGroup(_Data):
@@ -343,7 +354,8 @@ class MixData(_Data):
 
 def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
     """A source's :class:`~sonicspec.acoustics.moving.delays.PathSet` as arrays ``<prefix>_images``,
-    ``_weights``, ``_order`` and, for directional receivers, ``_directions``."""
+    ``_weights``, ``_order`` and, for directional receivers, ``_directions``; for a
+    directional source with edge paths, ``_departures``."""
     out = {f"{prefix}_images": paths.images_m, f"{prefix}_weights": paths.weights,
            f"{prefix}_order": paths.order}
     if paths.directions is not None:
@@ -354,6 +366,8 @@ def path_set_arrays(prefix: str, paths: PathSet) -> dict[str, np.ndarray]:
         out[f"{prefix}_lengths"] = paths.lengths_m
     if paths.at_index is not None:
         out[f"{prefix}_at_index"] = paths.at_index
+    if paths.departures is not None:  # a directional source's edge paths
+        out[f"{prefix}_departures"] = paths.departures
     return out
 
 
@@ -369,7 +383,9 @@ def read_path_set(arrays, prefix: str) -> PathSet:
                    None if isometries is None else np.asarray(isometries, dtype=np.float64),
                    None if lengths is None else np.asarray(lengths, dtype=np.float64),
                    None if f"{prefix}_at_index" not in arrays else
-                   np.asarray(arrays[f"{prefix}_at_index"], dtype=np.float64))
+                   np.asarray(arrays[f"{prefix}_at_index"], dtype=np.float64),
+                   None if f"{prefix}_departures" not in arrays else
+                   np.asarray(arrays[f"{prefix}_departures"], dtype=np.float64))
 
 
 MODELS: dict[str, type[_Data]] = {

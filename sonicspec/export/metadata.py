@@ -44,8 +44,10 @@ class TrackReference(_Record):
     frames: int = Field(ge=0, description="Frames in each array (one every hop_s).")
     hop_s: float = Field(gt=0, description="Time between frames, seconds (0.01).")
     arrays: dict[str, str] = Field(description=(
-        "Quantity (positions_m, azimuth_deg, elevation_deg, distance_m; the microphone: "
-        "positions_m and, when it moves, yaw_deg) -> the array's name in the archive."))
+        "Quantity (positions_m, azimuth_deg, elevation_deg, distance_m, and for a "
+        "directional source yaw_deg: where it faces, degrees counter-clockwise from +x; the "
+        "microphone: positions_m and, when it moves, yaw_deg) -> the array's name in the "
+        "archive."))
     scale: dict[str, int] = Field(description=(
         "Quantity -> integers per unit: the value is the stored int32 array / scale "
         "(10000 per metre, 100 per degree)."))

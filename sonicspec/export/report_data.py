@@ -106,7 +106,8 @@ def _read_json(path: Path) -> Any:
 
 
 _TRACK = b'track": {'
-# Only a moving microphone's track has a heading (stages.export.microphone_track).
+# A moving microphone's track has a heading (stages.export.microphone_track); so does a
+# directional source's (its facing): such a file is parsed whole, which is right either way.
 _MOVING_MIC = b'"yaw_deg"'
 
 

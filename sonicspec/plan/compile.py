@@ -355,6 +355,30 @@ def _hrtf_file(spec: DatasetSpec, base_dir: Path, digests: FileDigests
     return {"hrtf": digests.file(path)}, {"hrtf": str(path)}
 
 
+def _directivity(spec: DatasetSpec, base_dir: Path, digests: FileDigests
+                 ) -> tuple[dict[str, Any], dict[str, str], dict[str, str]]:
+    """The rir step's ``directivity`` param when some source is not omnidirectional (else
+    nothing), and its SOFA files: (params, digest by role, path by role)."""
+    if spec.directivity.is_omni:
+        return {}, {}, {}
+    if not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
+        raise CompileError("directivity: a directional source is rendered for a static "
+                           "microphone (microphone.trajectory is "
+                           f"{spec.microphone.trajectory.kind!r}); use omni sources or a "
+                           "static microphone")
+    files, paths = {}, {}
+    for role in ("speech", "noise", "music"):
+        d = spec.directivity.role(role)
+        if d.pattern != "sofa":
+            continue
+        path = base_dir / d.sofa_path
+        if not path.is_file():
+            raise CompileError(f"directivity.{role}.sofa_path: SOFA file {path} does not exist")
+        files[f"directivity_{role}"] = digests.file(path)
+        paths[f"directivity_{role}"] = str(path)
+    return {"directivity": _dump(spec.directivity)}, files, paths
+
+
 def scene_jobs(spec: DatasetSpec, entries: list[SceneEntry], base_dir: Path,
                digests: FileDigests) -> list[tuple[SceneEntry, Job, Job]]:
     """The ``mesh`` and ``navigation`` jobs of every concrete scene (no corpus is read)."""
@@ -404,6 +428,8 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
         jobs.extend([mesh, nav])
         mesh_keys[entry.id], nav_keys[entry.id] = mesh.key, nav.key
     rir_files, rir_paths = _hrtf_file(spec, base, digests)
+    directivity, source_files, source_paths = _directivity(spec, base, digests)
+    rir_files, rir_paths = {**rir_files, **source_files}, {**rir_paths, **source_paths}
     digests.save()
 
     layouts = split_layouts(spec, entries, base)
@@ -488,6 +514,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "files": rir_files_shared,
                         "early_paths": rendering == "paths",
                         **walk,
+                        **directivity,
                     },
                     (mesh_keys[scene_id], placement.key, *((arrange.key,) if walk else ())),
                     f"rir {tag}",

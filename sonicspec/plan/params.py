@@ -43,6 +43,7 @@ from sonicspec.spec.corpora import (
     LibriSpeechCorpusSpec,
 )
 from sonicspec.spec.dataset import DatasetSpec
+from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
 from sonicspec.spec.mixture import LoudnessSpec, MixtureSpec, Rendering, TaskSpec
@@ -277,8 +278,12 @@ class RirParams(ShardParams):
     walk: WalkParams | None = None
     """A moving microphone: how the sources walk (its RIRs are traced at pairs of source
     and microphone positions, :mod:`sonicspec.stages.motion`); None otherwise."""
+    directivity: SourcesDirectivitySpec | None = None
+    """The spec's ``directivity`` when some source is not omnidirectional (its SOFA files'
+    digests in ``files`` as ``directivity_<role>``); None: every source omni. The render
+    step reads it from here."""
 
-    omitted_when: ClassVar[Mapping[str, Any]] = {"walk": None}
+    omitted_when: ClassVar[Mapping[str, Any]] = {"walk": None, "directivity": None}
 
 
 class RenderParams(ShardParams):

@@ -4,12 +4,19 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import (
+    Field,
+    SerializationInfo,
+    SerializerFunctionWrapHandler,
+    field_validator,
+    model_serializer,
+)
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.acoustics import AcousticsSpec
 from sonicspec.spec.base import Identifier, SpecModel, SplitName
 from sonicspec.spec.corpora import CorporaSpec
+from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec, MonoMicSpec
 from sonicspec.spec.mixture import MixtureSpec
@@ -48,6 +55,11 @@ class DatasetSpec(SpecModel):
         default_factory=lambda: ShortestPathTrajectorySpec(kind="shortest_path"),
         description="How speech sources move (noise and music are always static).",
     )
+    directivity: SourcesDirectivitySpec = Field(
+        default_factory=SourcesDirectivitySpec,
+        description=("How each source role radiates (a pattern per octave band) and where it "
+                     "faces; every source is omnidirectional by default."),
+    )
     acoustics: AcousticsSpec = Field(default_factory=AcousticsSpec, description="Tracer settings.")
     corpora: CorporaSpec = Field(description="Speech, noise and music corpora.")
     mixture: MixtureSpec = Field(default_factory=MixtureSpec, description="Mixing recipe.")
@@ -58,6 +70,16 @@ class DatasetSpec(SpecModel):
     outputs: OutputsSpec = Field(
         default_factory=OutputsSpec, description="Output locations and formats."
     )
+
+    @model_serializer(mode="wrap")
+    def _omni_left_out(self, handler: SerializerFunctionWrapHandler,
+                       info: SerializationInfo) -> dict:
+        # Every source omnidirectional (the default): left out, so a spec written before
+        # directivity existed serialises (and is keyed, and lands in dataset.json) as before.
+        data = handler(self)
+        if self.directivity.is_omni and self.directivity == SourcesDirectivitySpec():
+            data.pop("directivity", None)
+        return data
 
     @field_validator("splits")
     @classmethod

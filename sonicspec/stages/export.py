@@ -171,7 +171,11 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         geometry = placement.source(name)
         line = timeline(geometry, a.segment_list(), placement, walk, speech,
                         render.clip_samples, w.rate)
-        track_labels = track_file.add(name, *position_track(line, w.rate))
+        hop_s, values = position_track(line, w.rate)
+        if "facing_yaw_deg" in track.arrays:  # a directional source: where it faced
+            facing = np.asarray(arrays[track.arrays["facing_yaw_deg"]], dtype=np.float64)
+            values["yaw_deg"] = (facing + 180.0) % 360.0 - 180.0
+        track_labels = track_file.add(name, hop_s, values)
         if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
             audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
         else:

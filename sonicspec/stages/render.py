@@ -28,6 +28,12 @@ import numpy as np
 
 from sonicspec import artifacts
 from sonicspec.acoustics.bands import OctaveFilterBank
+from sonicspec.acoustics.directivity import (
+    SourceDirectivity,
+    facing_yaw_deg,
+    head_turns_deg,
+    yaw_per_sample,
+)
 from sonicspec.acoustics.engine import (
     array_offsets,
     load_hrirs,
@@ -48,9 +54,11 @@ from sonicspec.audio.corpora import load_audio
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
+from sonicspec.spec.directivity import DirectivitySpec
 from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
+from sonicspec.stages.directivity import source_patterns
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 
@@ -86,13 +94,14 @@ def track_audio(track: ArrangedTrack, segments: list[Segment], cache: _AudioCach
 def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
                  params: RenderParams, cache: _AudioCache, clip_samples: int,
                  corpus_root: Path,
-                 paths: tuple[PathSet, np.ndarray, OctaveFilterBank, Receiver] | None = None
-                 ) -> dict[str, np.ndarray]:
+                 paths: tuple[PathSet, np.ndarray, OctaveFilterBank, Receiver] | None = None,
+                 source: SourceDirectivity | None = None) -> dict[str, np.ndarray]:
     """``{"reverberant", "dry", and any targets}`` arrays of one track heard along its
     ``line`` (:func:`sonicspec.stages.motion.timeline`: its RIR points and when it is
     where). ``paths``: the source's exact early paths, its late RIRs and their bands
     (``interpolation: paths``); a static source heard by a static microphone is heard through
-    its RIR, as its paths and late part sum to it."""
+    its RIR, as its paths and late part sum to it, unless it turns its head. ``source``: a
+    directional source's pattern and its yaw at every sample, for its paths."""
     rate = params.sample_rate_hz
     segments = track.segment_list()
     dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
@@ -105,7 +114,8 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
     distance = np.linalg.norm(points - line.mic_m, axis=1)
     delays = distance / params.speed_of_sound_m_s * rate
     out = {"dry": dry[None, :].astype(np.float32)}
-    if len(points) == 1:  # a static source: its RIR is its paths (and needs no pairing)
+    turns = source is not None and source.yaw_deg.ndim and np.ptp(source.yaw_deg) > 0
+    if len(points) == 1 and not turns:  # a static source: its RIR is its paths
         paths = None
     if paths is None:  # one RIR is one convolution, whichever blend
         method = "sample_crossfade" if params.interpolation == "paths" else params.interpolation
@@ -121,7 +131,7 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
         def heard(subset: PathSet) -> np.ndarray:
             return render_paths(dry, position, points, subset, bank, n_out=clip_samples,
                                 speed_of_sound_m_s=params.speed_of_sound_m_s,
-                                receiver=receiver)
+                                receiver=receiver, source=source)
 
         tail = render_moving(dry, late, position, "sample_crossfade")[:, :clip_samples]
         out["reverberant"] = heard(found) + tail
@@ -134,6 +144,25 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
                             + render_moving(dry, early_tail, position,
                                             "sample_crossfade")[:, :clip_samples])
     return {k: v.astype(np.float32) for k, v in out.items()}
+
+
+#: Where a directional source faces is recorded every this many seconds (the position
+#: tracks' hop, :data:`sonicspec.stages.export.TRACK_HOP_S`).
+FACING_HOP_S = 0.01
+
+
+def facing_frames(d: DirectivitySpec, line: Timeline, mic_m, rate: int,
+                  rng: np.random.Generator | None) -> tuple[int, np.ndarray]:
+    """Where a directional source faces every :data:`FACING_HOP_S` of the clip (frames read
+    at the same samples as its position track), unwrapped degrees, with its head turns when
+    ``rng`` is given: ``(hop in samples, yaw per frame)``."""
+    hop = max(1, round(FACING_HOP_S * rate))
+    positions = line.at(line.source_m, line.index[::hop])
+    yaw = facing_yaw_deg(positions, hop / rate, d.facing_rule, mic_m, d.facing_smoothing_s)
+    if d.head_turn is not None and rng is not None:
+        yaw = yaw + head_turns_deg(len(yaw), hop / rate, d.head_turn.std_deg,
+                                   d.head_turn.time_constant_s, rng)
+    return hop, yaw
 
 
 def path_receiver(microphone, center_m, line: Timeline | None = None, hrirs=None,
@@ -252,6 +281,9 @@ def run(ctx: JobContext) -> None:
     microphone = ctx.input_params("rir").microphone
     walk = Walk(params.speed_m_s, params.walk_span, microphone)
     hrirs = load_hrirs(ctx.job.paths["hrtf"]) if "hrtf" in ctx.job.paths else None
+    directivity = getattr(ctx.input_params("rir"), "directivity", None)
+    patterns = (source_patterns(directivity, ctx.job.paths, bank.bands_hz)
+                if params.interpolation == "paths" else {})
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -276,13 +308,29 @@ def run(ctx: JobContext) -> None:
                          np.asarray(rir_art.arrays[f"{entry.paths}_late"], dtype=np.float64),
                          bank, path_receiver(microphone, placement.mic_m, line, hrirs,
                                              params.sample_rate_hz))
+            source, facing = None, None
+            if directivity is not None and not directivity.role(track.role).is_omni:
+                d = directivity.role(track.role)
+                # head turns are rendered along the paths; RIRs at points face as the spec says
+                rng = (ctx.rng("head_turn", ctx.job.key, arr.group, track.name)
+                       if params.interpolation == "paths" else None)
+                hop, facing = facing_frames(d, line, placement.mic_m, params.sample_rate_hz,
+                                            rng)
+                if track.role in patterns:
+                    source = SourceDirectivity(patterns[track.role],
+                                               yaw_per_sample(facing, hop, line.index.size),
+                                               d.pitch_deg)
             signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
-                                   roots[track.role], paths)
+                                   roots[track.role], paths, source)
             keys = {}
             for kind, x in signals.items():
                 key = f"g{g}_{track.name}_{kind}"
                 arrays[key] = x
                 keys[kind] = key
+            if facing is not None:  # a directional source: where it faced, every 10 ms
+                key = f"g{g}_{track.name}_facing_yaw_deg"
+                arrays[key] = facing.astype(np.float32)
+                keys["facing_yaw_deg"] = key
             tracks.append(RenderedTrack(name=track.name, role=track.role, arrays=keys,
                                         channels=int(signals["reverberant"].shape[0])))
         groups.append(RenderGroup(group=arr.group, clip_samples=arr.clip_samples,

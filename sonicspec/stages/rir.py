@@ -8,6 +8,7 @@ it, and writes the RIRs.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import warnings
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from sonicspec import artifacts
+from sonicspec.acoustics.directivity import SourceDirectivity, point_yaws_deg
 from sonicspec.acoustics.engine import (
     RirFacts,
     RirResult,
@@ -48,6 +50,7 @@ from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import SofaHrtfSpec
+from sonicspec.stages.directivity import source_patterns, track_role
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")
@@ -261,6 +264,7 @@ def run(ctx) -> None:
     regions = planar_regions(scene)
     placements = artifacts.read(ctx, "placement").groups
     scene_name = f"scene {mesh_art.data.get('scene_id', '?')!r}"
+    patterns = source_patterns(params.directivity, ctx.job.paths, settings.bands_hz)
     walk = arranged = None
     if params.walk is not None:
         walk = Walk(params.walk.speed_m_s, params.walk.walk_span, params.microphone)
@@ -290,6 +294,19 @@ def run(ctx) -> None:
                         f">= {MIN_MOVING_GAP_M} m (a point source model); move the "
                         "microphone's path (microphone.trajectory) or the sources' rules")
         traces, refs = _traces(sources, lines, placement.mic_m, params.microphone.yaw_deg)
+        # a directional source: its pattern at every point, facing as the spec says
+        point_dirs: list[list[SourceDirectivity | None]] = [[None] * len(p) for *_, p in traces]
+        facings: list[np.ndarray | None] = []
+        for (name, pts), ref in zip(sources, refs, strict=True):
+            role = track_role(name)
+            if role not in patterns:
+                facings.append(None)
+                continue
+            d = params.directivity.role(role)
+            yaws = point_yaws_deg(pts, d.facing_rule, placement.mic_m)
+            facings.append(yaws)
+            for (t, i), yaw in zip(ref, yaws, strict=True):
+                point_dirs[t][i] = SourceDirectivity(patterns[role], float(yaw), d.pitch_deg)
         # one set of diffracting edges for the group: the most important for all of its
         # source and microphone positions
         group_settings, choice = settings, None
@@ -319,7 +336,8 @@ def run(ctx) -> None:
                 results.append(simulate_rirs(
                     scene, mic_m, np.asarray(points), group_settings, rng, regions,
                     {**microphone, "yaw_deg": yaw}, hrirs, progress=progress,
-                    where=scene_name, keep_arrivals=params.early_paths))
+                    where=scene_name, keep_arrivals=params.early_paths,
+                    directivity=point_dirs[t] if patterns else None))
         for w in caught:
             if issubclass(w.category, SonicspecWarning):
                 if not str(w.message).startswith("image sources: order"):
@@ -360,6 +378,8 @@ def run(ctx) -> None:
                     found = PathSet.identify_moving(fine.sources_m, fine.mics_m, fine.from_mic)
                 added = len(fine.at_index) > len(src_m)
                 found = found.with_index(fine.at_index if added else None)
+                if facings[s] is None:  # an omni source's paths: stored as before
+                    found = dataclasses.replace(found, departures=None)
                 arrays.update(artifacts.path_set_arrays(paths, found))
                 late = stack.astype(np.float64)
                 for i, early in enumerate(at_mic):  # each as long as its own RIR was made
@@ -374,6 +394,8 @@ def run(ctx) -> None:
                 t30_s=_finite(first.broadband["t30_s"]), drr_db=_finite(first.drr_db),
                 direct=facts[0].direct, tail=facts[0].tail,
                 escaped_ray_fraction=facts[0].escaped_ray_fraction, paths=paths,
+                facing_yaw_deg=None if facings[s] is None else [
+                    round(float(y), 2) for y in facings[s]],
                 **_order_reached(facts, settings.image_source_order)))
         groups.append(RirGroup(group=placement.group, sources=entries,
                                diffraction_edges=choice))

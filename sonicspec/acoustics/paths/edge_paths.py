@@ -247,17 +247,23 @@ def path_ids(kind: int, edge1: np.ndarray, edge2: np.ndarray | None = None,
 
 
 def _arrivals(source_idx, lengths, amp, apex_last, receiver, air, c, order, parts,
-              ids: np.ndarray, reflections: int = 0) -> None:
+              ids: np.ndarray, reflections: int = 0, sources=None, first=None) -> None:
+    """``first``: the first point after the source (apex or reflection point), for the
+    direction the path leaves ``sources[source_idx]`` in (a directional source)."""
     amp = amp * np.exp(-0.5 * air[None, :] * lengths[:, None])
     direction = apex_last - receiver[None]
     direction /= np.linalg.norm(direction, axis=1)[:, None]
+    departure = np.zeros_like(direction)
+    if first is not None:
+        departure = first - sources[source_idx]
+        departure /= np.maximum(np.linalg.norm(departure, axis=1), 1e-300)[:, None]
     for k in np.unique(source_idx):
         sel = source_idx == k
         parts[k].append(Arrivals(
             times_s=lengths[sel] / c, amplitudes=amp[sel], directions=direction[sel],
             order=np.full(int(sel.sum()), order + reflections, dtype=np.int64),
             kind=np.full(int(sel.sum()), KIND_DIFFRACTED, dtype=np.int8),
-            path_length_m=lengths[sel], path_id=ids[sel]))
+            path_length_m=lengths[sel], path_id=ids[sel], departures=departure[sel]))
 
 
 def _over_edges(edges: DiffractingEdges, a: np.ndarray, b: np.ndarray, lift_m: float
@@ -299,7 +305,7 @@ def _first_order(scene, edges, sources, receiver, bands, air, c, refl0, refl1, p
         return
     amp, length = _amplitudes(cand, sel, bands, c, refl0, refl1)
     _arrivals(cand["pair"][sel], length, amp, cand["apex"][sel], receiver, air, c, 1, parts,
-              path_ids(_FIRST, cand["edge"][sel]))
+              path_ids(_FIRST, cand["edge"][sel]), sources=sources, first=cand["apex"][sel])
 
 
 def _on_region(scene: AcousticScene, regions, region: np.ndarray, origin: np.ndarray,
@@ -344,7 +350,8 @@ def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver,
     clear = _legs_clear(scene, [lifted_point, cand["lifted"][keep],
                                 np.broadcast_to(receiver, lifted_point.shape)])
     keep = keep[clear]
-    found = [(refl_a[row[keep]], 0, src_a[row[keep]], cand, keep, cand["apex"][keep])]
+    found = [(refl_a[row[keep]], 0, src_a[row[keep]], cand, keep, cand["apex"][keep],
+              point[clear])]
     # (b): every (reflector, source) pair, the receiver mirrored in the reflector
     refl_b = np.flatnonzero(live & rcv_front)
     image_r = _mirror_rows(np.broadcast_to(receiver, (len(refl_b), 3)), normals[refl_b],
@@ -364,10 +371,11 @@ def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver,
     clear = _legs_clear(scene, [sources[src_b[row[keep]]], cand["lifted"][keep],
                                 point + scene.eps_m * normals[refl_b[row[keep]]]])
     keep, point = keep[clear], point[clear]
-    found.append((refl_b[row[keep]], 1, src_b[row[keep]], cand, keep, point))
+    found.append((refl_b[row[keep]], 1, src_b[row[keep]], cand, keep, point,
+                  cand["apex"][keep]))
     # One amplitude evaluation for both kinds; arrivals by reflector, (a) before (b).
     amps, lengths = [], []
-    for refl, _, _, cand, keep, _ in found:
+    for refl, _, _, cand, keep, _, _ in found:
         if len(keep) == 0:
             amps.append(np.zeros((0, len(bands))))
             lengths.append(np.zeros(0))
@@ -376,14 +384,15 @@ def _reflected_first_order(scene, edges, regions, reflectors, sources, receiver,
         amps.append(amp * gains[refl])
         lengths.append(length)
     ids = [path_ids(_REFLECTED_AFTER if kind else _REFLECTED_BEFORE, cand["edge"][keep],
-                    region=reflectors[refl]) for refl, kind, _, cand, keep, _ in found]
+                    region=reflectors[refl]) for refl, kind, _, cand, keep, _, _ in found]
     refl = np.concatenate([f[0] for f in found])
     if len(refl) == 0:
         return
     order = np.lexsort((np.concatenate([np.full(len(f[0]), f[1]) for f in found]), refl))
     _arrivals(np.concatenate([f[2] for f in found])[order], np.concatenate(lengths)[order],
               np.concatenate(amps)[order], np.concatenate([f[5] for f in found])[order],
-              receiver, air, c, 1, parts, np.concatenate(ids)[order], reflections=1)
+              receiver, air, c, 1, parts, np.concatenate(ids)[order], reflections=1,
+              sources=sources, first=np.concatenate([f[6] for f in found])[order])
 
 
 def _mirror_rows(points: np.ndarray, normals: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -466,4 +475,4 @@ def _second_order(scene, edges, pairs, sources, receiver, bands, air, c, refl0, 
         (refl0[e1[sel]], refl1[e1[sel]], refl0[e2[sel]], refl1[e2[sel]]))
     length = s1[sel] + d12[sel] + s2[sel]
     _arrivals(src_i[sel], length, amp, a2[sel], receiver, air, c, 2, parts,
-              path_ids(_SECOND, e1[sel], e2[sel]))
+              path_ids(_SECOND, e1[sel], e2[sel]), sources=sources, first=a1[sel])

@@ -1,0 +1,101 @@
+"""The spec's ``directivity`` section: defaults leave specs (and their keys) as they were,
+bad combinations are named."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from sonicspec.errors import CompileError
+from sonicspec.plan.compile import compile_spec
+from sonicspec.spec import load_spec
+from sonicspec.spec.directivity import DirectivitySpec
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _spec(tmp: Path, extra: str = "") -> Path:
+    path = tmp / "demo.yaml"
+    path.write_text((ROOT / "specs" / "demo.yaml").read_text() + extra)
+    return path
+
+
+def test_omni_sources_leave_the_spec_and_every_key_as_before(tmp_path: Path) -> None:
+    plain = compile_spec(load_spec(_spec(tmp_path)), cache=False)
+    (tmp_path / "b").mkdir()
+    explicit = compile_spec(load_spec(_spec(tmp_path / "b", "directivity:\n  speech: "
+                                                          "{pattern: omni}\n")), cache=False)
+    assert [j.key for j in plain.jobs] == [j.key for j in explicit.jobs]
+    assert "directivity" not in load_spec(_spec(tmp_path)).spec.model_dump(mode="json")
+
+
+def test_a_talker_pattern_keys_the_rir_step_only_from_there_on(tmp_path: Path) -> None:
+    plain = compile_spec(load_spec(_spec(tmp_path)), cache=False)
+    (tmp_path / "b").mkdir()
+    talker = compile_spec(load_spec(_spec(tmp_path / "b", "directivity:\n  speech: "
+                                                        "{pattern: speech}\n")), cache=False)
+    changed = {a.step for a, b in zip(plain.jobs, talker.jobs, strict=True) if a.key != b.key}
+    assert changed == {"rir", "render", "mix", "export", "dataset"}
+    rir = next(j for j in talker.jobs if j.step == "rir")
+    assert rir.params["directivity"]["speech"]["pattern"] == "speech"
+
+
+def test_bad_directivity_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ValidationError, match="sofa_path: expected a SOFA file exactly when"):
+        DirectivitySpec(pattern="sofa")
+    with pytest.raises(ValidationError, match="sofa_path: expected a SOFA file exactly when"):
+        DirectivitySpec(pattern="speech", sofa_path="talker.sofa")
+    with pytest.raises(ValidationError, match="pattern"):
+        DirectivitySpec(pattern="trumpet")
+    spec = _spec(tmp_path, "directivity:\n  speech: {pattern: sofa, sofa_path: nope.sofa}\n")
+    with pytest.raises(CompileError, match=r"directivity.speech.sofa_path: SOFA file .*nope"):
+        compile_spec(load_spec(spec), cache=False)
+
+
+def test_a_directional_source_with_a_moving_microphone_is_refused(tmp_path: Path) -> None:
+    text = (ROOT / "specs" / "demo.yaml").read_text()
+    assert "microphone:" in text
+    spec = _spec(tmp_path, "directivity:\n  noise: {pattern: cardioid}\n")
+    loaded = load_spec(spec)
+    moving = loaded.spec.model_copy(update={"microphone": loaded.spec.microphone.model_copy(
+        update={"trajectory": _moving_trajectory()})})
+    with pytest.raises(CompileError, match="directivity: a directional source is rendered"):
+        compile_spec(type(loaded)(**{**loaded.__dict__, "spec": moving}), cache=False)
+
+
+def _moving_trajectory():
+    from sonicspec.spec.trajectory import MicrophoneLineTrajectorySpec
+
+    return MicrophoneLineTrajectorySpec(kind="line", start_m=(1.0, 1.0, 1.5),
+                                        end_m=(2.0, 1.0, 1.5))
+
+
+def test_a_sofa_talker_is_keyed_by_its_file_and_read_by_the_steps(tmp_path: Path) -> None:
+    """A SOFA FreeFieldDirectivityTF file the test writes: its digest keys the rir step, both
+    steps that need it get its path, and the steps read it as a measured pattern."""
+    import numpy as np
+    from test_directivity import _write_sofa
+
+    from sonicspec.acoustics.directivity import SofaPattern
+    from sonicspec.plan.params import RirParams
+    from sonicspec.stages.directivity import source_patterns
+
+    def cardioid(dirs, f):
+        return np.repeat(0.5 + 0.5 * dirs[:, :1], len(f), axis=1)
+
+    _write_sofa(tmp_path / "talker.sofa", cardioid, np.geomspace(50, 7000, 100))
+    spec = _spec(tmp_path, "directivity:\n  speech: {pattern: sofa, sofa_path: talker.sofa}\n")
+    plan = compile_spec(load_spec(spec), cache=False)
+    rir = next(j for j in plan.jobs if j.step == "rir")
+    render = next(j for j in plan.jobs if j.step == "render")
+    assert len(rir.params["files"]["directivity_speech"]) == 64
+    assert rir.paths["directivity_speech"] == str(tmp_path / "talker.sofa")
+    if render.params["interpolation"] == "paths":
+        assert render.paths["directivity_speech"] == str(tmp_path / "talker.sofa")
+    params = RirParams.model_validate(rir.params)
+    patterns = source_patterns(params.directivity, rir.paths, (250.0, 1000.0, 4000.0))
+    assert set(patterns) == {"speech"} and isinstance(patterns["speech"], SofaPattern)
+    back = patterns["speech"].gains(np.array([[-1.0, 0, 0], [0, 1.0, 0]]), (1000.0,))[:, 0]
+    np.testing.assert_allclose(back, [0.0, 0.5], atol=0.02)
