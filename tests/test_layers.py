@@ -382,7 +382,7 @@ NOT_TYPED_YET = {
     ("repair", "marker"), ("repair", "store.read('dataset', key).provenance"),
     ("checked", "data"), ("checked", "r"), ("workflow", "files[0]"),
 }
-STRING_LOOKUPS_LEFT = 105
+STRING_LOOKUPS_LEFT = 106  # +1: a directional track's facing_yaw_deg array (keyed by signal kind)
 
 
 def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
