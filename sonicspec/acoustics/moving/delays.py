@@ -701,7 +701,7 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
             at = _coarse_rows(stop - start)
             if mirror is not None:
                 d_at = np.empty((at.size, 3))
-                image_directions(np.ascontiguousarray(source[at]), paths.images_m[k], mirror,
+                image_directions(np.ascontiguousarray(src_at[at]), paths.images_m[k], mirror,
                                  d_at)
             else:
                 d_at = _directions_at(paths.directions[k], lo[part][at], hi[part][at],
