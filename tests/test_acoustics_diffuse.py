@@ -141,3 +141,29 @@ def test_bad_inputs_are_named():
         render_isotropic(np.zeros((2, 10)), np.zeros((257, 2, 2)), np.random.default_rng(0))
     with pytest.raises(AcousticsError, match="root: expected"):
         render_isotropic(np.zeros(10), np.zeros((257, 2, 3)), np.random.default_rng(0))
+
+
+def test_a_measured_hrir_set_has_its_own_diffuse_coherence():
+    # A synthetic "measured" set (two free-field points 18 cm apart, 600 directions, heard by
+    # nearest direction): the rendered ears against the set's own diffuse-field coherence
+    # (hrtf.hrir_set_coherence, its directions weighted by their Voronoi cells).
+    from sonicspec.acoustics.directions import fibonacci_sphere
+    from sonicspec.acoustics.receivers.hrtf import HrirSet, hrir_set_coherence
+
+    dirs = fibonacci_sphere(600)
+    t = np.arange(64)
+    ears = np.array([[0.0, 0.09, 0.0], [0.0, -0.09, 0.0]])
+    delay = 32 - (dirs @ ears.T) / C * FS  # (n, 2) samples
+    hrirs = np.sinc(t[None, None, :] - delay[:, :, None]) * np.hanning(64)
+    hset = HrirSet(dirs, hrirs, float(FS))
+    mic = {"kind": "binaural", "yaw_deg": 0.0, "pitch_deg": 0.0,
+           "hrtf": {"kind": "sofa", "path": "set.sofa"}}
+    n = direction_count("spherical", receiver_aperture_m(mic), FS, C)
+    roots = isotropic_roots(direction_responses(isotropic_directions("spherical", n), SETTINGS,
+                                                mic, hset), FS)
+    x = np.random.default_rng(1).standard_normal(30 * FS)
+    y = render_isotropic(x, roots, np.random.default_rng(3))
+    f, g = coherence(y[0], y[1])
+    assert float(np.sqrt(np.mean((g - hrir_set_coherence(hset, f)) ** 2))) < 0.05
+    with pytest.raises(AcousticsError, match="SOFA HRTF needs its HRIR set"):
+        direction_responses(isotropic_directions("spherical", 8), SETTINGS, mic)

@@ -33,7 +33,8 @@ scenes:
   - kind: shoebox
     id: room
     size_m: [6.0, 5.0, 3.0]
-    materials: {{walls: plaster_on_brick, floor: carpet_on_concrete, ceiling: acoustic_ceiling_tile}}
+    materials: {{walls: plaster_on_brick, floor: carpet_on_concrete,
+                ceiling: acoustic_ceiling_tile}}
 microphone: {{kind: circular_array, n: 4, radius_m: {RADIUS_M}, yaw_deg: 20}}
 placement:
   source_start_distance_m: [1.0, 3.0]
