@@ -7,7 +7,10 @@ Two parts:
    plus the once-per-job mixing matrices from the receiver's per-direction responses) and,
    for comparison, as a point source: one FFT convolution with a ``--rir-seconds`` RIR per
    channel (what the render step does for a static source).
-2. **Pipeline**: the same small spec built in-process (every job of one store, timed with
+2. **Method**: coherence shaping against the alternative, one uncorrelated copy of the track
+   per plane wave (32, 128, 512 directions) through each direction's response: CPU and the
+   coherence error against sin(kd)/(kd).
+3. **Pipeline**: the same small spec built in-process (every job of one store, timed with
    ``getrusage``) with ``noise_field: point`` and ``noise_field: diffuse_spherical``, for a
    4-capsule circular array, first-order ambisonics and the sphere head; the CPU seconds of
    the per-group steps (placement, arrange, rir, render, mix, export) per group, and their
@@ -15,7 +18,7 @@ Two parts:
 
 Reproduce:
     python bench/bench_diffuse.py                      # both parts (a few minutes)
-    python bench/bench_diffuse.py --skip-pipeline      # the library part only
+    python bench/bench_diffuse.py --skip-pipeline      # parts 1 and 3 only
     python bench/bench_diffuse.py --groups 1 --seconds 20   # quicker
 """
 
@@ -146,12 +149,60 @@ def library(seconds: float, rir_seconds: float, repeat: int) -> None:
               f"{best_d / best_p:>6.2f}")
 
 
+def plane_waves(seconds: float) -> None:
+    """The alternative: one uncorrelated copy per plane wave through each direction's
+    response, summed (the copies drawn as :func:`render_isotropic` draws them, with an
+    identity matrix), against coherence shaping; a 4-capsule array with a 20 cm pair."""
+    from scipy import signal
+
+    from sonicspec.acoustics.theory import spherical_isotropic_coherence
+
+    mic = {"kind": "custom", "positions_m": [[0, 0, 0], [0.05, 0, 0], [0.1, 0, 0],
+                                             [0.2, 0, 0]], "yaw_deg": 0.0, "pitch_deg": 0.0}
+    s = settings()
+    x = np.random.default_rng(0).standard_normal(int(seconds * FS))
+
+    def rms_error(y: np.ndarray) -> float:
+        errors = []
+        for j, d in ((1, 0.05), (2, 0.1), (3, 0.2)):
+            f, pxy = signal.csd(y[0], y[j], FS, nperseg=512)
+            _, pxx = signal.welch(y[0], FS, nperseg=512)
+            _, pyy = signal.welch(y[j], FS, nperseg=512)
+            band = (f >= 100) & (f <= 4000)
+            g = pxy.real[band] / np.sqrt(pxx[band] * pyy[band])
+            errors.append(np.sqrt(np.mean((g - spherical_isotropic_coherence(f[band], d)) ** 2)))
+        return float(max(errors))
+
+    print(f"\n2. method: a {seconds:g} s track on 4 omni capsules (pairs 5, 10, 20 cm); the "
+          "worst pair's coherence RMS error against sin(kd)/(kd), 100-4000 Hz; CPU s")
+    print(f"{'method':>40} {'CPU':>7} {'RMS error':>10}")
+    for n in (32, 128, 512):
+        t0 = cpu_s()
+        responses = direction_responses(isotropic_directions("spherical", n), s, mic)
+        y = np.zeros((4, x.size + responses.shape[2] - 1))
+        eye = np.broadcast_to(np.eye(32, dtype=np.complex128), (257, 32, 32))
+        for start in range(0, n, 32):
+            copies = render_isotropic(x, eye, np.random.default_rng(start))  # (32, n)
+            for m in range(4):
+                y[m] += fftconvolve(copies, responses[start:start + 32, m], axes=-1).sum(0)
+        y /= np.sqrt(n)
+        t = cpu_s() - t0
+        print(f"{f'{n} uncorrelated plane waves':>40} {t:>6.2f}s {rms_error(y):>10.3f}")
+    t0 = cpu_s()
+    n = direction_count("spherical", receiver_aperture_m(mic), FS, C)
+    roots = isotropic_roots(direction_responses(isotropic_directions("spherical", n), s, mic),
+                            FS)
+    y = render_isotropic(x, roots, np.random.default_rng(1))
+    t = cpu_s() - t0
+    print(f"{f'coherence shaping ({n} directions)':>40} {t:>6.2f}s {rms_error(y):>10.3f}")
+
+
 def pipeline(seconds: float, groups: int) -> None:
     from sonicspec.plan.compile import compile_spec
     from sonicspec.spec import load_spec
     from sonicspec.stages import run_job
 
-    print(f"\n2. pipeline: {groups} group(s) of {seconds:g} s, CPU s per group of the "
+    print(f"\n3. pipeline: {groups} group(s) of {seconds:g} s, CPU s per group of the "
           f"per-group steps ({', '.join(GROUP_STEPS)})")
     print(f"{'microphone':>24} {'point':>8} {'diffuse':>8} {'ratio':>6}   "
           f"{'render point → diffuse':>24}")
@@ -186,6 +237,7 @@ def main() -> None:
     args = parser.parse_args()
     t0 = time.perf_counter()
     library(args.seconds, args.rir_seconds, args.repeat)
+    plane_waves(min(args.seconds, 20.0))
     if not args.skip_pipeline:
         pipeline(args.seconds, args.groups)
     print(f"\nwall {time.perf_counter() - t0:.1f} s, CPU {cpu_s():.1f} s")

@@ -418,8 +418,8 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         if k in MaterialTable.model_fields})
     loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
     targets = shared(list(spec.mixture.targets))
-    diffuse = {role: mixture[f"{role}_field"] for role in ("noise", "music")
-               if getattr(spec.mixture, f"{role}_field").diffuse}
+    diffuse = {role: getattr(spec.mixture, f"{role}_field").model_dump(mode="json")
+               for role in ("noise", "music") if getattr(spec.mixture, f"{role}_field").diffuse}
     backgrounds = {"backgrounds": shared(diffuse)} if diffuse else {}
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)

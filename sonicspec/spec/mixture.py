@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, model_serializer, model_validator
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.base import SpecModel, value_range
@@ -183,6 +183,18 @@ class MixtureSpec(SpecModel):
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "
         "(bench/bench_motion.py). 'auto': 'paths'.",
     )
+
+    @model_serializer(mode="wrap")
+    def _omit_point_backgrounds(self, handler: Any) -> Any:
+        """``noise_field`` / ``music_field`` left out of a dump at their default (``point``),
+        as older specs had no such fields: a point-background spec's copy in dataset.json,
+        and the dataset step's key, stay as they were (issue 30)."""
+        data = handler(self)
+        if isinstance(data, dict):
+            for name in ("noise_field", "music_field"):
+                if getattr(self, name) == BackgroundFieldSpec():
+                    data.pop(name, None)
+        return data
 
     def rendering(self) -> Rendering:
         """The method a build uses: ``interpolation``, with ``auto`` resolved (``paths``,
