@@ -155,3 +155,17 @@ def test_a_fraction_without_a_diffuse_field_is_an_error(tmp_path: Path) -> None:
         "{field: diffuse_spherical}", "{field: point, diffuse_fraction: 0.5}"))
     with pytest.raises(SpecError, match=r"noise_field.*diffuse_fraction 0.5 needs field"):
         load_spec(tmp_path / "bad.yaml")
+
+
+def test_a_diffuse_field_without_its_track_is_a_warning() -> None:
+    from sonicspec.spec.load import format_path
+    from sonicspec.spec.validate import validate_text
+
+    text = SPEC.replace("  music_clips: [2, 2]\n", "  music_clips: [0, 0]\n").replace(
+        "    - {kind: enhancement, background: both}", "    - {kind: enhancement}")
+    loaded, problems = validate_text(text, "w.yaml")
+    assert loaded is not None, [p.format("w.yaml") for p in problems]
+    warned = {format_path(w.path): w.format("w.yaml") for w in loaded.warnings}
+    assert "'diffuse_cylindrical' has no effect: a group has no music track" in warned[
+        "mixture.music_field"]
+    assert "mixture.noise_field" not in warned
