@@ -137,6 +137,13 @@ class BackgroundTrack(_Track):
     """A static noise or music source."""
 
     position_m: Vector3 = Field(description="Where the source stands, metres.")
+    field: Literal["diffuse_spherical", "diffuse_cylindrical"] | None = Field(None, description=(
+        "How the track reaches the microphone when not from its point source alone "
+        "(mixture.noise_field / music_field): a spherically or cylindrically isotropic "
+        "field. Absent: from the point source at position_m."))
+    diffuse_fraction: float | None = Field(None, gt=0, le=1, description=(
+        "With field: the share of the track's power that is diffuse (the rest from the "
+        "point source at position_m)."))
 
 
 class MixtureRecord(_Record):
@@ -211,12 +218,16 @@ class GroupMetadata(BaseModel):
         "tag says the same)."))
 
     def to_json(self) -> str:
-        """Compact JSON, keys sorted, final newline; absent backgrounds, scales and capsules
-        left out."""
+        """Compact JSON, keys sorted, final newline; absent backgrounds, scales and capsules,
+        and a point background's field, left out."""
         data = self.model_dump(mode="json")
         for name in ("noise", "music", "audio_scales", "capsules"):
             if data[name] is None:
                 del data[name]
+            elif name in ("noise", "music"):  # a point background: no field recorded
+                for key in ("field", "diffuse_fraction"):
+                    if data[name][key] is None:
+                        del data[name][key]
         return json.dumps(data, sort_keys=True, separators=(",", ":"),
                           ensure_ascii=False) + "\n"
 

@@ -445,6 +445,9 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                                        MaterialTable.omitted_when))
     loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
     targets = shared(list(spec.mixture.targets))
+    diffuse = {role: getattr(spec.mixture, f"{role}_field").model_dump(mode="json")
+               for role in ("noise", "music") if getattr(spec.mixture, f"{role}_field").diffuse}
+    backgrounds = {"backgrounds": shared(diffuse)} if diffuse else {}
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     rendering = spec.mixture.rendering()  # `auto` resolved
@@ -530,10 +533,12 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
                         "walk_span": getattr(spec.trajectory, "span", "speech"),
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
+                        **backgrounds,
                     },
                     (rir.key, arrange.key, placement.key, *corpus_inputs),
                     f"render {tag}",
-                    rir_paths if rendering == "paths" else {},  # a SOFA set hears the paths
+                    # a SOFA set hears the paths and the diffuse backgrounds
+                    rir_paths if rendering == "paths" or backgrounds else {},
                 )
                 mix = Job(
                     "mix",

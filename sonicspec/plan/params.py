@@ -46,7 +46,13 @@ from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
-from sonicspec.spec.mixture import LoudnessSpec, MixtureSpec, Rendering, TaskSpec
+from sonicspec.spec.mixture import (
+    BackgroundFieldSpec,
+    LoudnessSpec,
+    MixtureSpec,
+    Rendering,
+    TaskSpec,
+)
 from sonicspec.spec.outputs import Manifest, OutputsSpec
 from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import (
@@ -296,6 +302,12 @@ class RenderParams(ShardParams):
     walk_span: Literal["speech", "clip"]
     """What a moving source's walk spans: its speech or the whole clip."""
     speed_of_sound_m_s: float
+    backgrounds: dict[Literal["noise", "music"], BackgroundFieldSpec] | None = None
+    """The background roles heard as a diffuse field (``mixture.noise_field``,
+    ``mixture.music_field`` when not ``point``); None: every background from its point
+    source (left out then, so point-source renders keep their keys)."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"backgrounds": None}
 
 
 class MixParams(ShardParams):

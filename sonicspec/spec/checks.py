@@ -476,6 +476,15 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             f"fails on such a draw); expected an upper bound below mixture.duration_s minus "
             f"the shortest utterance, got {list(m.utterance_gap_s)}",
         )
+    for kind in ("noise", "music"):
+        field = getattr(m, f"{kind}_field")
+        if field.diffuse and (getattr(spec.corpora, kind) is None
+                              or getattr(m, f"{kind}_clips")[1] == 0):
+            yield _warn(
+                ("mixture", f"{kind}_field"),
+                f"{field.field!r} has no effect: a group has no {kind} track (corpora.{kind} "
+                f"and a non-zero mixture.{kind}_clips make one)",
+            )
     if m.interpolation not in ("auto", "sample_crossfade") and isinstance(
             spec.trajectory, StaticTrajectorySpec):
         yield _warn(

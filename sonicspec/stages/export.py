@@ -150,8 +150,10 @@ def capsules_record(microphone) -> CapsulesRecord | None:
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
-                 keys: dict[str, str], walk: Walk) -> dict[str, Any]:
-    """Write one group's folder; its record for ``dataset``."""
+                 keys: dict[str, str], walk: Walk,
+                 backgrounds: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write one group's folder; its record for ``dataset``. ``backgrounds``: the render's
+    diffuse background fields by role (recorded in the metadata)."""
     group = render.group
     split, index = group.split("/")
     w = _GroupWriter(out, out / split / index, group, params)
@@ -209,7 +211,11 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                 path_length_m=geometry.path_length_m)
             spoken[name] = (a.speaker, segs)
         else:
-            entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]))
+            field = (backgrounds or {}).get(role)
+            heard = ({"field": field.field, "diffuse_fraction": field.diffuse_fraction}
+                     if field is not None else {})
+            entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]),
+                                            **heard)
     mixtures = []
     if outputs.mixtures:
         for m in mix.mixtures:
@@ -273,6 +279,6 @@ def run(ctx: JobContext) -> None:
                                                rir.groups, strict=True):
         groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
                                    rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
-                                   walk))
+                                   walk, render_params.backgrounds))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})
