@@ -17,6 +17,7 @@ the next build check), the manifest entries and the metadata for the ``dataset``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,9 @@ from sonicspec.artifacts import (
     RirGroup,
     RirSource,
 )
+from sonicspec.audio.augment import apply_chain, chain_files, draw_chain, parse_chain
+from sonicspec.audio.corpora import resample
+from sonicspec.errors import AudioError
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -133,10 +137,56 @@ def _order(source: RirSource) -> ImageSourceOrder | None:
                             stopped=source.image_source_order_stopped)
 
 
+@dataclass(frozen=True)
+class Augmentation:
+    """A group's draw of the spec's augmentation chain and the impulse responses it may use
+    (file as written -> response at the dataset's rate)."""
+
+    draw: list[dict[str, Any]]
+    impulse_responses: dict[str, np.ndarray]
+
+    @property
+    def touches_targets(self) -> bool:
+        return any(d["applied"] and d["targets"] for d in self.draw)
+
+    def apply(self, x: np.ndarray, rate: int, *, target: bool, full_scale: bool
+              ) -> tuple[np.ndarray, list[dict[str, Any] | None]]:
+        """``x`` through the draw; with ``full_scale`` (a PCM file without a per-file scale)
+        clipped at 0 dBFS as the device's converter would, the share cut recorded."""
+        y, measured = apply_chain(self.draw, x, rate, target=target,
+                                  impulse_responses=self.impulse_responses)
+        if full_scale:
+            over = float(np.mean(np.abs(y) > 1.0)) if y.size else 0.0
+            y = np.clip(y, -1.0, 1.0)
+            measured = [*measured, {"full_scale_clipped_share": over}]
+        return y, measured
+
+
+def read_impulse_responses(paths: dict[str, str], names: list[str], rate: int
+                           ) -> dict[str, np.ndarray]:
+    """The impulse-response files of a chain (their first channel) at ``rate``."""
+    import soundfile
+
+    out = {}
+    for name in names:
+        try:
+            data, file_rate = soundfile.read(paths[name], dtype="float64", always_2d=True)
+        except (KeyError, RuntimeError, soundfile.LibsndfileError) as err:
+            raise AudioError(f"augmentation impulse_response {name!r}: cannot read "
+                             f"{paths.get(name, '(no path in the plan)')}: {err}") from None
+        h = data[:, 0]
+        if not np.any(h) or not np.all(np.isfinite(h)):
+            raise AudioError(f"augmentation impulse_response {name!r}: expected a finite, "
+                             "non-silent response, got silence or NaN")
+        out[name] = resample(h, file_rate, rate) if file_rate != rate else h
+    return out
+
+
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
-                 keys: dict[str, str], walk: Walk) -> dict[str, Any]:
+                 keys: dict[str, str], walk: Walk,
+                 augmentation: Augmentation | None = None) -> dict[str, Any]:
     """Write one group's folder; its record for ``dataset``."""
     group = render.group
     split, index = group.split("/")
@@ -146,6 +196,14 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     tracks = {t.name: t for t in render.tracks}
     arranged = {t.name: t for t in arrange.tracks}
     track_file = TrackFile(out, w.folder)
+    # A PCM file without a per-file scale holds [-1, 1]: the augmented signal is cut there.
+    full_scale = outputs.scale != "per_file" and outputs.subtype != "FLOAT"
+
+    def clean(x: np.ndarray) -> np.ndarray:
+        """A track or training target: through the effects marked ``targets``, if any."""
+        if augmentation is None or not augmentation.touches_targets:
+            return x
+        return augmentation.apply(x, w.rate, target=True, full_scale=full_scale)[0]
     entries: dict[str, SpeechTrack | BackgroundTrack] = {}
     spoken: dict[str, tuple[str, list[dict[str, Any]]]] = {}
     speech = group_speech(arrange.tracks)
@@ -159,14 +217,14 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                         render.clip_samples, w.rate)
         track_labels = track_file.add(name, *position_track(line, w.rate))
         if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
-            audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
+            audio_rel = w.audio(role, name, clean(signal), custom={"track": track_labels})
         else:
             audio_rel = None
         for kind in ("dry", "direct", "early"):
             if f"{name}_{kind}" in gains:
                 w.audio(f"{role}_{kind}", f"{name}_{kind}",
-                        gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
-                                                             dtype=np.float64))
+                        clean(gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
+                                                                   dtype=np.float64)))
         if outputs.rirs:
             stack = np.asarray(rir_arrays[rir_source.array])
             for j in range(stack.shape[0]):
@@ -197,8 +255,13 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         for m in mix.mixtures:
             total = sum(gains[c] * np.asarray(arrays[tracks[c].arrays["reverberant"]],
                                               dtype=np.float64) for c in m.components)
+            measured = None
+            if augmentation is not None:
+                total, measured = augmentation.apply(total, w.rate, target=False,
+                                                     full_scale=full_scale)
             rel = w.audio("mixture", f"mixtures/{m.name}", total)
-            mixtures.append({**m.model_dump(mode="json"), "file": rel})
+            mixtures.append({**m.model_dump(mode="json"), "file": rel,
+                             "augmentation": measured})
     mic_ref = TrackReference(**track_file.add("microphone", *microphone_track(line, w.rate)))
     track_file.write()
     w.files.append({"kind": "tracks", "name": "tracks", **file_record(out, track_file.path)})
@@ -209,7 +272,8 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         num_samples=render.clip_samples, mixtures=[MixtureRecord(**m) for m in mixtures],
         group_gain_db=mix.group_gain_db, keys=keys, microphone_track=mic_ref,
         noise=entries.get("noise"), music=entries.get("music"), **speech_entries,
-        audio_scales=w.scales or None)
+        audio_scales=w.scales or None,
+        augmentation=augmentation.draw if augmentation is not None else None)
     if outputs.metadata:
         metadata.write(w.folder / "metadata.json")
         w.files.append({"kind": "metadata", "name": "metadata",
@@ -251,11 +315,18 @@ def run(ctx: JobContext) -> None:
     microphone = ctx.input_params("rir").microphone
     render_params = ctx.input_params("render")
     walk = Walk(render_params.speed_m_s, render_params.walk_span, microphone)
+    chain = parse_chain(params.augmentation) if params.augmentation is not None else None
+    responses = (read_impulse_responses(dict(ctx.job.paths), chain_files(chain),
+                                        params.sample_rate_hz) if chain else {})
     groups = []
     for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
                                                rir.groups, strict=True):
+        # One draw per group, from the spec seed and the group (its own stream: the mix
+        # step's draws are untouched).
+        aug = (Augmentation(draw_chain(chain, ctx.rng("augment", r.group)), responses)
+               if chain else None)
         groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
                                    rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
-                                   walk))
+                                   walk, aug))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})
