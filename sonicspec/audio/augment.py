@@ -26,7 +26,8 @@ Effects (``kind``):
   MP3 constant bit rate (LAME), Opus (libopus; variable bit rate around the asked rate),
   GSM 06.10 full rate (13 kbit/s at 8 kHz, the narrow-band phone codec; the signal is resampled
   to 8 kHz and back). Each channel is coded alone (bit rates are per channel); libsndfile
-  removes the codecs' delay and padding, so the decoded signal is sample-aligned.
+  removes the codecs' delay and padding (where an MP3 lacks the tag that says how much, the
+  delay is found by cross-correlation), so the decoded signal is sample-aligned.
 * ``one_of`` — one of several effects, drawn with weights.
 
 Every effect has ``probability`` (drawn once per draw) and ``targets`` (also applied to the
@@ -40,6 +41,7 @@ import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -412,6 +414,15 @@ def _codec_rate(rate_hz: int, allowed: Sequence[int]) -> int:
     return min(higher) if higher else max(allowed)
 
 
+def _delay(x: np.ndarray, y: np.ndarray, most: int) -> int:
+    """The lag in ``[0, most]`` at which ``y`` best matches ``x`` (cross-correlation)."""
+    from scipy.signal import correlate
+
+    n = x.size
+    c = correlate(y[:n + most], x, mode="full", method="fft")[n - 1:n + most]
+    return int(np.argmax(c)) if np.any(c) else 0
+
+
 def encode_decode(x: np.ndarray, rate_hz: int, codec: str,
                   bitrate_kbps: float | None = None) -> tuple[np.ndarray, dict[str, float]]:
     """``x`` ``(C, T)`` coded and decoded by ``codec`` (``mp3``, ``opus``, ``gsm``), each
@@ -449,7 +460,12 @@ def encode_decode(x: np.ndarray, rate_hz: int, codec: str,
         data = buf.getvalue()
         total_bytes += len(data)
         y, _ = sf.read(io.BytesIO(data), dtype="float64", always_2d=False)
-        y = np.asarray(y)[:ch.size]
+        y = np.asarray(y)
+        if y.size > ch.size:
+            # Delay and padding left in (an MP3 frame too short for LAME's gapless tag, as at
+            # 32 kbit/s and 16 kHz): the delay is found where the decoded signal best matches.
+            y = y[_delay(ch, y, y.size - ch.size):]
+        y = y[:ch.size]
         out.append(np.pad(y, (0, ch.size - y.size)))
     decoded = np.stack(out)
     if rate != rate_hz:
@@ -460,6 +476,24 @@ def encode_decode(x: np.ndarray, rate_hz: int, codec: str,
     seconds = z.shape[1] / rate
     return decoded, {"bitrate_kbps": total_bytes * 8.0 / seconds / 1000.0 / x.shape[0],
                      "codec_rate_hz": float(rate)}
+
+
+def read_impulse_response(path: str | Path, rate_hz: int, *, where: str = "impulse_response"
+                          ) -> np.ndarray:
+    """A device impulse response from a sound file (its first channel) at ``rate_hz``."""
+    import soundfile
+
+    from sonicspec.audio.corpora import resample
+
+    try:
+        data, file_rate = soundfile.read(str(path), dtype="float64", always_2d=True)
+    except (RuntimeError, soundfile.LibsndfileError) as err:
+        raise AudioError(f"{where}: cannot read {path}: {err}") from None
+    h = data[:, 0]
+    if not np.all(np.isfinite(h)) or not np.any(h):
+        raise AudioError(f"{where}: expected a finite, non-silent response in {path}, got "
+                         "silence or NaN")
+    return resample(h, file_rate, rate_hz) if file_rate != rate_hz else h
 
 
 def _mean_power(x: np.ndarray) -> float:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import itertools
 from typing import Annotated, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, StrictBool, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.base import SpecModel, value_range
@@ -32,7 +32,7 @@ class _EffectSpec(SpecModel):
     probability: float = Field(
         1.0, ge=0, le=1, description="Chance the effect is applied to a group (drawn per "
         "group), 0-1.")
-    targets: bool = Field(
+    targets: StrictBool = Field(
         False, description="Also apply the effect (the same draw) to the group's clean "
         "tracks and training targets; false: the targets stay clean.")
 

@@ -33,9 +33,13 @@ from sonicspec.artifacts import (
     RirGroup,
     RirSource,
 )
-from sonicspec.audio.augment import apply_chain, chain_files, draw_chain, parse_chain
-from sonicspec.audio.corpora import resample
-from sonicspec.errors import AudioError
+from sonicspec.audio.augment import (
+    apply_chain,
+    chain_files,
+    draw_chain,
+    parse_chain,
+    read_impulse_response,
+)
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -160,26 +164,6 @@ class Augmentation:
             y = np.clip(y, -1.0, 1.0)
             measured = [*measured, {"full_scale_clipped_share": over}]
         return y, measured
-
-
-def read_impulse_responses(paths: dict[str, str], names: list[str], rate: int
-                           ) -> dict[str, np.ndarray]:
-    """The impulse-response files of a chain (their first channel) at ``rate``."""
-    import soundfile
-
-    out = {}
-    for name in names:
-        try:
-            data, file_rate = soundfile.read(paths[name], dtype="float64", always_2d=True)
-        except (KeyError, RuntimeError, soundfile.LibsndfileError) as err:
-            raise AudioError(f"augmentation impulse_response {name!r}: cannot read "
-                             f"{paths.get(name, '(no path in the plan)')}: {err}") from None
-        h = data[:, 0]
-        if not np.any(h) or not np.all(np.isfinite(h)):
-            raise AudioError(f"augmentation impulse_response {name!r}: expected a finite, "
-                             "non-silent response, got silence or NaN")
-        out[name] = resample(h, file_rate, rate) if file_rate != rate else h
-    return out
 
 
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
@@ -316,8 +300,10 @@ def run(ctx: JobContext) -> None:
     render_params = ctx.input_params("render")
     walk = Walk(render_params.speed_m_s, render_params.walk_span, microphone)
     chain = parse_chain(params.augmentation) if params.augmentation is not None else None
-    responses = (read_impulse_responses(dict(ctx.job.paths), chain_files(chain),
-                                        params.sample_rate_hz) if chain else {})
+    paths = dict(ctx.job.paths)
+    responses = {name: read_impulse_response(paths.get(name, name), params.sample_rate_hz,
+                                             where=f"augmentation impulse_response {name!r}")
+                 for name in (chain_files(chain) if chain else [])}
     groups = []
     for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
                                                rir.groups, strict=True):
