@@ -364,9 +364,9 @@ def minimum_phase_fir(points: Sequence[Sequence[float]], rate_hz: int,
 
 
 def _filter(x: np.ndarray, h: np.ndarray, advance: int = 0) -> np.ndarray:
-    from scipy.signal import fftconvolve
+    from scipy.signal import oaconvolve  # overlap-add: a long signal, a short filter
 
-    y = fftconvolve(x, h[None, :], axes=-1)
+    y = oaconvolve(x, h[None, :], axes=-1)
     return y[:, advance:advance + x.shape[-1]]
 
 
