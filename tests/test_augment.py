@@ -309,3 +309,31 @@ def test_mp3_at_a_rate_without_that_bitrate_is_an_error_naming_it() -> None:
     with pytest.raises(AudioError, match=r"mp3 bitrate_kbps: 320 kbit/s is not an MP3 bit "
                        r"rate at 16000 Hz"):
         A.encode_decode(_noise(seconds=1), RATE, "mp3", 320)
+
+
+@pytest.mark.parametrize("rate", [8000, 11025, 16000, 22050, 32000, 44100, 48000, 96000])
+def test_the_spec_knows_the_mp3_bit_rates_the_library_codes_at(rate: int) -> None:
+    from sonicspec.spec.augmentation import mp3_bitrates_at
+
+    allowed = mp3_bitrates_at(rate)
+    x = 0.05 * np.random.default_rng(0).standard_normal((1, rate))
+    for bitrate in (allowed[0], allowed[-1]):  # the library codes at both ends
+        y, _ = A.encode_decode(x, rate, "mp3", bitrate)
+        assert y.shape == x.shape
+    rate_used = A._codec_rate(rate, A.MP3_RATES_HZ)
+    table = A.MP3_BITRATES_KBPS["mpeg1" if rate_used >= 32000 else "mpeg2"]
+    assert allowed == tuple(b for b in table if rate_used >= 16000 or b <= 64)
+
+
+def test_validate_refuses_an_mp3_bit_rate_the_sample_rate_cannot_take() -> None:
+    block = {"augmentation": {"effects": [
+        {"kind": "one_of", "effects": [{"kind": "mp3", "bitrate_kbps": [64, 320]}]},
+        {"kind": "resample", "rate_hz": [16000]}]}}
+    loaded, problems = validate_text(BASE + yaml.safe_dump(block), "bad.yaml")
+    assert loaded is None
+    found = {format_path(p.path): (p.severity, p.message) for p in problems}
+    assert found["augmentation.effects[0].effects[0].bitrate_kbps[1]"][0] == "error"
+    assert "sample_rate_hz 16000" in found["augmentation.effects[0].effects[0].bitrate_kbps[1]"][1]
+    assert found["augmentation.effects[1].rate_hz[0]"] == (
+        "warning", "16000 Hz is not below sample_rate_hz (16000): resampling through it does "
+        "nothing")

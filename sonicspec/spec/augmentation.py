@@ -28,6 +28,21 @@ Mp3Bitrate = Literal[8, 16, 24, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 
                      320]
 
 
+MP3_RATES_HZ = (8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000)
+
+
+def mp3_bitrates_at(sample_rate_hz: int) -> tuple[int, ...]:
+    """The MP3 bit rates (kbit/s) a dataset at ``sample_rate_hz`` can be coded at: MPEG-1's
+    from 32 kHz on, MPEG-2's at 16-24 kHz, MPEG-2.5's (up to 64) below; a rate MP3 does not
+    take is coded at the next it takes (the library's rule, checked against it in the tests)."""
+    higher = [r for r in MP3_RATES_HZ if r >= sample_rate_hz]
+    rate = min(higher) if higher else max(MP3_RATES_HZ)
+    if rate >= 32000:
+        return (32, 40, 48, 56, 64, 80, 96, 112, 128, 160, 192, 224, 256, 320)
+    mpeg2 = (8, 16, 24, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160)
+    return mpeg2 if rate >= 16000 else tuple(b for b in mpeg2 if b <= 64)
+
+
 class _EffectSpec(SpecModel):
     probability: float = Field(
         1.0, ge=0, le=1, description="Chance the effect is applied to a group (drawn per "
@@ -156,8 +171,8 @@ class OneOfEffectSpec(_EffectSpec):
 
     kind: Literal["one_of"] = Field(description="Effect type.")
     effects: list[SingleEffectSpec] = Field(
-        min_length=1, description="The effects to choose from (their own probability is "
-        "ignored: this effect's applies).")
+        min_length=1, description="The effects to choose from (their own probability and "
+        "targets are ignored: this effect's apply).")
     weights: list[Annotated[float, Field(ge=0)]] | None = Field(
         None, description="Relative weight of each effect (null: equal).")
 
