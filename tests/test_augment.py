@@ -337,3 +337,28 @@ def test_validate_refuses_an_mp3_bit_rate_the_sample_rate_cannot_take() -> None:
     assert found["augmentation.effects[1].rate_hz[0]"] == (
         "warning", "16000 Hz is not below sample_rate_hz (16000): resampling through it does "
         "nothing")
+
+
+def test_an_impulse_response_file_is_read_resampled_and_refused_when_unusable(tmp_path) -> None:
+    import soundfile as sf
+
+    h = np.zeros(96)
+    h[4] = 1.0
+    sf.write(tmp_path / "ir48k.wav", np.stack([h, -h], 1), 48000, subtype="FLOAT")
+    got = A.read_impulse_response(tmp_path / "ir48k.wav", 16000)
+    assert got.shape == (32,)  # the first channel, at 16 kHz
+    sf.write(tmp_path / "silent.wav", np.zeros(64), 16000, subtype="FLOAT")
+    with pytest.raises(AudioError, match=r"ir 'silent': expected a finite, non-silent "
+                       r"response in .*silent\.wav"):
+        A.read_impulse_response(tmp_path / "silent.wav", 16000, where="ir 'silent'")
+    with pytest.raises(AudioError, match=r"ir 'gone': cannot read .*gone\.wav"):
+        A.read_impulse_response(tmp_path / "gone.wav", 16000, where="ir 'gone'")
+
+
+def test_codecs_without_mp3_or_opus_in_libsndfile_say_how_to_get_them(monkeypatch) -> None:
+    import soundfile
+
+    monkeypatch.setattr(soundfile, "available_formats", lambda: {"WAV": "WAV", "OGG": "OGG"})
+    with pytest.raises(AudioError, match=r"need libsndfile >= 1\.1 with MP3 and Opus .*"
+                       r"pip install 'sonicspec\[augment\]'"):
+        A.encode_decode(_noise(seconds=0.5), RATE, "gsm")
