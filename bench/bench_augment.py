@@ -8,10 +8,10 @@ syllable-rate bursts over a harmonic voice), then a typical chain as the docs' e
     response (p 0.8) · self_noise · gain · clipping (p 0.1) · resample 8 kHz (p 0.3) ·
     one_of mp3 / opus / gsm (p 0.6)
 
-The chain's cost per group is the mean over 40 draws of one mixture's time × 9, and its worst
-case (every effect applied, the slowest codec) × 9. CPU seconds (``time.process_time``, after a
-warm-up run on one second) on one core; wall times too, the machine being shared. The same for a 4-capsule array (every effect
-per channel).
+The chain's cost per group is the mean over 40 draws of one mixture's time × 9, and with
+every effect applied, once per codec, × 9. CPU seconds (``time.process_time``, after a warm-up
+run on one second) on one core; wall times too, the machine being shared. The same for a
+4-capsule array (every effect per channel).
 
 Reproduce:
     python bench/bench_augment.py                # about 2 min
