@@ -406,8 +406,10 @@ def augmentation_facts(meta: dict[str, Any]) -> dict[str, Any]:
     a response with its preset), per :data:`AUGMENT_QUANTITIES` the drawn value (None: not
     applied) and ``aug_codec_kbps_measured``, the codec's measured bit rate on the first
     mixture."""
-    if not meta.get("augmentation"):
-        return {"augmented": False}
+    if not meta.get("augmentation"):  # every key, so a quantity finds its field
+        return {"augmented": False, "aug_effects": None, "aug_labels": [],
+                "aug_codec_kbps_measured": None,
+                **{f"aug_{kind}_{name}": None for kind, name, _, _ in AUGMENT_QUANTITIES}}
     applied = _applied_effects(meta)
     facts: dict[str, Any] = {"augmented": True, "aug_effects": len(applied),
                              "aug_labels": [d["kind"] + (f":{d['preset']}" if d.get("preset")
