@@ -54,15 +54,23 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from sonicspec.audio.metrics import METRICS
     from sonicspec.dataload.evaluate import evaluate, summarise, summary_table, write_results
     from sonicspec.dataload.folder import DatasetError
+    from sonicspec.dataload.formats import detect
 
     metrics = args.metrics or list(METRICS)
+    fmt = None if args.format == "auto" else args.format
     try:
         unknown = [m for m in metrics if m not in METRICS]
         if unknown:
             raise DatasetError(f"--metrics: expected names from {list(METRICS)}, got "
                                f"{unknown[0]!r}")
+        if args.sets is not None or args.estimates_root is not None:
+            return _evaluate_sets(args, metrics, fmt)
+        if args.dataset is None:
+            raise DatasetError("evaluate: give a DATASET folder, or --estimates-root with "
+                               "--sets")
         rows = evaluate(args.dataset, args.split, args.task, estimates=args.estimates,
-                        oracle=args.oracle, channel=args.channel, metrics=metrics)
+                        oracle=args.oracle, channel=args.channel, metrics=metrics,
+                        format=fmt, mixtures=args.mixture)
     except DatasetError as exc:
         print(f"sonicspec: error: {exc}", file=sys.stderr)
         return EXIT_INVALID
@@ -70,11 +78,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     settings = {"dataset": str(Path(args.dataset).resolve()), "split": args.split,
                 "task": args.task, "estimates": args.estimates, "oracle": args.oracle,
                 "channel": args.channel, "metrics": metrics, "window_s": 6.0, "hop_s": 3.0,
+                "format": fmt or detect(args.dataset), "mixtures": args.mixture,
                 "sonicspec_version": __version__}
     out = Path(args.output or f"evaluation-{args.split}-{args.task}")
     csv_path, json_path = write_results(out, rows, summary, settings)
     print(summary_table(summary, metrics))
     print(f"scores: {csv_path}\nsummary: {json_path}")
+    _warn_silent(rows)
+    return EXIT_OK
+
+
+def _warn_silent(rows) -> None:
     silent = [r for r in rows if r.get("silent_estimate")]
     if silent:
         first = silent[0]
@@ -83,6 +97,30 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
               "not scored (every metric is undefined for silence); first: group "
               f"{first['group']} {first['mixture']} channel {first['estimate_channel']}, "
               f"{first['silent_estimate']} of {first['scored']} windows", file=sys.stderr)
+
+
+def _evaluate_sets(args: argparse.Namespace, metrics: list[str], fmt: str | None) -> int:
+    """``--estimates-root DIR --sets A,B``: the models × sets table."""
+    from sonicspec.dataload.folder import DatasetError
+    from sonicspec.dataload.tables import cross_set, parse_sets
+
+    if args.sets is None or args.estimates_root is None:
+        raise DatasetError("evaluate: --estimates-root and --sets go together (the models' "
+                           "folder and the test sets)")
+    if args.dataset is not None or args.estimates is not None:
+        raise DatasetError("evaluate: with --sets, give no DATASET or --estimates (each set "
+                           "is NAME=PATH; estimates are <root>/<model>/<set>/)")
+    sets = parse_sets(args.sets, args.split, fmt)
+    out = Path(args.output or f"evaluation-sets-{args.task}")
+    table = cross_set(args.estimates_root, sets, args.task, out, metrics=metrics,
+                      oracle=args.oracle, channel=args.channel, mixtures=args.mixture,
+                      settings={"sonicspec_version": __version__, "window_s": 6.0,
+                                "hop_s": 3.0, "channel": args.channel})
+    print((out / "table.md").read_text(encoding="utf-8"), end="")
+    print(f"table: {out / 'table.md'}, {out / 'table.csv'}\nsummary: {out / 'table.json'}")
+    for miss in table["missing"]:
+        print(f"sonicspec: warning: {args.estimates_root}/{miss}: no such folder; the cell "
+              "is empty (\"-\")", file=sys.stderr)
     return EXIT_OK
 
 
@@ -119,17 +157,38 @@ def add_report(sub) -> None:
 def add_evaluate(sub) -> None:
     """``sonicspec evaluate DATASET``."""
     from sonicspec.audio.metrics import METRICS
+    from sonicspec.dataload.formats import FORMATS
 
-    p = sub.add_parser("evaluate", help="score a model's outputs against a built dataset's "
-                       "targets (SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s)")
-    p.add_argument("dataset", metavar="DATASET", help="a built dataset folder (outputs.dir)")
-    p.add_argument("--split", required=True, help="the split to score (e.g. test)")
+    p = sub.add_parser("evaluate", help="score a model's outputs against a dataset's targets "
+                       "(SI-SNR(i), SDR(i), PESQ, STOI; 6 s windows every 3 s): a built "
+                       "dataset or a public test set (LibriMix, WHAM!, SonicSet...), or "
+                       "several models on several sets as one table")
+    p.add_argument("dataset", metavar="DATASET", nargs="?",
+                   help="a built dataset folder (outputs.dir) or a test set in a layout "
+                   "--format names (left out with --sets)")
+    p.add_argument("--split", required=True,
+                   help="the split to score: the set's own name (test, tt, test-noise...) "
+                   "or test/val/train, which every layout maps to its own")
+    p.add_argument("--format", choices=FORMATS, default="auto",
+                   help="the layout of DATASET (and of every --sets folder): auto (default: "
+                   "a dataset.json makes a sonicspec dataset, else the layout is "
+                   "recognised from its folders and files), sonicspec, or a public set's")
+    p.add_argument("--mixture", action="append", metavar="NAME",
+                   help="score only the mixtures of this name (repeat; e.g. mix_both for "
+                   "LibriMix and WHAM!, noisy for VoiceBank-DEMAND)")
     p.add_argument("--task", required=True, choices=("separation", "enhancement"),
                    help="which mixtures to score: separation (one estimate channel per "
                    "speaker, matched by the best permutation) or enhancement (one channel: "
                    "the speech)")
     p.add_argument("--estimates", metavar="DIR",
-                   help="<DIR>/<split>/<group>/<mixture name>.wav, one channel per target")
+                   help="<DIR>/<group id>/<mixture name>.wav (the group id starts with its "
+                   "split), one channel per target")
+    p.add_argument("--estimates-root", metavar="DIR",
+                   help="score several models on several sets as one table: "
+                   "<DIR>/<model>/<set>/<group id>/<mixture name>.wav (with --sets)")
+    p.add_argument("--sets", metavar="A=PATH,B=PATH",
+                   help="the test sets of the table, comma-separated NAME=PATH (a bare PATH "
+                   "is named after its folder), each optionally @SPLIT to override --split")
     p.add_argument("--oracle", action="store_true",
                    help="also score the mixture itself (the baseline) and the targets "
                    "themselves (the ceiling) as estimates")
@@ -138,8 +197,9 @@ def add_evaluate(sub) -> None:
     p.add_argument("--metrics", nargs="+", metavar="NAME",
                    help=f"a subset of {' '.join(METRICS)} (default: all)")
     p.add_argument("-o", "--output", metavar="DIR",
-                   help="where scores.csv and summary.json go "
-                   "(default: evaluation-<split>-<task>)")
+                   help="where scores.csv and summary.json go (default: "
+                   "evaluation-<split>-<task>); with --sets, table.md, table.csv, "
+                   "table.json and each cell's scores (default: evaluation-sets-<task>)")
     p.set_defaults(func=cmd_evaluate)
 
 

@@ -1,7 +1,9 @@
 """``sonicspec evaluate``: a model's outputs scored against a dataset's targets.
 
-The estimates folder mirrors the dataset: for each mixture of the task,
-``<estimates>/<split>/<group index>/<mixture name>.wav`` (or ``.flac``), as long as the
+The dataset is a built sonicspec dataset or a public test set in its own layout
+(:mod:`sonicspec.dataload.formats`). The estimates folder mirrors its groups: for each
+mixture of the task, ``<estimates>/<group id>/<mixture name>.wav`` (or ``.flac``; a sonicspec
+group id is ``<split>/<group index>``, an external set's is its own), as long as the
 mixture, at its sample rate, with one channel per target (``k`` for separation of ``k``
 speakers, one for enhancement). Targets and mixture are taken at the reference channel
 (``channel``, default 0). Separation outputs are matched to the targets by the permutation
@@ -33,7 +35,7 @@ import numpy as np
 
 from sonicspec.atomic import write_text
 from sonicspec.audio.metrics import METRICS, best_permutation, windowed_scores
-from sonicspec.dataload.folder import DatasetError, DatasetFolder, Group, read_audio
+from sonicspec.dataload.folder import DatasetError, Group, read_audio
 from sonicspec.dataload.loader import TASKS
 
 AUDIO_EXTENSIONS = (".wav", ".flac")
@@ -96,12 +98,18 @@ def score_mixture(estimates: np.ndarray, targets: np.ndarray, mixture: np.ndarra
 
 def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path | None = None,
              oracle: bool = False, channel: int = 0, metrics: Sequence[str] = METRICS,
-             window_s: float = 6.0, hop_s: float = 3.0) -> list[dict[str, Any]]:
+             window_s: float = 6.0, hop_s: float = 3.0, format: str | None = None,
+             mixtures: Sequence[str] | None = None) -> list[dict[str, Any]]:
     """Per-target score rows for every mixture of ``task`` in ``split``.
 
+    ``root`` is a built dataset or a folder in an external layout
+    (:mod:`sonicspec.dataload.formats`; ``format`` names it, else it is detected);
+    ``mixtures`` keeps only the mixtures of those names (``mix_both``).
     Each row: ``method`` (``estimates``, ``oracle_mixture``, ``oracle_targets``), ``group``,
     ``mixture``, ``target``, ``estimate_channel`` and one column per metric.
     """
+    from sonicspec.dataload.formats import open_dataset
+
     if task not in TASKS:
         raise DatasetError(f"task: expected one of {list(TASKS)}, got {task!r}")
     if estimates is None and not oracle:
@@ -109,11 +117,17 @@ def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path |
     est_root = Path(estimates) if estimates is not None else None
     if est_root is not None and not est_root.is_dir():
         raise DatasetError(f"{est_root}: no such estimates folder")
-    folder = DatasetFolder(root)
+    folder = open_dataset(root, format)
     groups = folder.groups(split)
     todo = [(g, m) for g in groups for m in g.mixtures(task)]
     if not todo:
         raise DatasetError(f"{folder.root}: split {split!r} has no {task} mixtures")
+    if mixtures is not None:
+        names = sorted({m["name"] for _, m in todo})
+        todo = [(g, m) for g, m in todo if m["name"] in mixtures]
+        if not todo:
+            raise DatasetError(f"{folder.root}: split {split!r} has no {task} mixture named "
+                               f"{' or '.join(mixtures)}; its {task} mixtures are {names}")
     rows: list[dict[str, Any]] = []
     for group, m in todo:
         chans = (channel,)

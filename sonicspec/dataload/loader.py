@@ -36,7 +36,7 @@ from sonicspec.audio.augment import (
     parse_chain,
     read_impulse_response,
 )
-from sonicspec.dataload.folder import BACKGROUNDS, STEMS, DatasetError, DatasetFolder, Group
+from sonicspec.dataload.folder import BACKGROUNDS, STEMS, DatasetError, Group
 from sonicspec.errors import AudioError
 from sonicspec.hashing import rng_for
 
@@ -166,6 +166,11 @@ class SonicspecDataset:
     augmentation_dir
         The folder the block's impulse-response files are relative to (default: the
         current one; a spec's block names them relative to the spec).
+    format
+        The folder's layout (:mod:`sonicspec.dataload.formats`: ``librimix``, ``wham``…);
+        ``None``: detected (a folder with ``dataset.json`` is a sonicspec dataset). Sets
+        whose background was not released (VoiceBank-DEMAND, DNS, the SonicSet benchmarks)
+        give their items as written: dynamic mixing needs the background track.
 
     Notes
     -----
@@ -181,11 +186,13 @@ class SonicspecDataset:
     def __init__(self, root: str | Path, split: str, task: str = "separation", *,
                  config: MixingConfig | str = "paper", speakers: int | None = None,
                  background: str | None = None, stems: tuple[str, ...] = (),
-                 labels: bool = False, seed: int = 0, augmentation: Any = None,
-                 augmentation_dir: str | Path | None = None) -> None:
+                 labels: bool = False, seed: int = 0, format: str | None = None,
+                 augmentation: Any = None, augmentation_dir: str | Path | None = None) -> None:
+        from sonicspec.dataload.formats import open_dataset
+
         if task not in TASKS:
             raise DatasetError(f"task: expected one of {list(TASKS)}, got {task!r}")
-        self.folder = DatasetFolder(root)
+        self.folder = open_dataset(root, format)
         self.split, self.task, self.seed = split, task, int(seed)
         self.config = preset(config, task) if isinstance(config, str) else config
         for s in stems:
@@ -215,6 +222,14 @@ class SonicspecDataset:
                                + (f" of {speakers} speakers" if speakers else "")
                                + (f" with background {background!r}" if background else "")
                                + "; see mixture.tasks in its spec")
+        if self.config.dynamic:
+            partial = next((g for g, m in self.items
+                            if m.get("components_complete") is False), None)
+            if partial is not None:
+                raise DatasetError(f"{self.folder.root}: group {partial}'s mixture has a "
+                                   "background that is not among its files (the layout does "
+                                   "not release it), so it cannot be re-mixed; use "
+                                   "MixingConfig(dynamic=False) for its items as written")
         if background is None:
             first = self.items[0][1]
             self.items = [(g, m) for g, m in self.items
