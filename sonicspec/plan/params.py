@@ -33,6 +33,7 @@ from pydantic import (
 
 from sonicspec.errors import StageError
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.augmentation import AugmentationSpec
 from sonicspec.spec.base import BandCoefficients
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
@@ -325,6 +326,14 @@ class ExportParams(ShardParams):
     """``outputs.dir`` as written in the spec (no key depends on where it is)."""
     sample_rate_hz: int
     scene_id: str
+    augmentation: AugmentationSpec | None = None
+    """The spec's device and channel effects (issue 30)."""
+    impulse_responses: dict[str, str] = Field(default_factory=dict)
+    """Each impulse-response file of ``augmentation`` as written -> the SHA-256 of its bytes
+    (files enter the key by content; the job's ``paths`` say where they are)."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"augmentation": None, "impulse_responses": {}}
+    """Left out when unused (added in issue 30), so exports without effects keep their keys."""
 
 
 class DatasetParams(StepParams):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import (
     Field,
@@ -14,6 +14,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.augmentation import AugmentationSpec
 from sonicspec.spec.base import Identifier, SpecModel, SplitName
 from sonicspec.spec.corpora import CorporaSpec
 from sonicspec.spec.directivity import SourcesDirectivitySpec
@@ -70,6 +71,19 @@ class DatasetSpec(SpecModel):
     outputs: OutputsSpec = Field(
         default_factory=OutputsSpec, description="Output locations and formats."
     )
+    augmentation: AugmentationSpec | None = Field(
+        None, description="Device and channel effects on the mixtures (microphone response, "
+        "self-noise, gain, clipping, resampling, codecs), drawn per group and recorded in "
+        "metadata.json; null: none (the mixtures as mixed).")
+
+    @model_serializer(mode="wrap")
+    def _without_no_augmentation(self, handler: Any) -> Any:
+        # Left out when null, so a spec without effects dumps (and keys its dataset job) as
+        # before the field existed.
+        data = handler(self)
+        if isinstance(data, dict) and data.get("augmentation", 0) is None:
+            del data["augmentation"]
+        return data
 
     @model_serializer(mode="wrap")
     def _omni_left_out(self, handler: SerializerFunctionWrapHandler,
