@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
 from pydantic import (
     Field,
@@ -77,22 +77,16 @@ class DatasetSpec(SpecModel):
         "metadata.json; null: none (the mixtures as mixed).")
 
     @model_serializer(mode="wrap")
-    def _without_no_augmentation(self, handler: Any) -> Any:
-        # Left out when null, so a spec without effects dumps (and keys its dataset job) as
-        # before the field existed.
-        data = handler(self)
-        if isinstance(data, dict) and data.get("augmentation", 0) is None:
-            del data["augmentation"]
-        return data
-
-    @model_serializer(mode="wrap")
-    def _omni_left_out(self, handler: SerializerFunctionWrapHandler,
+    def _defaults_left_out(self, handler: SerializerFunctionWrapHandler,
                        info: SerializationInfo) -> dict:
         # Every source omnidirectional (the default): left out, so a spec written before
         # directivity existed serialises (and is keyed, and lands in dataset.json) as before.
+        # No augmentation (null): left out the same way, for the same reason.
         data = handler(self)
         if self.directivity.is_omni and self.directivity == SourcesDirectivitySpec():
             data.pop("directivity", None)
+        if isinstance(data, dict) and data.get("augmentation", 0) is None:
+            del data["augmentation"]
         return data
 
     @field_validator("splits")
