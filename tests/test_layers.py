@@ -356,6 +356,8 @@ KEYED_BY_DATA = {
     ("render", "ctx.job.paths"): "the plan's named input paths",
     ("rir", "ctx.job.paths"): "the plan's named input paths",
     ("render", "signals"): "rendered signals per kind (reverberant, direct, early)",
+    ("render", "point"): "a point source's rendered signals per kind (diffuse backgrounds)",
+    ("render", "out"): "a diffuse background's signals per kind",
     ("mix", "track.arrays"): "a rendered track's array name per kind (RenderedTrack.arrays)",
     ("export", "track.arrays"): "a rendered track's array name per kind",
     ("export", "tracks[c].arrays"): "a rendered track's array name per kind",
@@ -382,7 +384,7 @@ NOT_TYPED_YET = {
     ("repair", "marker"), ("repair", "store.read('dataset', key).provenance"),
     ("checked", "data"), ("checked", "r"), ("workflow", "files[0]"),
 }
-STRING_LOOKUPS_LEFT = 106  # +1: a directional track's facing_yaw_deg array (keyed by signal kind)
+STRING_LOOKUPS_LEFT = 110  # +4: a diffuse background's signals per kind; +1 a facing array
 
 
 def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
@@ -396,7 +398,8 @@ def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
     assert len(found) == STRING_LOOKUPS_LEFT
     # the RIR step and the placement read none but named inputs and the library's figures
     assert {r for m, _, r, _ in found if m in ("rir", "placement", "motion", "render")} == {
-        "ctx.job.paths", "broadband", "first.broadband", "mesh_art.data", "signals"}
+        "ctx.job.paths", "broadband", "first.broadband", "mesh_art.data", "signals", "point",
+        "out"}
 
 
 def test_the_string_lookup_counter_sees_reads_and_gets() -> None:

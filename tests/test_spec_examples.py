@@ -65,10 +65,10 @@ def test_every_field_has_a_description() -> None:
 
 def test_every_numeric_field_names_its_unit_or_is_a_count() -> None:
     """Floats carry a unit suffix (DESIGN.md §1) unless they are unitless by nature."""
-    unitless = {"scale", "jitter_lu", "max_leak_fraction",
+    unitless = {"scale", "jitter_lu", "max_leak_fraction", "diffuse_fraction",
                 "relative_humidity_pct", "temperature_c", "absorption", "scattering",
                 "transmission", "scattering_override", "speed_of_sound_m_s", "ray_splitting",
-                "horizontal_guiding"}
+                "horizontal_guiding", "probability"}
     suffixes = ("_m", "_m2", "_s", "_hz", "_db", "_lufs", "_deg", "_m_s", "_lu", "_pct", "_c",
                 "_dbfs")
     bad = []

@@ -653,6 +653,54 @@ def early_part(arrivals: Arrivals, settings: SimulationSettings, n_samples: int,
                          f"separated (expected one of {', '.join(PATH_RECEIVERS)})")
 
 
+def receiver_aperture_m(microphone: Mapping[str, Any]) -> float:
+    """The largest path difference between two of a receiver's channels for one plane wave,
+    metres: twice the farthest capsule's offset (arrays), Woodworth's lateral path
+    ``a (π/2 + 1)`` (the sphere head), the speed of sound times a SOFA set's interaural
+    delay bound (taken as a 0.2 m head's), 0 for coincident channels (mono, ambisonics)."""
+    kind = microphone["kind"]
+    if kind in ("mono", "ambisonics"):
+        return 0.0
+    if kind == "binaural":
+        radius = microphone["hrtf"].get("head_radius_m", 0.1) if microphone["hrtf"][
+            "kind"] == "sphere" else 0.1
+        return radius * (np.pi / 2 + 1)
+    return 2.0 * float(np.max(np.linalg.norm(array_offsets(microphone), axis=1)))
+
+
+def direction_responses(directions: np.ndarray, settings: SimulationSettings,
+                        microphone: Mapping[str, Any] = MONO, hrirs: HrirSet | None = None
+                        ) -> np.ndarray:
+    """Each direction's unit plane wave as the receiver renders it, ``(N, channels, taps)``:
+    one flat arrival per direction (scene-frame directions of arrival), spaced ``taps``
+    apart in one call to :func:`early_part` and cut apart, so every receiver, orientation and
+    pattern the early part models applies (the diffuse background's per-direction responses,
+    :mod:`sonicspec.acoustics.receivers.diffuse`). Each response sits wholly inside its
+    ``taps`` (a power of two), after a lead common to all."""
+    from sonicspec.acoustics.arrivals import KIND_DIRECT
+    from sonicspec.acoustics.receivers.synthesis import DEFAULT_TAPS
+
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    fs = settings.sample_rate_hz
+    reach = receiver_aperture_m(microphone) / settings.speed_of_sound_m_s * fs
+    lead = int(np.ceil(reach)) + DEFAULT_TAPS // 2 + 2
+    h_len = 0
+    if microphone["kind"] == "binaural" and microphone["hrtf"]["kind"] == "sofa":
+        check_receiver(microphone, hrirs)
+        h_len = hrirs.resampled(fs).hrirs.shape[-1]
+    # The lead before, the same after, plus an HRIR's length and a sphere head's shadow
+    # filter's ring (its poles decay within a few samples; 64 leave it below 1e-12).
+    taps = 1 << int(np.ceil(np.log2(2 * lead + DEFAULT_TAPS + h_len + 64)))
+    n = len(d)
+    bank_bands = len(settings.bands_hz)
+    arrivals = Arrivals((np.arange(n) * taps + lead) / fs, np.ones((n, bank_bands)), d,
+                        np.zeros(n, dtype=np.int64), np.full(n, KIND_DIRECT, dtype=np.int8),
+                        np.zeros(n))
+    out = early_part(arrivals, settings, n * taps, microphone, hrirs)
+    return np.ascontiguousarray(out.reshape(out.shape[0], n, taps).transpose(1, 0, 2))
+
+
 # --- where a RIR ends (issue 19): kept apart from the paths above ----------------------------
 
 def late_envelope(histogram: EnergyHistogram, settings: SimulationSettings

@@ -37,6 +37,11 @@
   ``g_i g_j e^{jk d·(p_i − p_j)}`` by Gauss–Legendre quadrature in ``cos θ`` and the trapezoid
   rule in azimuth (exact for the band-limited integrand as the orders grow), the reference the
   closed form of :mod:`~sonicspec.acoustics.receivers.capsules` is measured against (issue 30).
+* Isotropic (diffuse) noise fields (issue 30): the coherence of two omnidirectional points,
+  ``sin(kd)/(kd)`` in a spherically isotropic field and ``J₀(k d_h)`` in a cylindrically
+  isotropic one, and the interaural coherence of the Brown–Duda head from its own transfer
+  functions integrated over directions (:func:`brown_duda_diffuse_coherence`). The references
+  the diffuse background is measured against.
 """
 
 from __future__ import annotations
@@ -803,3 +808,116 @@ def diffuse_cross_spectrum_quadrature(offsets_m, axes, alphas, frequencies_hz, *
         / speed_of_sound_m_s
     h = g[None] * np.exp(1j * k[:, None, None] * (p @ d.T)[None])  # (F, M, N)
     return (h * w) @ np.conj(np.swapaxes(h, 1, 2))
+# --- diffuse (isotropic) fields: the coherence between two receivers (issue 30) --------------
+
+def _wavenumbers(frequencies_hz, speed_of_sound_m_s: float) -> np.ndarray:
+    f = np.asarray(frequencies_hz, dtype=np.float64)
+    if not np.all(np.isfinite(f) & (f >= 0)):
+        raise AcousticsError("frequencies_hz: expected finite frequencies >= 0, got "
+                             f"{f[~(np.isfinite(f) & (f >= 0))].ravel()[:3].tolist()}")
+    return 2 * math.pi * f / _positive("speed_of_sound_m_s", speed_of_sound_m_s)
+
+
+def _distance(name: str, value: float) -> float:
+    if not (math.isfinite(value) and value >= 0):
+        raise AcousticsError(f"{name}: expected a distance >= 0, got {value!r}")
+    return float(value)
+
+
+def spherical_isotropic_coherence(frequencies_hz, distance_m: float,
+                                  speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
+                                  ) -> np.ndarray:
+    """Coherence of two omnidirectional points ``distance_m`` apart in a spherically
+    isotropic (3-D diffuse) field: ``Γ(f) = sin(kd) / (kd)``, ``k = 2πf / c`` (Cook et al.
+    1955). Real: the field has no preferred direction, so the cross-spectrum has no phase."""
+    k = _wavenumbers(frequencies_hz, speed_of_sound_m_s)
+    d = _distance("distance_m", distance_m)
+    return np.sinc(k * d / math.pi)  # numpy's sinc is sin(πx)/(πx)
+
+
+def cylindrical_isotropic_coherence(frequencies_hz, horizontal_distance_m: float,
+                                    speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S
+                                    ) -> np.ndarray:
+    """Coherence of two omnidirectional points in a cylindrically isotropic (2-D diffuse)
+    field, plane waves from every horizontal direction alike: ``Γ(f) = J₀(k d_h)``, ``d_h``
+    the points' horizontal distance (a vertical offset is heard identically by every
+    horizontal wave)."""
+    from scipy.special import j0
+
+    k = _wavenumbers(frequencies_hz, speed_of_sound_m_s)
+    return j0(k * _distance("horizontal_distance_m", horizontal_distance_m))
+
+
+#: Brown & Duda (1998) head-shadow constants, the same as the receiver's.
+BROWN_DUDA_ALPHA_MIN = 0.1
+BROWN_DUDA_THETA_MIN_DEG = 150.0
+
+
+def brown_duda_response(frequencies_hz, cos_theta, head_radius_m: float,
+                        speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                        sample_rate_hz: float | None = None) -> np.ndarray:
+    """Transfer function of the Brown–Duda (1998) spherical head at one ear, relative to the
+    head's centre, for plane waves arriving at angle ``θ`` from the ear axis:
+    ``H = e^{−jωτ(θ)} (1 + jα(θ) ω/(2ω₀)) / (1 + jω/(2ω₀))``, ``ω₀ = c/a``, ``τ`` the
+    Woodworth ray-path delay (``−(a/c) cos θ`` lit, ``(a/c)(θ − π/2)`` shadowed) and
+    ``α(θ) = 1 + α_min/2 + (1 − α_min/2) cos(θ/θ_min · 180°)``. ``sample_rate_hz``: the shadow
+    filter as the renderer realises it, the bilinear transform, whose response at ``ω`` is
+    the analog one at ``2 f_s tan(ω / 2f_s)`` (the delay stays exact). Shape: ``(F, *θ)``."""
+    w = _wavenumbers(frequencies_hz, 1.0)  # ω = 2πf
+    a = _positive("head_radius_m", head_radius_m)
+    c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
+    cos_t = np.clip(np.asarray(cos_theta, dtype=np.float64), -1.0, 1.0)
+    theta = np.arccos(cos_t)
+    tau = np.where(theta < math.pi / 2, -a / c * cos_t, a / c * (theta - math.pi / 2))
+    alpha = (1 + BROWN_DUDA_ALPHA_MIN / 2) + (1 - BROWN_DUDA_ALPHA_MIN / 2) * np.cos(
+        theta / math.radians(BROWN_DUDA_THETA_MIN_DEG) * math.pi)
+    wa = w
+    if sample_rate_hz is not None:
+        fs = _positive("sample_rate_hz", sample_rate_hz)
+        if np.any(w >= math.pi * fs):
+            raise AcousticsError(f"frequencies_hz: expected < Nyquist ({fs / 2:g} Hz) with "
+                                 "sample_rate_hz")
+        wa = 2 * fs * np.tan(w / (2 * fs))
+    shape = (-1,) + (1,) * cos_t.ndim
+    x = 1j * wa.reshape(shape) / (2 * c / a)
+    return np.exp(-1j * w.reshape(shape) * tau) * (1 + alpha * x) / (1 + x)
+
+
+def brown_duda_diffuse_coherence(frequencies_hz, head_radius_m: float = 0.0875,
+                                 ear_angle_deg: float = 100.0, field: str = "spherical", *,
+                                 speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
+                                 sample_rate_hz: float | None = None,
+                                 n_polar: int = 192, n_azimuth: int = 384) -> np.ndarray:
+    """Interaural coherence of the Brown–Duda head in an isotropic field, from its own
+    transfer functions (:func:`brown_duda_response`) integrated over directions:
+    ``Γ = Re ∫ H_L H_R* dΩ / √(∫ |H_L|² dΩ ∫ |H_R|² dΩ)``.
+
+    The ears are horizontal, at ``±ear_angle_deg`` from the front. ``spherical``: Gauss–
+    Legendre in the height ``z`` (``n_polar`` nodes) times the trapezoid rule in azimuth
+    (``n_azimuth``, spectrally exact for periodic integrands); ``cylindrical``: the
+    trapezoid rule over horizontal directions. Independent of the renderer's direction sets.
+    """
+    if field not in ("spherical", "cylindrical"):
+        raise AcousticsError(f"field: expected 'spherical' or 'cylindrical', got {field!r}")
+    if not 0 <= ear_angle_deg <= 180:
+        raise AcousticsError(f"ear_angle_deg: expected 0..180, got {ear_angle_deg!r}")
+    phi = 2 * math.pi * (np.arange(n_azimuth) + 0.5) / n_azimuth
+    if field == "spherical":
+        z, wz = np.polynomial.legendre.leggauss(n_polar)
+    else:
+        z, wz = np.zeros(1), np.ones(1)
+    r = np.sqrt(1 - z**2)
+    dirs = np.stack([r[:, None] * np.cos(phi)[None, :], r[:, None] * np.sin(phi)[None, :],
+                     np.broadcast_to(z[:, None], (len(z), n_azimuth))], axis=-1).reshape(-1, 3)
+    weights = np.repeat(wz, n_azimuth) / (wz.sum() * n_azimuth)
+    e = math.radians(ear_angle_deg)
+    ears = np.array([[math.cos(e), math.sin(e), 0.0], [math.cos(e), -math.sin(e), 0.0]])
+    f = np.atleast_1d(np.asarray(frequencies_hz, dtype=np.float64))
+    out = np.zeros(f.shape)
+    for i in range(0, f.size, 64):
+        hl, hr = (brown_duda_response(f[i:i + 64], dirs @ ear, head_radius_m,
+                                      speed_of_sound_m_s, sample_rate_hz) for ear in ears)
+        cross = (hl * np.conj(hr)).real @ weights
+        norm = np.sqrt((np.abs(hl) ** 2 @ weights) * (np.abs(hr) ** 2 @ weights))
+        out[i:i + 64] = cross / norm
+    return out.reshape(np.shape(frequencies_hz))

@@ -21,6 +21,7 @@ copy of the dataset and so see the new epoch).
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -28,7 +29,15 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.audio.augment import (
+    apply_chain,
+    chain_files,
+    draw_chain,
+    parse_chain,
+    read_impulse_response,
+)
 from sonicspec.dataload.folder import BACKGROUNDS, STEMS, DatasetError, Group
+from sonicspec.errors import AudioError
 from sonicspec.hashing import rng_for
 
 TASKS = ("separation", "enhancement")
@@ -149,6 +158,14 @@ class SonicspecDataset:
         Also return each speaker's positions, azimuth, elevation and distance every 10 ms.
     seed
         The seed of every draw (with the epoch and the index).
+    augmentation
+        Device and channel effects applied on the fly: a spec's ``augmentation:`` block (the
+        validated model, ``load_spec(path).augmentation``, or the same block as plain data),
+        drawn per item and epoch from its own stream (the other draws do not change with
+        it), applied to the mixture, and to the targets for effects marked ``targets``.
+    augmentation_dir
+        The folder the block's impulse-response files are relative to (default: the
+        current one; a spec's block names them relative to the spec).
     format
         The folder's layout (:mod:`sonicspec.dataload.formats`: ``librimix``, ``wham``…);
         ``None``: detected (a folder with ``dataset.json`` is a sonicspec dataset). Sets
@@ -162,13 +179,15 @@ class SonicspecDataset:
     ``start`` (first sample of the crop), ``sir_db`` ``(k-1,)`` and ``snr_db`` (the gains
     drawn; NaN when not drawn), ``group`` and ``mixture_name`` (str), and with ``labels``
     ``positions_m`` ``(k, F, 3)``, ``azimuth_deg``, ``elevation_deg``, ``distance_m``
-    ``(k, F)``.
+    ``(k, F)``; with ``augmentation`` also ``augmentation``, the item's draw as JSON text
+    (as ``metadata.json`` records a group's).
     """
 
     def __init__(self, root: str | Path, split: str, task: str = "separation", *,
                  config: MixingConfig | str = "paper", speakers: int | None = None,
                  background: str | None = None, stems: tuple[str, ...] = (),
-                 labels: bool = False, seed: int = 0, format: str | None = None) -> None:
+                 labels: bool = False, seed: int = 0, format: str | None = None,
+                 augmentation: Any = None, augmentation_dir: str | Path | None = None) -> None:
         from sonicspec.dataload.formats import open_dataset
 
         if task not in TASKS:
@@ -180,6 +199,13 @@ class SonicspecDataset:
             if s not in STEMS:
                 raise DatasetError(f"stems: expected names from {list(STEMS)}, got {s!r}")
         self.stems, self.labels = tuple(stems), bool(labels)
+        try:
+            self.augmentation = (parse_chain(augmentation) if augmentation is not None
+                                 else None)
+        except AudioError as err:
+            raise DatasetError(str(err)) from None
+        self._ir_dir = Path(augmentation_dir) if augmentation_dir is not None else Path()
+        self._impulse_responses: dict[tuple[str, int], np.ndarray] = {}
         self.epoch = 0
         self.items: list[tuple[str, dict[str, Any]]] = []
         for group in self.folder.groups(split):
@@ -322,8 +348,33 @@ class SonicspecDataset:
             out[stem] = np.stack([
                 gains[n] * group.read(f"{n}_{stem}", start, start + length, cfg.channels)
                 for n in d.targets]).astype(np.float32)
+        if self.augmentation is not None:
+            out.update(self._augment(out, index, epoch, group.sample_rate_hz))
         if self.labels:
             out.update(self._labels(group, list(d.targets), start, length))
+        return out
+
+    def _augment(self, item: dict[str, Any], index: int, epoch: int, rate: int
+                 ) -> dict[str, Any]:
+        """The item's mixture (and targets and stems, for effects marked ``targets``) through
+        one draw of the augmentation chain, seeded by (seed, epoch, index)."""
+        assert self.augmentation is not None
+        rng = rng_for(self.seed, "augment", self.split, self.task, str(epoch), str(index))
+        draw = draw_chain(self.augmentation, rng)
+        responses = {}
+        for name in chain_files(self.augmentation):
+            if (name, rate) not in self._impulse_responses:
+                self._impulse_responses[(name, rate)] = read_impulse_response(
+                    self._ir_dir / name, rate, where=f"augmentation impulse_response {name!r}")
+            responses[name] = self._impulse_responses[(name, rate)]
+        out: dict[str, Any] = {"augmentation": json.dumps(draw, sort_keys=True)}
+        mix, _ = apply_chain(draw, item["mixture"], rate, impulse_responses=responses)
+        out["mixture"] = mix.astype(np.float32)
+        if any(d["applied"] and d["targets"] for d in draw):
+            for key in ("targets", *self.stems):
+                out[key] = np.stack([
+                    apply_chain(draw, t, rate, target=True, impulse_responses=responses)[0]
+                    for t in item[key]]).astype(np.float32)
         return out
 
     def to_lhotse(self, epoch: int = 0):

@@ -137,6 +137,13 @@ class BackgroundTrack(_Track):
     """A static noise or music source."""
 
     position_m: Vector3 = Field(description="Where the source stands, metres.")
+    field: Literal["diffuse_spherical", "diffuse_cylindrical"] | None = Field(None, description=(
+        "How the track reaches the microphone when not from its point source alone "
+        "(mixture.noise_field / music_field): a spherically or cylindrically isotropic "
+        "field. Absent: from the point source at position_m."))
+    diffuse_fraction: float | None = Field(None, gt=0, le=1, description=(
+        "With field: the share of the track's power that is diffuse (the rest from the "
+        "point source at position_m)."))
 
 
 class MixtureRecord(_Record):
@@ -145,6 +152,12 @@ class MixtureRecord(_Record):
     components: list[str] = Field(description="Tracks summed into it.")
     targets: list[str] = Field(description="Tracks it is to be separated into.")
     file: str = Field(description="Its audio file, relative to the dataset folder.")
+    augmentation: list[dict[str, Any] | None] | None = Field(None, description=(
+        "With augmentation: what each effect of the group's draw measured on this mixture, "
+        "in the chain's order (null: not applied): bitrate_kbps (encoded bytes x 8 / duration, "
+        "per channel) and codec_rate_hz of a codec, clipped_share of clipping, noise_rms_db "
+        "of self-noise; and full_scale_clipped_share, the share of samples cut at 0 dBFS when "
+        "the file cannot hold more."))
 
 
 class CapsuleRecord(BaseModel):
@@ -182,7 +195,7 @@ class GroupMetadata(BaseModel):
                                               "mic_m", "floor", "sample_rate_hz",
                                               "num_samples", "mixtures", "group_gain_db",
                                               "keys", "microphone_track", "noise", "music",
-                                              "audio_scales", "capsules"]}]}})
+                                              "audio_scales", "capsules", "augmentation"]}]}})
     __pydantic_extra__: dict[str, SpeechTrack] = Field(init=False)  # type: ignore[assignment]
 
     version: Literal[2] = Field(METADATA_VERSION, description="Version of this record's form.")
@@ -210,13 +223,27 @@ class GroupMetadata(BaseModel):
         "its scale: the signal is the decoded samples times it (the file's sonicspec_scale "
         "tag says the same)."))
 
+    augmentation: list[dict[str, Any]] | None = Field(None, description=(
+        "The group's draw of the spec's augmentation chain, in order: each effect's kind, "
+        "applied (drawn with its probability), targets (also applied to the clean tracks) and "
+        "its drawn parameters (preset or points, file, snr_db, color and seed, gain_db, "
+        "threshold_dbfs, rate_hz, bitrate_kbps; one_of: choice and the chosen effect's draw). "
+        "Absent without augmentation."))
+
     def to_json(self) -> str:
-        """Compact JSON, keys sorted, final newline; absent backgrounds, scales and capsules
-        left out."""
+        """Compact JSON, keys sorted, final newline; absent backgrounds, scales, capsules and
+        augmentation, and a point background's field, left out."""
         data = self.model_dump(mode="json")
-        for name in ("noise", "music", "audio_scales", "capsules"):
+        for name in ("noise", "music", "audio_scales", "capsules", "augmentation"):
             if data[name] is None:
                 del data[name]
+            elif name in ("noise", "music"):  # a point background: no field recorded
+                for key in ("field", "diffuse_fraction"):
+                    if data[name][key] is None:
+                        del data[name][key]
+        for m in data["mixtures"]:
+            if m.get("augmentation", 0) is None:
+                del m["augmentation"]
         return json.dumps(data, sort_keys=True, separators=(",", ":"),
                           ensure_ascii=False) + "\n"
 

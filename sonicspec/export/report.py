@@ -324,6 +324,11 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
                                     for s, d in shares.items()},
                                    "share of sources by direct path")}
     scenes, geometry = _scenes(groups, view, warnings)
+    augmented = {s: rd.augmentation_shares([g for g in groups if g["split"] == s])
+                 for s in splits}
+    augmentation = ({"table": augmented,
+                     "kinds": sorted({k for v in augmented.values() for k in v})}
+                    if any(augmented.values()) else None)
 
     files_dir = files_dir_of(path)
     pages_dir = files_dir / "groups"
@@ -377,6 +382,7 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
         "splits": splits,
         "distributions": distributions,
         "direct": direct,
+        "augmentation": augmentation,
         "bands_hz": bands_hz, "band_plots": band_plots,
         "scenes": scenes,
         "rows": rows, "groups": len(groups), "group_pages": len(pages_written),

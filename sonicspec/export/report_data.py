@@ -372,11 +372,81 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
         "num_samples": n, "sample_rate_hz": meta.get("sample_rate_hz"),
         "rir_key": (meta.get("keys") or {}).get("rir"),
     }
+    facts.update(augmentation_facts(meta))
     for role in ROLES:
         of_role = [iv for s in sources if s["role"] == role for iv in s["intervals"]]
         facts[f"{role}_activity"] = (_union_length(of_role) / n if n and of_role
                                      else (0.0 if n else None))
     return facts
+
+
+# The augmentation draws the report shows (issue 30): (kind, drawn field, label, unit).
+AUGMENT_QUANTITIES = (
+    ("self_noise", "snr_db", "augmentation: self-noise SNR", "dB"),
+    ("gain", "gain_db", "augmentation: gain", "dB"),
+    ("clipping", "threshold_dbfs", "augmentation: clipping level", "dBFS"),
+    ("resample", "rate_hz", "augmentation: resampled through", "Hz"),
+    ("mp3", "bitrate_kbps", "augmentation: MP3 bit rate asked", "kbit/s"),
+    ("opus", "bitrate_kbps", "augmentation: Opus bit rate asked", "kbit/s"),
+)
+
+
+def _applied_effects(meta: dict[str, Any]) -> list[dict[str, Any]]:
+    """The effects of a group's augmentation draw that were applied (a one_of's choice in
+    its place)."""
+    out = []
+    for d in meta.get("augmentation") or []:
+        if isinstance(d, dict) and d.get("applied"):
+            out.append(d["effect"] if d.get("kind") == "one_of" and "effect" in d else d)
+    return out
+
+
+def augmentation_facts(meta: dict[str, Any]) -> dict[str, Any]:
+    """A group's augmentation draw as report facts: ``augmented`` (a draw is recorded),
+    ``aug_effects`` (how many effects were applied), ``aug_labels`` (each applied effect,
+    a response with its preset), per :data:`AUGMENT_QUANTITIES` the drawn value (None: not
+    applied) and ``aug_codec_kbps_measured``, the codec's measured bit rate on the first
+    mixture."""
+    if not meta.get("augmentation"):  # every key, so a quantity finds its field
+        return {"augmented": False, "aug_effects": None, "aug_labels": [],
+                "aug_codec_kbps_measured": None,
+                **{f"aug_{kind}_{name}": None for kind, name, _, _ in AUGMENT_QUANTITIES}}
+    applied = _applied_effects(meta)
+    facts: dict[str, Any] = {"augmented": True, "aug_effects": len(applied),
+                             "aug_labels": [d["kind"] + (f":{d['preset']}" if d.get("preset")
+                                                         else "") for d in applied]}
+    for kind, name, _, _ in AUGMENT_QUANTITIES:
+        values = [d.get(name) for d in applied if d.get("kind") == kind]
+        facts[f"aug_{kind}_{name}"] = _num(values[0]) if values else None
+    measured = None
+    mixtures = meta.get("mixtures") or []
+    for m in (mixtures[0].get("augmentation") or []) if mixtures else []:
+        if isinstance(m, dict) and "bitrate_kbps" in m:
+            measured = _num(m["bitrate_kbps"])
+    facts["aug_codec_kbps_measured"] = measured
+    return facts
+
+
+def augmentation_shares(groups: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per applied effect (a response with its preset): groups and share of ``groups``."""
+    augmented = [g for g in groups if g.get("augmented")]
+    counts: dict[str, int] = {}
+    for g in augmented:
+        for label in set(g.get("aug_labels") or []):
+            counts[label] = counts.get(label, 0) + 1
+    return {k: {"count": n, "share": n / len(augmented)} for k, n in sorted(counts.items())}
+
+
+def _augment_range(spec: dict[str, Any], kind: str, name: str) -> tuple[float, float] | None:
+    """The spec's range of ``kind``'s ``name`` (the first such effect, one_of's included)."""
+    effects = list((spec.get("augmentation") or {}).get("effects") or [])
+    effects += [e for o in effects if o.get("kind") == "one_of" for e in o.get("effects") or []]
+    for e in effects:
+        if e.get("kind") == kind and name in e:
+            v = e[name]
+            if isinstance(v, list) and v and all(isinstance(x, int | float) for x in v):
+                return float(min(v)), float(max(v))
+    return None
 
 
 def read_group_facts(info: DatasetInfo, split: str | None = None) -> list[dict[str, Any]]:
@@ -480,6 +550,15 @@ def quantities(spec: dict[str, Any]) -> list[Quantity]:
     ]
     qs += [Quantity(f"{role}_activity", f"{role} activity (share of the clip)", "", "group",
                     f"{role}_activity") for role in ROLES]
+    # Augmentation draws (shown when a dataset has them: a quantity without values is left out)
+    qs.append(Quantity("aug_effects", "augmentation: effects applied per group", "", "group",
+                       "aug_effects"))
+    for kind, name, label, unit in AUGMENT_QUANTITIES:
+        r = _augment_range(spec, kind, name)
+        qs.append(Quantity(f"aug_{kind}_{name}", label, unit, "group", f"aug_{kind}_{name}",
+                           ranges=(("spec", *r),) if r else ()))
+    qs.append(Quantity("aug_codec_kbps", "augmentation: codec bit rate measured (first "
+                       "mixture, per channel)", "kbit/s", "group", "aug_codec_kbps_measured"))
     return qs
 
 

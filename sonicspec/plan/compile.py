@@ -379,6 +379,26 @@ def _directivity(spec: DatasetSpec, base_dir: Path, digests: FileDigests
     return {"directivity": _dump(spec.directivity)}, files, paths
 
 
+def _impulse_response_files(spec: DatasetSpec, base_dir: Path, digests: FileDigests
+                            ) -> tuple[dict[str, str], dict[str, str]]:
+    """The impulse-response files of ``augmentation``: (digest by file as written, path by
+    file as written), else empty."""
+    if spec.augmentation is None:
+        return {}, {}
+    effects = [*spec.augmentation.effects]
+    effects += [e for o in effects if o.kind == "one_of" for e in o.effects]
+    files: dict[str, str] = {}
+    paths: dict[str, str] = {}
+    for i, effect in enumerate(effects):
+        for name in getattr(effect, "files", None) or ():
+            path = base_dir / name
+            if not path.is_file():
+                raise CompileError(f"augmentation.effects: impulse-response file {path} "
+                                   f"(effect {i}, {name!r}) does not exist")
+            files[name], paths[name] = digests.file(path), str(path)
+    return files, paths
+
+
 def scene_jobs(spec: DatasetSpec, entries: list[SceneEntry], base_dir: Path,
                digests: FileDigests) -> list[tuple[SceneEntry, Job, Job]]:
     """The ``mesh`` and ``navigation`` jobs of every concrete scene (no corpus is read)."""
@@ -430,7 +450,10 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     rir_files, rir_paths = _hrtf_file(spec, base, digests)
     directivity, source_files, source_paths = _directivity(spec, base, digests)
     rir_files, rir_paths = {**rir_files, **source_files}, {**rir_paths, **source_paths}
+    ir_files, ir_paths = _impulse_response_files(spec, base, digests)
     digests.save()
+    augmentation = (shared(_dump(spec.augmentation)) if spec.augmentation is not None
+                    else None)
 
     layouts = split_layouts(spec, entries, base)
     # Sub-dicts every shard's jobs repeat are made once, with their canonical JSON, so keying
@@ -445,6 +468,9 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                                        MaterialTable.omitted_when))
     loudness, tasks = shared(mixture["loudness"]), shared(mixture["tasks"])
     targets = shared(list(spec.mixture.targets))
+    diffuse = {role: getattr(spec.mixture, f"{role}_field").model_dump(mode="json")
+               for role in ("noise", "music") if getattr(spec.mixture, f"{role}_field").diffuse}
+    backgrounds = {"backgrounds": shared(diffuse)} if diffuse else {}
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     rendering = spec.mixture.rendering()  # `auto` resolved
@@ -530,10 +556,12 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "speed_m_s": getattr(spec.trajectory, "speed_m_s", None),
                         "walk_span": getattr(spec.trajectory, "span", "speech"),
                         "speed_of_sound_m_s": spec.speed_of_sound_m_s,
+                        **backgrounds,
                     },
                     (rir.key, arrange.key, placement.key, *corpus_inputs),
                     f"render {tag}",
-                    rir_paths if rendering == "paths" else {},  # a SOFA set hears the paths
+                    # a SOFA set hears the paths and the diffuse backgrounds
+                    rir_paths if rendering == "paths" or backgrounds else {},
                 )
                 mix = Job(
                     "mix",
@@ -557,9 +585,12 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "output_dir": spec.outputs.dir,  # as written: keys do not depend on where
                         "sample_rate_hz": spec.sample_rate_hz,
                         "scene_id": scene_id,
+                        **({"augmentation": augmentation, "impulse_responses": ir_files}
+                           if augmentation is not None else {}),
                     },
                     (mix.key, render.key, rir.key, arrange.key, placement.key),
                     f"export {tag}",
+                    ir_paths,
                 )
                 jobs.extend([placement, arrange, rir, render, mix, export])
                 export_keys.append(export.key)

@@ -33,6 +33,7 @@ from pydantic import (
 
 from sonicspec.errors import StageError
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.augmentation import AugmentationSpec
 from sonicspec.spec.base import BandCoefficients
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
@@ -46,7 +47,13 @@ from sonicspec.spec.dataset import DatasetSpec
 from sonicspec.spec.directivity import SourcesDirectivitySpec
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import MicrophoneSpec
-from sonicspec.spec.mixture import LoudnessSpec, MixtureSpec, Rendering, TaskSpec
+from sonicspec.spec.mixture import (
+    BackgroundFieldSpec,
+    LoudnessSpec,
+    MixtureSpec,
+    Rendering,
+    TaskSpec,
+)
 from sonicspec.spec.outputs import Manifest, OutputsSpec
 from sonicspec.spec.placement import PlacementSpec
 from sonicspec.spec.scene import (
@@ -296,6 +303,12 @@ class RenderParams(ShardParams):
     walk_span: Literal["speech", "clip"]
     """What a moving source's walk spans: its speech or the whole clip."""
     speed_of_sound_m_s: float
+    backgrounds: dict[Literal["noise", "music"], BackgroundFieldSpec] | None = None
+    """The background roles heard as a diffuse field (``mixture.noise_field``,
+    ``mixture.music_field`` when not ``point``); None: every background from its point
+    source (left out then, so point-source renders keep their keys)."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"backgrounds": None}
 
 
 class MixParams(ShardParams):
@@ -313,6 +326,14 @@ class ExportParams(ShardParams):
     """``outputs.dir`` as written in the spec (no key depends on where it is)."""
     sample_rate_hz: int
     scene_id: str
+    augmentation: AugmentationSpec | None = None
+    """The spec's device and channel effects (issue 30)."""
+    impulse_responses: dict[str, str] = Field(default_factory=dict)
+    """Each impulse-response file of ``augmentation`` as written -> the SHA-256 of its bytes
+    (files enter the key by content; the job's ``paths`` say where they are)."""
+
+    omitted_when: ClassVar[Mapping[str, Any]] = {"augmentation": None, "impulse_responses": {}}
+    """Left out when unused (added in issue 30), so exports without effects keep their keys."""
 
 
 class DatasetParams(StepParams):

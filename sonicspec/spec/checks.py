@@ -16,6 +16,7 @@ from pathlib import Path
 
 from sonicspec.errors import SonicspecError
 from sonicspec.shares import split_shares
+from sonicspec.spec.augmentation import mp3_bitrates_at
 from sonicspec.spec.corpora import (
     FmaCorpusSpec,
     FolderCorpusSpec,
@@ -175,6 +176,7 @@ def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = (),
         _check_outputs,
         _check_trajectory,
         _check_heights_and_distances,
+        _check_augmentation,
     ):
         problems.extend(check(spec))
     return problems
@@ -476,6 +478,15 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
             f"fails on such a draw); expected an upper bound below mixture.duration_s minus "
             f"the shortest utterance, got {list(m.utterance_gap_s)}",
         )
+    for kind in ("noise", "music"):
+        field = getattr(m, f"{kind}_field")
+        if field.diffuse and (getattr(spec.corpora, kind) is None
+                              or getattr(m, f"{kind}_clips")[1] == 0):
+            yield _warn(
+                ("mixture", f"{kind}_field"),
+                f"{field.field!r} has no effect: a group has no {kind} track (corpora.{kind} "
+                f"and a non-zero mixture.{kind}_clips make one)",
+            )
     if m.interpolation not in ("auto", "sample_crossfade") and isinstance(
             spec.trajectory, StaticTrajectorySpec):
         yield _warn(
@@ -751,3 +762,31 @@ def _pinned_scene_problems(spec: DatasetSpec, base_dir: Path) -> list[Problem]:
                     f"no scene {pattern!r}: glob of scene {family!r} gives no such file"
                     + did_you_mean(pattern, families[family])))
     return problems
+
+
+def _check_augmentation(spec: DatasetSpec) -> Iterator[Problem]:
+    """MP3 bit rates the dataset's rate can be coded at; resampling that would do nothing."""
+    if spec.augmentation is None:
+        return
+    rate = spec.sample_rate_hz
+    where: list[tuple[tuple, object]] = []
+    for i, e in enumerate(spec.augmentation.effects):
+        where.append((("augmentation", "effects", i), e))
+        if e.kind == "one_of":
+            where += [(("augmentation", "effects", i, "effects", j), inner)
+                      for j, inner in enumerate(e.effects)]
+    allowed = mp3_bitrates_at(rate)
+    for path, e in where:
+        kind = getattr(e, "kind", None)
+        if kind == "mp3":
+            for j, b in enumerate(e.bitrate_kbps):
+                if b not in allowed:
+                    yield _err((*path, "bitrate_kbps", j),
+                               f"expected an MP3 bit rate at sample_rate_hz {rate} "
+                               f"({', '.join(map(str, allowed))} kbit/s), got {b}")
+        elif kind == "resample":
+            for j, r in enumerate(e.rate_hz):
+                if r >= rate:
+                    yield _warn((*path, "rate_hz", j),
+                                f"{r} Hz is not below sample_rate_hz ({rate}): resampling "
+                                "through it does nothing")

@@ -14,6 +14,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.acoustics import AcousticsSpec
+from sonicspec.spec.augmentation import AugmentationSpec
 from sonicspec.spec.base import Identifier, SpecModel, SplitName
 from sonicspec.spec.corpora import CorporaSpec
 from sonicspec.spec.directivity import SourcesDirectivitySpec
@@ -70,15 +71,22 @@ class DatasetSpec(SpecModel):
     outputs: OutputsSpec = Field(
         default_factory=OutputsSpec, description="Output locations and formats."
     )
+    augmentation: AugmentationSpec | None = Field(
+        None, description="Device and channel effects on the mixtures (microphone response, "
+        "self-noise, gain, clipping, resampling, codecs), drawn per group and recorded in "
+        "metadata.json; null: none (the mixtures as mixed).")
 
     @model_serializer(mode="wrap")
-    def _omni_left_out(self, handler: SerializerFunctionWrapHandler,
+    def _defaults_left_out(self, handler: SerializerFunctionWrapHandler,
                        info: SerializationInfo) -> dict:
         # Every source omnidirectional (the default): left out, so a spec written before
         # directivity existed serialises (and is keyed, and lands in dataset.json) as before.
+        # No augmentation (null): left out the same way, for the same reason.
         data = handler(self)
         if self.directivity.is_omni and self.directivity == SourcesDirectivitySpec():
             data.pop("directivity", None)
+        if isinstance(data, dict) and data.get("augmentation", 0) is None:
+            del data["augmentation"]
         return data
 
     @field_validator("splits")

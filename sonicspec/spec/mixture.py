@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, model_serializer, model_validator
 from pydantic_core import PydanticCustomError
 
 from sonicspec.spec.base import SpecModel, value_range
@@ -95,6 +95,47 @@ class EnhancementTaskSpec(SpecModel):
 
 TaskSpec = Annotated[SeparationTaskSpec | EnhancementTaskSpec, Field(discriminator="kind")]
 
+BackgroundField = Literal["point", "diffuse_spherical", "diffuse_cylindrical"]
+
+
+class BackgroundFieldSpec(SpecModel):
+    """How a static background track (noise or music) reaches the microphone."""
+
+    field: BackgroundField = Field(
+        "point",
+        description="'point': from its static source placed in the room, through its RIR "
+        "(SonicSet). 'diffuse_spherical': an isotropic field, uncorrelated plane waves from "
+        "every direction alike (coherence sin(kd)/(kd) between omni capsules d metres "
+        "apart); 'diffuse_cylindrical': from every horizontal direction alike (J0(kd)). A "
+        "diffuse field is rendered at any receiver through the receiver's own per-direction "
+        "response (arrays, ambisonics, binaural), its level set by mixture.loudness like a "
+        "point source's.",
+    )
+    diffuse_fraction: float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description="Share of the track's power that is diffuse, the rest heard from its "
+        "point source (both parts brought to equal power at the loudness-measured channels "
+        "first), 0 < fraction <= 1. Only with a diffuse field.",
+    )
+
+    @model_validator(mode="after")
+    def _fraction_needs_a_diffuse_field(self) -> BackgroundFieldSpec:
+        if self.field == "point" and self.diffuse_fraction != 1.0:
+            raise PydanticCustomError(
+                "point_fraction",
+                "diffuse_fraction {fraction} needs field diffuse_spherical or "
+                "diffuse_cylindrical; a point field has no diffuse part",
+                {"fraction": self.diffuse_fraction},
+            )
+        return self
+
+    @property
+    def diffuse(self) -> Literal["spherical", "cylindrical"] | None:
+        """The isotropic field's kind, or None for a point source."""
+        return None if self.field == "point" else self.field.removeprefix("diffuse_")  # type: ignore[return-value]
+
 
 class MixtureSpec(SpecModel):
     """One group: a clip of ``duration_s`` in one scene (the SonicSet recipe by default)."""
@@ -120,6 +161,16 @@ class MixtureSpec(SpecModel):
         (0.0, 4.0), description="Silence drawn before each music clip, seconds."
     )
     loudness: LoudnessSpec = Field(default_factory=LoudnessSpec, description="Target levels.")
+    noise_field: BackgroundFieldSpec = Field(
+        default_factory=BackgroundFieldSpec,
+        description="How the noise track reaches the microphone: from its point source "
+        "(default) or as a diffuse field.",
+    )
+    music_field: BackgroundFieldSpec = Field(
+        default_factory=BackgroundFieldSpec,
+        description="How the music track reaches the microphone: from its point source "
+        "(default) or as a diffuse field.",
+    )
     interpolation: Interpolation = Field(
         "auto",
         description="How a moving source is heard along its path. 'paths': the direct sound and "
@@ -132,6 +183,18 @@ class MixtureSpec(SpecModel):
         "overlap-added tails (gpuRIR); blends comb-filter the direct sound "
         "(bench/bench_motion.py). 'auto': 'paths'.",
     )
+
+    @model_serializer(mode="wrap")
+    def _omit_point_backgrounds(self, handler: Any) -> Any:
+        """``noise_field`` / ``music_field`` left out of a dump at their default (``point``),
+        as older specs had no such fields: a point-background spec's copy in dataset.json,
+        and the dataset step's key, stay as they were (issue 30)."""
+        data = handler(self)
+        if isinstance(data, dict):
+            for name in ("noise_field", "music_field"):
+                if getattr(self, name) == BackgroundFieldSpec():
+                    data.pop(name, None)
+        return data
 
     def rendering(self) -> Rendering:
         """The method a build uses: ``interpolation``, with ``auto`` resolved (``paths``,

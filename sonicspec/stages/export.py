@@ -34,6 +34,13 @@ from sonicspec.artifacts import (
     RirSource,
 )
 from sonicspec.audio.arrange import Segment
+from sonicspec.audio.augment import (
+    GroupAugmentation,
+    chain_files,
+    draw_chain,
+    parse_chain,
+    read_impulse_response,
+)
 from sonicspec.export.checksums import file_record
 from sonicspec.export.files import peak_scale, write_audio
 from sonicspec.export.manifests import RecordingEntry, SupervisionEntry
@@ -150,8 +157,12 @@ def capsules_record(microphone) -> CapsulesRecord | None:
 def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  render: RenderGroup, mix: MixGroup, arrange: ArrangedGroup,
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
-                 keys: dict[str, str], walk: Walk) -> dict[str, Any]:
-    """Write one group's folder; its record for ``dataset``."""
+                 keys: dict[str, str], walk: Walk,
+                 backgrounds: dict[str, Any] | None = None,
+                 augmentation: GroupAugmentation | None = None) -> dict[str, Any]:
+    """Write one group's folder; its record for ``dataset``. ``backgrounds``: the render's
+    diffuse background fields by role (recorded in the metadata); ``augmentation``: the
+    group's draw of the spec's device and channel effects."""
     group = render.group
     split, index = group.split("/")
     w = _GroupWriter(out, out / split / index, group, params)
@@ -160,6 +171,14 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     tracks = {t.name: t for t in render.tracks}
     arranged = {t.name: t for t in arrange.tracks}
     track_file = TrackFile(out, w.folder)
+    # A PCM file without a per-file scale holds [-1, 1]: the augmented signal is cut there.
+    full_scale = outputs.scale != "per_file" and outputs.subtype != "FLOAT"
+
+    def clean(x: np.ndarray) -> np.ndarray:
+        """A track or training target: through the effects marked ``targets``, if any."""
+        if augmentation is None or not augmentation.touches_targets:
+            return x
+        return augmentation.apply(x, w.rate, target=True, full_scale=full_scale)[0]
     entries: dict[str, SpeechTrack | BackgroundTrack] = {}
     spoken: dict[str, tuple[str, list[Segment]]] = {}
     speech = group_speech(arrange.tracks)
@@ -177,14 +196,14 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             values["yaw_deg"] = (facing + 180.0) % 360.0 - 180.0
         track_labels = track_file.add(name, hop_s, values)
         if (outputs.sources and role == "speech") or (outputs.background and role != "speech"):
-            audio_rel = w.audio(role, name, signal, custom={"track": track_labels})
+            audio_rel = w.audio(role, name, clean(signal), custom={"track": track_labels})
         else:
             audio_rel = None
         for kind in ("dry", "direct", "early"):
             if f"{name}_{kind}" in gains:
                 w.audio(f"{role}_{kind}", f"{name}_{kind}",
-                        gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
-                                                             dtype=np.float64))
+                        clean(gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
+                                                                   dtype=np.float64)))
         if outputs.rirs:
             stack = np.asarray(rir_arrays[rir_source.array])
             for j in range(stack.shape[0]):
@@ -209,14 +228,23 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                 path_length_m=geometry.path_length_m)
             spoken[name] = (a.speaker, segs)
         else:
-            entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]))
+            field = (backgrounds or {}).get(role)
+            heard = ({"field": field.field, "diffuse_fraction": field.diffuse_fraction}
+                     if field is not None else {})
+            entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]),
+                                            **heard)
     mixtures = []
     if outputs.mixtures:
         for m in mix.mixtures:
             total = sum(gains[c] * np.asarray(arrays[tracks[c].arrays["reverberant"]],
                                               dtype=np.float64) for c in m.components)
+            measured = None
+            if augmentation is not None:
+                total, measured = augmentation.apply(total, w.rate, target=False,
+                                                     full_scale=full_scale)
             rel = w.audio("mixture", f"mixtures/{m.name}", total)
-            mixtures.append(MixtureRecord(**m.model_dump(mode="json"), file=rel))
+            mixtures.append(MixtureRecord(**m.model_dump(mode="json"), file=rel,
+                                          augmentation=measured))
     mic_ref = TrackReference(**track_file.add("microphone", *microphone_track(line, w.rate)))
     track_file.write()
     w.files.append({"kind": "tracks", "name": "tracks", **file_record(out, track_file.path)})
@@ -227,7 +255,8 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         num_samples=render.clip_samples, mixtures=mixtures,
         group_gain_db=mix.group_gain_db, keys=keys, microphone_track=mic_ref,
         noise=entries.get("noise"), music=entries.get("music"), **speech_entries,
-        audio_scales=w.scales or None, capsules=capsules_record(walk.microphone))
+        audio_scales=w.scales or None, capsules=capsules_record(walk.microphone),
+        augmentation=augmentation.draw if augmentation is not None else None)
     if outputs.metadata:
         metadata.write(w.folder / "metadata.json")
         w.files.append({"kind": "metadata", "name": "metadata",
@@ -268,11 +297,20 @@ def run(ctx: JobContext) -> None:
     microphone = ctx.input_params("rir").microphone
     render_params = ctx.input_params("render")
     walk = Walk(render_params.speed_m_s, render_params.walk_span, microphone)
+    chain = parse_chain(params.augmentation) if params.augmentation is not None else None
+    paths = dict(ctx.job.paths)
+    responses = {name: read_impulse_response(paths.get(name, name), params.sample_rate_hz,
+                                             where=f"augmentation impulse_response {name!r}")
+                 for name in (chain_files(chain) if chain else [])}
     groups = []
     for r, m, arr, placement, rir_group in zip(render.groups, mix, arrange, placements,
                                                rir.groups, strict=True):
+        # One draw per group, from the spec seed and the group (its own stream: the mix
+        # step's draws are untouched).
+        aug = (GroupAugmentation(draw_chain(chain, ctx.rng("augment", r.group)), responses)
+               if chain else None)
         groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
                                    rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
-                                   walk))
+                                   walk, render_params.backgrounds, aug))
     ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
               {"groups": groups})

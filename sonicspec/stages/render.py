@@ -22,6 +22,7 @@ with ``paths``, the paths arriving within 50 ms of the direct sound and the late
 from __future__ import annotations
 
 import functools
+import math
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +36,22 @@ from sonicspec.acoustics.directivity import (
     yaw_per_sample,
 )
 from sonicspec.acoustics.engine import (
+    SimulationSettings,
     array_offsets,
+    direction_responses,
     load_hrirs,
     microphone_capsules,
+    receiver_aperture_m,
     sphere_head,
 )
 from sonicspec.acoustics.moving.delays import PathSet, Receiver, render_paths
 from sonicspec.acoustics.receivers.arrays import rotation
+from sonicspec.acoustics.receivers.diffuse import (
+    direction_count,
+    isotropic_directions,
+    isotropic_roots,
+    render_isotropic,
+)
 from sonicspec.acoustics.receivers.hrtf import SphereHead, ear_axes
 from sonicspec.artifacts import (
     ArrangedTrack,
@@ -51,11 +61,13 @@ from sonicspec.artifacts import (
 )
 from sonicspec.audio.arrange import Segment, assemble
 from sonicspec.audio.corpora import load_audio
+from sonicspec.audio.mix import measurement_channels
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
 from sonicspec.spec.directivity import DirectivitySpec
 from sonicspec.spec.microphone import SofaHrtfSpec
+from sonicspec.spec.mixture import BackgroundFieldSpec
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
 from sonicspec.stages.directivity import source_patterns
@@ -91,6 +103,13 @@ def track_audio(track: ArrangedTrack, segments: list[Segment], cache: _AudioCach
             for sid, n in need.items()}
 
 
+def track_dry(track: ArrangedTrack, cache: _AudioCache, clip_samples: int,
+              corpus_root: Path) -> np.ndarray:
+    """A track's dry signal: its clips assembled on the clip's timeline, ``(clip,)``."""
+    segments = track.segment_list()
+    return assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
+
+
 def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
                  params: RenderParams, cache: _AudioCache, clip_samples: int,
                  corpus_root: Path,
@@ -103,8 +122,7 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
     its RIR, as its paths and late part sum to it, unless it turns its head. ``source``: a
     directional source's pattern and its yaw at every sample, for its paths."""
     rate = params.sample_rate_hz
-    segments = track.segment_list()
-    dry = assemble(segments, track_audio(track, segments, cache, corpus_root), clip_samples)
+    dry = track_dry(track, cache, clip_samples, corpus_root)
     points = line.source_m
     if len(points) != rirs.shape[0]:
         raise StageError(f"track {track.name}: {len(points)} RIR points in the placement but "
@@ -269,6 +287,61 @@ def _within(paths: PathSet, points: np.ndarray, mic_m: np.ndarray, window_s: flo
     return paths.with_weights(paths.weights * inside[:, :, None])
 
 
+class _Diffuse:
+    """A job's diffuse backgrounds (``mixture.noise_field`` / ``music_field``): the
+    receiver's mixing matrices per field, computed once from its per-direction responses
+    (:func:`~sonicspec.acoustics.engine.direction_responses`, through the receiver's own
+    early-part synthesis), and the blend with the point source."""
+
+    def __init__(self, ctx: JobContext, microphone, hrirs) -> None:
+        rir_params = ctx.input_params("rir")
+        self.settings = SimulationSettings.from_spec(
+            rir_params.acoustics.model_dump(mode="json"), rir_params.sample_rate_hz,
+            rir_params.speed_of_sound_m_s)
+        self.mic = microphone.model_dump(mode="json")
+        self.hrirs = hrirs
+        self.binaural = microphone.kind == "binaural"
+        self.targets = ctx.params.targets
+        self._roots: dict[str, np.ndarray] = {}
+
+    def roots(self, field: str) -> np.ndarray:
+        if field not in self._roots:
+            s = self.settings
+            n = direction_count(field, receiver_aperture_m(self.mic), s.sample_rate_hz,
+                                s.speed_of_sound_m_s)
+            responses = direction_responses(isotropic_directions(field, n), s, self.mic,
+                                            self.hrirs)
+            self._roots[field] = isotropic_roots(responses, s.sample_rate_hz)
+        return self._roots[field]
+
+    def render(self, spec: BackgroundFieldSpec, point: dict[str, np.ndarray],
+               rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """The track's signals with its ``reverberant`` part (and any targets) diffuse by
+        ``spec.diffuse_fraction`` of its power: ``√f D + √(1 − f) g P``, ``g`` bringing the
+        point part ``P`` to the diffuse part's power ``D`` on the channels loudness is
+        measured on; ``direct``/``early`` targets keep only the point part's share."""
+        dry = point["dry"][0].astype(np.float64)
+        diffuse = render_isotropic(dry, self.roots(spec.diffuse), rng)
+        f = spec.diffuse_fraction
+        out = {"dry": point["dry"]}
+        if f >= 1.0:
+            out["reverberant"] = diffuse.astype(np.float32)
+            for kind in ("direct", "early"):
+                if kind in self.targets:
+                    out[kind] = np.zeros_like(out["reverberant"])
+            return out
+        reverberant = point["reverberant"].astype(np.float64)
+        p_point = float(np.mean(measurement_channels(reverberant, self.binaural) ** 2))
+        p_diffuse = float(np.mean(measurement_channels(diffuse, self.binaural) ** 2))
+        g = math.sqrt(p_diffuse / p_point) if p_point > 0 else 0.0
+        w = math.sqrt(1.0 - f) * g
+        out["reverberant"] = (math.sqrt(f) * diffuse + w * reverberant).astype(np.float32)
+        for kind in ("direct", "early"):
+            if kind in point:
+                out[kind] = (w * point[kind]).astype(np.float32)
+        return out
+
+
 def run(ctx: JobContext) -> None:
     params: RenderParams = ctx.params
     arrange = artifacts.read(ctx, "arrange").groups
@@ -284,6 +357,7 @@ def run(ctx: JobContext) -> None:
     directivity = getattr(ctx.input_params("rir"), "directivity", None)
     patterns = (source_patterns(directivity, ctx.job.paths, bank.bands_hz)
                 if params.interpolation == "paths" else {})
+    diffuse: _Diffuse | None = None
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, (arr, placement, rir_group) in enumerate(
@@ -320,8 +394,19 @@ def run(ctx: JobContext) -> None:
                     source = SourceDirectivity(patterns[track.role],
                                                yaw_per_sample(facing, hop, line.index.size),
                                                d.pitch_deg)
-            signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
-                                   roots[track.role], paths, source)
+            field = (params.backgrounds or {}).get(track.role)
+            if field is not None and field.diffuse_fraction >= 1.0:
+                # The point source is not heard: its dry track is all the diffuse field needs.
+                signals = {"dry": track_dry(track, cache, arr.clip_samples,
+                                            roots[track.role])[None, :].astype(np.float32)}
+            else:
+                signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
+                                       roots[track.role], paths, source)
+            if field is not None:
+                if diffuse is None:
+                    diffuse = _Diffuse(ctx, microphone, hrirs)
+                signals = diffuse.render(field, signals, ctx.rng("render", "diffuse",
+                                                                 arr.group, track.name))
             keys = {}
             for kind, x in signals.items():
                 key = f"g{g}_{track.name}_{kind}"
