@@ -39,9 +39,11 @@ from sonicspec.dataload.evaluate import evaluate, summarise, write_results
 from sonicspec.dataload.folder import DatasetError
 
 LABELS = {"si_snr": "SI-SNR", "si_snri": "SI-SNRi", "sdr": "SDR", "sdri": "SDRi",
-          "pesq_nb": "NB-PESQ", "pesq_wb": "WB-PESQ", "stoi": "STOI"}
+          "pesq_nb": "NB-PESQ", "pesq_wb": "WB-PESQ", "stoi": "STOI", "wer": "WER",
+          "cer": "CER", "dnsmos_sig": "SIG", "dnsmos_bak": "BAK", "dnsmos_ovrl": "OVRL",
+          "dnsmos_p808": "P808"}
 """How the paper heads each metric (a metric not listed is headed by its name)."""
-DIGITS = {"stoi": 3}
+DIGITS = {"stoi": 3, "wer": 3, "cer": 3}
 """Decimals shown per metric (2 unless listed)."""
 ORACLE_ROWS = {"oracle_mixture": "Mixture", "oracle_targets": "Oracle"}
 
@@ -96,9 +98,12 @@ def models_in(estimates_root: Path) -> list[str]:
 def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
               out_dir: str | Path, *, metrics: Sequence[str], oracle: bool = False,
               channel: int = 0, mixtures: Sequence[str] | None = None,
-              settings: dict[str, Any] | None = None) -> dict[str, Any]:
+              settings: dict[str, Any] | None = None,
+              models: dict[str, Any] | None = None) -> dict[str, Any]:
     """Score every model on every set, write the table and each cell's scores; return
-    ``table.json``'s content."""
+    ``table.json``'s content. ``models``: the user-held models of the model metrics
+    (``transcriber``, ``transcripts``, ``mos``: :func:`sonicspec.dataload.evaluate.evaluate`'s
+    arguments)."""
     root, out = Path(estimates_root), Path(out_dir)
     models = models_in(root)
     cells: dict[str, dict[str, dict[str, Any] | None]] = {}
@@ -113,7 +118,8 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
     for ts in sets:
         if oracle:
             rows = evaluate(ts.root, ts.split, task, oracle=True, channel=channel,
-                            metrics=metrics, format=ts.format, mixtures=mixtures)
+                            metrics=metrics, format=ts.format, mixtures=mixtures,
+                            **(models or {}))
             summary = summarise(rows, metrics)
             write_results(out / "_oracle" / ts.name, rows, summary,
                           {"set": ts.name, "root": str(ts.root), "split": ts.split})
@@ -126,7 +132,8 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
                 cells[model][ts.name] = None
                 continue
             rows = evaluate(ts.root, ts.split, task, estimates=folder, channel=channel,
-                            metrics=metrics, format=ts.format, mixtures=mixtures)
+                            metrics=metrics, format=ts.format, mixtures=mixtures,
+                            **(models or {}))
             summary = summarise(rows, metrics)
             write_results(out / model / ts.name, rows, summary,
                           {"model": model, "set": ts.name, "root": str(ts.root),
