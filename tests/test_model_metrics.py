@@ -352,7 +352,7 @@ def test_cli_dnsmos_summary_states_the_model_files_and_checksums(tmp_path: Path,
                       str(tmp_path / "m"), "-o", str(tmp_path / "out")], capsys)
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    files = summary["settings"]["models"]["dnsmos"]["files"]
+    files = summary["settings"]["model_files"]["dnsmos"]["files"]
     assert [f["sha256"] for f in files] == [file_sha256(tmp_path / "m" / n) for n in
                                             ("sig_bak_ovr.onnx", "model_v8.onnx")]
     assert summary["settings"]["metrics"] == ["si_snr", "dnsmos_sig", "dnsmos_bak",
@@ -361,3 +361,21 @@ def test_cli_dnsmos_summary_states_the_model_files_and_checksums(tmp_path: Path,
     assert all(isinstance(means[k], float) for k in summary["settings"]["metrics"])
     header = (tmp_path / "out" / "scores.csv").read_text().splitlines()[0]
     assert "dnsmos_p808" in header
+
+
+def test_cli_model_metrics_in_a_cross_set_table(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("onnxruntime", reason="onnxruntime is not installed (sonicspec[mos])")
+    sets, models = tmp_path / "sets", tmp_path / "models"
+    for name in ("a", "b"):
+        _plain_set(sets / name, models / "m1" / name, n=1)
+    _tiny_dnsmos(tmp_path / "m")
+    code, err = _cli(["evaluate", "--estimates-root", str(models), "--sets",
+                      f"a={sets / 'a'},b={sets / 'b'}", "--split", "test", "--task",
+                      "enhancement", "--metrics", "si_snr", "dnsmos", "--dnsmos-dir",
+                      str(tmp_path / "m"), "-o", str(tmp_path / "out")], capsys)
+    assert code == 0, err
+    table = json.loads((tmp_path / "out" / "table.json").read_text())
+    assert table["settings"]["model_files"]["dnsmos"]["files"][0]["path"].endswith(
+        "sig_bak_ovr.onnx")
+    head = (tmp_path / "out" / "table.md").read_text()
+    assert "a OVRL" in head and "b P808" in head, head

@@ -123,7 +123,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                 "task": args.task, "estimates": args.estimates, "oracle": args.oracle,
                 "channel": args.channel, "metrics": metrics, "window_s": 6.0, "hop_s": 3.0,
                 "format": fmt or detect(args.dataset), "mixtures": args.mixture,
-                "sonicspec_version": __version__, "models": _model_files(models),
+                "sonicspec_version": __version__, "model_files": _model_files(models),
                 "transcripts": args.transcripts}
     out = Path(args.output or f"evaluation-{args.split}-{args.task}")
     csv_path, json_path = write_results(out, rows, summary, settings)
@@ -162,9 +162,9 @@ def _evaluate_sets(args: argparse.Namespace, metrics: list[str], fmt: str | None
                       oracle=args.oracle, channel=args.channel, mixtures=args.mixture,
                       settings={"sonicspec_version": __version__, "window_s": 6.0,
                                 "hop_s": 3.0, "channel": args.channel,
-                                "models": _model_files(models),
+                                "model_files": _model_files(models),
                                 "transcripts": args.transcripts},
-                      models=models)
+                      model_args=models)
     print((out / "table.md").read_text(encoding="utf-8"), end="")
     print(f"table: {out / 'table.md'}, {out / 'table.csv'}\nsummary: {out / 'table.json'}")
     for miss in table["missing"]:

@@ -99,9 +99,9 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
               out_dir: str | Path, *, metrics: Sequence[str], oracle: bool = False,
               channel: int = 0, mixtures: Sequence[str] | None = None,
               settings: dict[str, Any] | None = None,
-              models: dict[str, Any] | None = None) -> dict[str, Any]:
+              model_args: dict[str, Any] | None = None) -> dict[str, Any]:
     """Score every model on every set, write the table and each cell's scores; return
-    ``table.json``'s content. ``models``: the user-held models of the model metrics
+    ``table.json``'s content. ``model_args``: the user-held models of the model metrics
     (``transcriber``, ``transcripts``, ``mos``: :func:`sonicspec.dataload.evaluate.evaluate`'s
     arguments)."""
     root, out = Path(estimates_root), Path(out_dir)
@@ -119,7 +119,7 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
         if oracle:
             rows = evaluate(ts.root, ts.split, task, oracle=True, channel=channel,
                             metrics=metrics, format=ts.format, mixtures=mixtures,
-                            **(models or {}))
+                            **(model_args or {}))
             summary = summarise(rows, metrics)
             write_results(out / "_oracle" / ts.name, rows, summary,
                           {"set": ts.name, "root": str(ts.root), "split": ts.split})
@@ -133,7 +133,7 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
                 continue
             rows = evaluate(ts.root, ts.split, task, estimates=folder, channel=channel,
                             metrics=metrics, format=ts.format, mixtures=mixtures,
-                            **(models or {}))
+                            **(model_args or {}))
             summary = summarise(rows, metrics)
             write_results(out / model / ts.name, rows, summary,
                           {"model": model, "set": ts.name, "root": str(ts.root),
