@@ -164,7 +164,9 @@ def _tiny_dnsmos(folder: Path) -> None:
 
 
 @pytest.mark.parametrize(("seconds", "starts"), [
-    (20.5, [float(s) for s in range(11)]),  # int(20 - 9.01) + 1 segments, one a second
+    # int(20 - 9.01) + 1 = 11 segments, one a second, but the reference's floating-point cut
+    # leaves those from 7 s on one sample short, and skips them.
+    (20.5, [float(s) for s in range(7)]),
     (3.0, [0.0, 1.0, 2.0]),  # repeated to 6 s, then 12 s: three segments
 ])
 def test_dnsmos_pipeline_segments_maps_and_averages(tmp_path: Path, seconds: float,
@@ -195,6 +197,15 @@ def test_dnsmos_pipeline_segments_maps_and_averages(tmp_path: Path, seconds: flo
     assert [f["path"] for f in model.files] == [str((tmp_path / "m" / n).resolve()) for n in
                                                 ("sig_bak_ovr.onnx", "model_v8.onnx")]
     assert all(len(f["sha256"]) == 64 for f in model.files)
+
+
+def test_segments_skip_those_the_reference_cuts_short() -> None:
+    from sonicspec.dataload.mos import segments
+
+    ramp = np.arange(130 * RATE) / RATE
+    starts = [round(float(s[0]), 6) for s in segments(ramp)]
+    # int(130 - 9.01) + 1 = 121 segments at 0…120 s; the reference skips 7…23, 119, 120.
+    assert starts == [float(s) for s in (*range(7), *range(24, 119))]
 
 
 def test_log_mel_matches_librosa_with_the_references_padding() -> None:

@@ -11,7 +11,8 @@ checks, and how it scores a clip; a new kind (NISQA, SigMOS) is one more entry.
 DNSMOS, as Microsoft's reference (``DNSMOS/dnsmos_local.py`` in microsoft/DNS-Challenge)
 computes it, re-implemented here: the clip at 16 kHz (resampled by a polyphase filter where
 the reference uses librosa's resampler), repeated end to end until it is at least 9.01 s long;
-9.01 s segments (144,160 samples) every 1 s; each segment through the P.835 model (raw
+9.01 s segments (144,160 samples) every 1 s, less those the reference skips (its floating-point
+cut leaves them one sample short: :func:`segments`); each segment through the P.835 model (raw
 signal, background and overall ratings), mapped by the reference's polynomials (its
 non-personalised ones), and its first 9.00 s through the P.808 model as a 120-band log mel
 spectrogram; each rating is the mean over the segments.
@@ -137,15 +138,24 @@ def log_mel(audio: np.ndarray) -> np.ndarray:
 
 def segments(audio: np.ndarray) -> list[np.ndarray]:
     """The 9.01 s segments a clip at 16 kHz is rated on: the clip repeated end to end until it
-    is at least 9.01 s, then a segment every second that fits whole."""
+    is at least 9.01 s, then a segment every second that fits whole, as the reference picks
+    them. The reference cuts segment ``i`` at ``int((i + 9.01) * 16000)`` in floating point,
+    which falls one sample short for ``i`` = 7…23, 119…122 (and more further on), and skips
+    those segments as too short; they are skipped here too, so that the ratings are the
+    reference's (a clip of 30 s is rated on its segments at 0…6 s)."""
     x = np.asarray(audio, dtype=np.float32)
     if len(x) == 0:
         raise DatasetError("DNSMOS: expected a clip with samples, got an empty one")
     while len(x) < SEGMENT:
         x = np.concatenate([x, x])
     hops = int(len(x) // RATE_HZ - SEGMENT / RATE_HZ) + 1
-    return [x[i * HOP:i * HOP + SEGMENT] for i in range(hops)
-            if i * HOP + SEGMENT <= len(x)]
+    out = []
+    for i in range(hops):
+        start = i * HOP
+        stop = int((i + SEGMENT / RATE_HZ) * RATE_HZ)  # the reference's arithmetic
+        if stop - start >= SEGMENT and start + SEGMENT <= len(x):
+            out.append(x[start:start + SEGMENT])
+    return out
 
 
 @dataclass
