@@ -390,3 +390,16 @@ def test_cli_model_metrics_in_a_cross_set_table(tmp_path: Path, capsys) -> None:
         "sig_bak_ovr.onnx")
     head = (tmp_path / "out" / "table.md").read_text()
     assert "a OVRL" in head and "b P808" in head, head
+
+
+def test_transcriber_hears_16_khz_float32() -> None:
+    from sonicspec.dataload.asr import Transcriber
+
+    heard = []
+    t = Transcriber("probe", lambda x: heard.append(x) or "ok")
+    t_8k = np.sin(2 * np.pi * 440 * np.arange(8000) / 8000)
+    assert t(t_8k, 8000) == "ok"
+    x = heard[0]
+    assert x.dtype == np.float32 and len(x) == 16000
+    spectrum = np.abs(np.fft.rfft(x))
+    assert abs(int(np.argmax(spectrum)) - 440) <= 1  # 1 Hz bins: still a 440 Hz tone
