@@ -403,3 +403,15 @@ def test_transcriber_hears_16_khz_float32() -> None:
     assert x.dtype == np.float32 and len(x) == 16000
     spectrum = np.abs(np.fft.rfft(x))
     assert abs(int(np.argmax(spectrum)) - 440) <= 1  # 1 Hz bins: still a 440 Hz tone
+
+
+def test_the_table_bolds_the_lowest_wer() -> None:
+    from sonicspec.dataload.tables import markdown
+
+    cells = {"A": {"s": {"wer": 0.30, "si_snr": 9.0}}, "B": {"s": {"wer": 0.10, "si_snr": 8.0}}}
+    table = {"settings": {"models": ["A", "B"], "metrics": ["si_snr", "wer"], "task":
+                          "enhancement", "sets": [{"name": "s"}]},
+             "rows": ["A", "B"], "cells": cells, "missing": []}
+    lines = markdown(table).splitlines()
+    assert lines[2].startswith("| A | **9.00** | 0.300 |"), lines
+    assert lines[3].startswith("| B | 8.00 | **0.100** |"), lines

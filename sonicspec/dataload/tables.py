@@ -45,6 +45,8 @@ LABELS = {"si_snr": "SI-SNR", "si_snri": "SI-SNRi", "sdr": "SDR", "sdri": "SDRi"
 """How the paper heads each metric (a metric not listed is headed by its name)."""
 DIGITS = {"stoi": 3, "wer": 3, "cer": 3}
 """Decimals shown per metric (2 unless listed)."""
+LOWER_IS_BETTER = frozenset({"wer", "cer"})
+"""Metrics whose best model is the lowest (higher is better for every other)."""
 ORACLE_ROWS = {"oracle_mixture": "Mixture", "oracle_targets": "Oracle"}
 
 
@@ -173,14 +175,15 @@ def _value(table: dict[str, Any], row: str, set_name: str, metric: str) -> float
 
 def markdown(table: dict[str, Any]) -> str:
     """The table in Markdown: a column per (set, metric), the best model per column in bold
-    (the oracle rows are not candidates)."""
+    (the lowest WER and CER, the highest of the others; the oracle rows are not candidates)."""
     cols = _columns(table)
     models = table["settings"]["models"]
     best = {}
     for s, m in cols:
         values = [v for r in models if (v := _value(table, r, s, m)) is not None
                   and math.isfinite(v)]
-        best[(s, m)] = max(values) if len(values) > 1 else None
+        pick = min if m in LOWER_IS_BETTER else max
+        best[(s, m)] = pick(values) if len(values) > 1 else None
     head = ["Model", *(f"{s} {LABELS.get(m, m)}" for s, m in cols)]
     lines = ["| " + " | ".join(head) + " |",
              "|" + "|".join([" --- "] + [" ---: "] * len(cols)) + "|"]
