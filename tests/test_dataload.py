@@ -271,6 +271,27 @@ def test_oracle_mixture_is_the_zero_baseline_and_targets_the_ceiling(root: Path)
         assert r["pesq_wb"] == pytest.approx(4.644, abs=1e-3)
 
 
+def test_wer_references_are_the_metadata_words(root: Path) -> None:
+    pytest.importorskip("jiwer", reason="jiwer is not installed (sonicspec[asr])")
+    english = pytest.importorskip("whisper_normalizer.english",
+                                  reason="whisper-normalizer is not installed (sonicspec[asr])")
+    from sonicspec.dataload.asr import Transcriber
+    from sonicspec.dataload.folder import DatasetFolder
+
+    heard = []
+    stub = Transcriber("stub", lambda x: heard.append(len(x)) or "zzz")
+    rows = evaluate(root, "test", "separation", oracle=True, metrics=["wer"],
+                    transcriber=stub)
+    assert len(heard) == len(rows) == 2 * 3 * 2  # two methods, three mixtures, two targets
+    norm = english.EnglishTextNormalizer()
+    folder = DatasetFolder(root)
+    for r in rows:
+        words = folder.group(r["group"]).metadata[r["target"]]["words"]
+        n = len(norm(" ".join(words)).split())
+        assert n > 0 and r["ref_words"] == n
+        assert r["wer"] == 1.0  # one substitution, every other word deleted
+
+
 def _write_estimates(root: Path, out: Path, task: str, swap: bool) -> None:
     """Estimates that are the targets themselves, channels swapped when asked."""
     for g in ("test/000000",):

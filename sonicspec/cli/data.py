@@ -50,27 +50,71 @@ def cmd_report(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _models(args: argparse.Namespace, metrics: list[str]) -> dict:
+    """The user-held models the metrics need, opened and checked, and the transcripts."""
+    from sonicspec.dataload.evaluate import check_models
+    from sonicspec.dataload.folder import DatasetError
+
+    out: dict = {"transcriber": None, "transcripts": None, "mos": {}}
+    wer = "wer" in metrics or "cer" in metrics
+    dnsmos = any(m.startswith("dnsmos_") for m in metrics)
+    if args.asr_model is not None and not wer:
+        raise DatasetError("--asr-model: given without wer in --metrics; add it (--metrics "
+                           "... wer) or leave the model out")
+    if args.dnsmos_dir is not None and not dnsmos:
+        raise DatasetError("--dnsmos-dir: given without dnsmos in --metrics; add it "
+                           "(--metrics ... dnsmos) or leave the models out")
+    if args.transcripts is not None and not wer:
+        raise DatasetError("--transcripts: given without wer in --metrics")
+    if wer and args.asr_model is not None:
+        from sonicspec.dataload.asr import open_transcriber, read_transcripts
+
+        out["transcriber"] = open_transcriber(args.asr_model)
+        if args.transcripts is not None:
+            out["transcripts"] = read_transcripts(args.transcripts)
+    if dnsmos and args.dnsmos_dir is not None:
+        from sonicspec.dataload.mos import open_mos
+
+        out["mos"]["dnsmos"] = open_mos("dnsmos", args.dnsmos_dir)
+    check_models(metrics, out["transcriber"], out["mos"])
+    return out
+
+
+def _model_files(models: dict) -> dict:
+    """The summary's record of the model files: path, bytes, SHA-256 per model."""
+    files = {}
+    if models["transcriber"] is not None:
+        files["asr"] = {"kind": models["transcriber"].kind,
+                        "files": models["transcriber"].files}
+    for kind, model in models["mos"].items():
+        files[kind] = {"kind": kind, "files": model.files}
+    return files
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from sonicspec.audio.metrics import METRICS
-    from sonicspec.dataload.evaluate import evaluate, summarise, summary_table, write_results
+    from sonicspec.dataload.evaluate import (
+        evaluate,
+        expand_metrics,
+        summarise,
+        summary_table,
+        write_results,
+    )
     from sonicspec.dataload.folder import DatasetError
     from sonicspec.dataload.formats import detect
 
-    metrics = args.metrics or list(METRICS)
     fmt = None if args.format == "auto" else args.format
     try:
-        unknown = [m for m in metrics if m not in METRICS]
-        if unknown:
-            raise DatasetError(f"--metrics: expected names from {list(METRICS)}, got "
-                               f"{unknown[0]!r}")
+        metrics = expand_metrics(args.metrics or list(METRICS))
+        models = _models(args, metrics)
         if args.sets is not None or args.estimates_root is not None:
-            return _evaluate_sets(args, metrics, fmt)
+            return _evaluate_sets(args, metrics, fmt, models)
         if args.dataset is None:
             raise DatasetError("evaluate: give a DATASET folder, or --estimates-root with "
                                "--sets")
         rows = evaluate(args.dataset, args.split, args.task, estimates=args.estimates,
                         oracle=args.oracle, channel=args.channel, metrics=metrics,
-                        format=fmt, mixtures=args.mixture)
+                        format=fmt, mixtures=args.mixture, **models)
     except DatasetError as exc:
         print(f"sonicspec: error: {exc}", file=sys.stderr)
         return EXIT_INVALID
@@ -79,7 +123,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                 "task": args.task, "estimates": args.estimates, "oracle": args.oracle,
                 "channel": args.channel, "metrics": metrics, "window_s": 6.0, "hop_s": 3.0,
                 "format": fmt or detect(args.dataset), "mixtures": args.mixture,
-                "sonicspec_version": __version__}
+                "sonicspec_version": __version__, "model_files": _model_files(models),
+                "transcripts": args.transcripts}
     out = Path(args.output or f"evaluation-{args.split}-{args.task}")
     csv_path, json_path = write_results(out, rows, summary, settings)
     print(summary_table(summary, metrics))
@@ -99,7 +144,8 @@ def _warn_silent(rows) -> None:
               f"{first['silent_estimate']} of {first['scored']} windows", file=sys.stderr)
 
 
-def _evaluate_sets(args: argparse.Namespace, metrics: list[str], fmt: str | None) -> int:
+def _evaluate_sets(args: argparse.Namespace, metrics: list[str], fmt: str | None,
+                   models: dict) -> int:
     """``--estimates-root DIR --sets A,B``: the models × sets table."""
     from sonicspec.dataload.folder import DatasetError
     from sonicspec.dataload.tables import cross_set, parse_sets
@@ -115,7 +161,10 @@ def _evaluate_sets(args: argparse.Namespace, metrics: list[str], fmt: str | None
     table = cross_set(args.estimates_root, sets, args.task, out, metrics=metrics,
                       oracle=args.oracle, channel=args.channel, mixtures=args.mixture,
                       settings={"sonicspec_version": __version__, "window_s": 6.0,
-                                "hop_s": 3.0, "channel": args.channel})
+                                "hop_s": 3.0, "channel": args.channel,
+                                "model_files": _model_files(models),
+                                "transcripts": args.transcripts},
+                      model_args=models)
     print((out / "table.md").read_text(encoding="utf-8"), end="")
     print(f"table: {out / 'table.md'}, {out / 'table.csv'}\nsummary: {out / 'table.json'}")
     for miss in table["missing"]:
@@ -195,7 +244,20 @@ def add_evaluate(sub) -> None:
     p.add_argument("--channel", type=int, default=0,
                    help="the dataset's reference channel (default 0)")
     p.add_argument("--metrics", nargs="+", metavar="NAME",
-                   help=f"a subset of {' '.join(METRICS)} (default: all)")
+                   help=f"what to score, names separated by spaces or commas: {' '.join(METRICS)}"
+                   " (default: these), pesq (both bands), wer (word and character error "
+                   "rates of a Whisper transcript; needs --asr-model), dnsmos (P.835 SIG BAK "
+                   "OVRL and P.808; needs --dnsmos-dir)")
+    p.add_argument("--asr-model", metavar="PATH",
+                   help="the speech recogniser for wer: a faster-whisper (CTranslate2) model "
+                   "folder or an openai-whisper checkpoint (.pt); never downloaded")
+    p.add_argument("--transcripts", metavar="FILE",
+                   help="what each target says, for wer where the dataset's metadata has no "
+                   "words: UTF-8 lines '<group id>/<target><TAB><text>'")
+    p.add_argument("--dnsmos-dir", metavar="DIR",
+                   help="the folder holding Microsoft's DNSMOS ONNX files (sig_bak_ovr.onnx "
+                   "and model_v8.onnx), or 'speechmos' for those the speechmos package "
+                   "ships; never downloaded")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="where scores.csv and summary.json go (default: "
                    "evaluation-<split>-<task>); with --sets, table.md, table.csv, "

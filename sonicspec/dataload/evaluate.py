@@ -19,6 +19,12 @@ windows where it is silent every metric is undefined (SI-SNR and SDR are 0 / 0, 
 level silence), so they are left out of the means like windows of a silent target, and
 counted per row (``silent_estimate``); ``sonicspec evaluate`` warns with the count, and a
 target whose estimate is silent throughout has no scores ("-" in the table).
+
+Metrics with a model the user holds are scored on the whole clip of each matched estimate,
+not in windows: ``wer`` (with ``cer``; a transcriber, :mod:`sonicspec.dataload.asr`) and
+``dnsmos`` (``dnsmos_sig``, ``dnsmos_bak``, ``dnsmos_ovrl``, ``dnsmos_p808``;
+:mod:`sonicspec.dataload.mos`). :func:`expand_metrics` turns the names a user gives into the
+columns.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import csv
 import io
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +45,66 @@ from sonicspec.dataload.folder import DatasetError, Group, read_audio
 from sonicspec.dataload.loader import TASKS
 
 AUDIO_EXTENSIONS = (".wav", ".flac")
+# Names that stand for several columns; any column is a name too.
+ALIASES: dict[str, tuple[str, ...]] = {
+    "pesq": ("pesq_nb", "pesq_wb"),
+    "wer": ("wer", "cer"),
+    "dnsmos": ("dnsmos_sig", "dnsmos_bak", "dnsmos_ovrl", "dnsmos_p808"),
+}
+MODEL_COLUMNS = ("wer", "cer", *ALIASES["dnsmos"])
+POOLED = {"wer": ("word_errors", "ref_words"), "cer": ("char_errors", "ref_chars")}
+
+
+def expand_metrics(names: Sequence[str]) -> list[str]:
+    """The columns ``names`` ask for (each name a column or an alias of several; commas
+    separate names too), in order, once each."""
+    known = [*METRICS, *MODEL_COLUMNS]
+    out: list[str] = []
+    for item in names:
+        for name in (n.strip() for n in str(item).split(",")):
+            if not name:
+                continue
+            cols = ALIASES.get(name, (name,))
+            if cols[0] not in known:
+                raise DatasetError(f"--metrics: expected names from "
+                                   f"{[*METRICS, *ALIASES]}, got {name!r}")
+            out.extend(c for c in cols if c not in out)
+    if not out:
+        raise DatasetError("--metrics: expected at least one name")
+    return out
+
+
+def score_models(row: dict[str, Any], estimate: np.ndarray, rate: int, columns: Sequence[str],
+                 *, reference: str | None, transcriber: Any = None, normalise: Any = None,
+                 mos: Mapping[str, Any] | None = None) -> None:
+    """Add the model metrics of ``columns`` for one whole-clip estimate to ``row``."""
+    from sonicspec.dataload.asr import error_counts
+
+    if "wer" in columns or "cer" in columns:
+        if not np.any(estimate):
+            text = ""  # a silent estimate says nothing: every reference word is deleted
+        else:
+            text = transcriber(estimate, rate)
+        counts = error_counts(reference or "", text, normalise)
+        row.update({c: counts[c] for c in ("wer", "cer") if c in columns})
+        row.update({k: counts[k] for k in ("word_errors", "ref_words", "char_errors",
+                                           "ref_chars", "transcript")})
+    for model in (mos or {}).values():
+        wanted = [c for c in model.COLUMNS if c in columns]
+        if wanted:
+            scores = model(estimate, rate)
+            row.update({c: scores[c] for c in wanted})
+
+
+def check_models(columns: Sequence[str], transcriber: Any, mos: Mapping[str, Any] | None
+                 ) -> None:
+    """A clear error when a model metric is asked for without its model."""
+    if ("wer" in columns or "cer" in columns) and transcriber is None:
+        raise DatasetError("--metrics wer: give the speech recogniser with --asr-model PATH (a "
+                           "faster-whisper model folder or an openai-whisper .pt file)")
+    if any(c.startswith("dnsmos_") for c in columns) and "dnsmos" not in (mos or {}):
+        raise DatasetError("--metrics dnsmos: give the DNSMOS model files with --dnsmos-dir "
+                           "DIR (sig_bak_ovr.onnx and model_v8.onnx) or --dnsmos-dir speechmos")
 
 
 def estimate_path(estimates: Path, group: Group, mixture: dict[str, Any]) -> Path:
@@ -99,7 +165,9 @@ def score_mixture(estimates: np.ndarray, targets: np.ndarray, mixture: np.ndarra
 def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path | None = None,
              oracle: bool = False, channel: int = 0, metrics: Sequence[str] = METRICS,
              window_s: float = 6.0, hop_s: float = 3.0, format: str | None = None,
-             mixtures: Sequence[str] | None = None) -> list[dict[str, Any]]:
+             mixtures: Sequence[str] | None = None, transcriber: Any = None,
+             transcripts: Mapping[str, str] | None = None,
+             mos: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """Per-target score rows for every mixture of ``task`` in ``split``.
 
     ``root`` is a built dataset or a folder in an external layout
@@ -107,11 +175,30 @@ def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path |
     ``mixtures`` keeps only the mixtures of those names (``mix_both``).
     Each row: ``method`` (``estimates``, ``oracle_mixture``, ``oracle_targets``), ``group``,
     ``mixture``, ``target``, ``estimate_channel`` and one column per metric.
+
+    ``metrics`` are columns (:func:`expand_metrics`); ``wer``/``cer`` need ``transcriber``
+    (:func:`sonicspec.dataload.asr.open_transcriber`) and each target's text (its metadata's
+    ``words`` or ``transcripts``, keyed ``<group id>/<target>``); the ``dnsmos_*`` columns need
+    ``mos["dnsmos"]`` (:func:`sonicspec.dataload.mos.open_mos`). With ``wer``, rows also carry
+    the counts (``word_errors``, ``ref_words``, ``char_errors``, ``ref_chars``) and the
+    normalised ``transcript``.
     """
     from sonicspec.dataload.formats import open_dataset
 
     if task not in TASKS:
         raise DatasetError(f"task: expected one of {list(TASKS)}, got {task!r}")
+    unknown = [m for m in metrics if m not in (*METRICS, *MODEL_COLUMNS)]
+    if unknown:
+        raise DatasetError(f"metrics: expected columns from {[*METRICS, *MODEL_COLUMNS]}, got "
+                           f"{unknown[0]!r}")
+    check_models(metrics, transcriber, mos)
+    windowed = [m for m in metrics if m in METRICS]
+    asr = "wer" in metrics or "cer" in metrics
+    normalise = None
+    if asr:
+        from sonicspec.dataload.asr import normaliser, reference_text
+
+        normalise = normaliser()
     if estimates is None and not oracle:
         raise DatasetError("evaluate: give an estimates folder, --oracle, or both")
     est_root = Path(estimates) if estimates is not None else None
@@ -130,6 +217,8 @@ def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path |
                                f"{' or '.join(mixtures)}; its {task} mixtures are {names}")
     rows: list[dict[str, Any]] = []
     for group, m in todo:
+        refs = ({t: reference_text(group, t, len(m["targets"]), transcripts)
+                 for t in m["targets"]} if asr else {})
         chans = (channel,)
         targets = np.stack([group.read(t, channels=chans)[0] for t in m["targets"]]
                            ).astype(np.float64)
@@ -145,9 +234,12 @@ def evaluate(root: str | Path, split: str, task: str, *, estimates: str | Path |
             runs.append(("oracle_targets", targets.copy()))
         for method, est in runs:
             scored = score_mixture(est, targets, mix, group.sample_rate_hz,
-                                   permute=task == "separation", metrics=metrics,
+                                   permute=task == "separation", metrics=windowed,
                                    window_s=window_s, hop_s=hop_s)
             for target, row in zip(m["targets"], scored, strict=True):
+                score_models(row, est[row["estimate_channel"]], group.sample_rate_hz, metrics,
+                             reference=refs.get(target), transcriber=transcriber,
+                             normalise=normalise, mos=mos)
                 rows.append({"method": method, "group": group.id, "mixture": m["name"],
                              "target": target, **row})
     return rows
@@ -158,15 +250,25 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(finite)) if finite else None
 
 
+def _aggregate(rows: list[dict[str, Any]], column: str) -> float | None:
+    """A column's mean over rows; WER and CER pooled (errors over reference words/chars)."""
+    if column in POOLED:
+        errors, total = POOLED[column]
+        n = sum(r.get(total) or 0 for r in rows)
+        return sum(r.get(errors) or 0 for r in rows) / n if n else None
+    return _mean([r.get(column) for r in rows])
+
+
 def summarise(rows: list[dict[str, Any]], metrics: Sequence[str] = METRICS) -> dict[str, Any]:
-    """Means per method, and per method and group."""
+    """Means per method, and per method and group (WER and CER: pooled errors over pooled
+    reference words or characters, the corpus rates)."""
     out: dict[str, Any] = {"per_method": {}, "per_group": {}}
     for method in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == method]
-        out["per_method"][method] = {k: _mean([r[k] for r in mine]) for k in metrics}
+        out["per_method"][method] = {k: _aggregate(mine, k) for k in metrics}
         out["per_method"][method]["targets"] = len(mine)
         out["per_group"][method] = {
-            g: {k: _mean([r[k] for r in mine if r["group"] == g]) for k in metrics}
+            g: {k: _aggregate([r for r in mine if r["group"] == g], k) for k in metrics}
             for g in dict.fromkeys(r["group"] for r in mine)}
     return out
 

@@ -39,10 +39,14 @@ from sonicspec.dataload.evaluate import evaluate, summarise, write_results
 from sonicspec.dataload.folder import DatasetError
 
 LABELS = {"si_snr": "SI-SNR", "si_snri": "SI-SNRi", "sdr": "SDR", "sdri": "SDRi",
-          "pesq_nb": "NB-PESQ", "pesq_wb": "WB-PESQ", "stoi": "STOI"}
+          "pesq_nb": "NB-PESQ", "pesq_wb": "WB-PESQ", "stoi": "STOI", "wer": "WER",
+          "cer": "CER", "dnsmos_sig": "SIG", "dnsmos_bak": "BAK", "dnsmos_ovrl": "OVRL",
+          "dnsmos_p808": "P808"}
 """How the paper heads each metric (a metric not listed is headed by its name)."""
-DIGITS = {"stoi": 3}
+DIGITS = {"stoi": 3, "wer": 3, "cer": 3}
 """Decimals shown per metric (2 unless listed)."""
+LOWER_IS_BETTER = frozenset({"wer", "cer"})
+"""Metrics whose best model is the lowest (higher is better for every other)."""
 ORACLE_ROWS = {"oracle_mixture": "Mixture", "oracle_targets": "Oracle"}
 
 
@@ -96,9 +100,12 @@ def models_in(estimates_root: Path) -> list[str]:
 def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
               out_dir: str | Path, *, metrics: Sequence[str], oracle: bool = False,
               channel: int = 0, mixtures: Sequence[str] | None = None,
-              settings: dict[str, Any] | None = None) -> dict[str, Any]:
+              settings: dict[str, Any] | None = None,
+              model_args: dict[str, Any] | None = None) -> dict[str, Any]:
     """Score every model on every set, write the table and each cell's scores; return
-    ``table.json``'s content."""
+    ``table.json``'s content. ``model_args``: the user-held models of the model metrics
+    (``transcriber``, ``transcripts``, ``mos``: :func:`sonicspec.dataload.evaluate.evaluate`'s
+    arguments)."""
     root, out = Path(estimates_root), Path(out_dir)
     models = models_in(root)
     cells: dict[str, dict[str, dict[str, Any] | None]] = {}
@@ -113,7 +120,8 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
     for ts in sets:
         if oracle:
             rows = evaluate(ts.root, ts.split, task, oracle=True, channel=channel,
-                            metrics=metrics, format=ts.format, mixtures=mixtures)
+                            metrics=metrics, format=ts.format, mixtures=mixtures,
+                            **(model_args or {}))
             summary = summarise(rows, metrics)
             write_results(out / "_oracle" / ts.name, rows, summary,
                           {"set": ts.name, "root": str(ts.root), "split": ts.split})
@@ -126,7 +134,8 @@ def cross_set(estimates_root: str | Path, sets: Sequence[TestSet], task: str,
                 cells[model][ts.name] = None
                 continue
             rows = evaluate(ts.root, ts.split, task, estimates=folder, channel=channel,
-                            metrics=metrics, format=ts.format, mixtures=mixtures)
+                            metrics=metrics, format=ts.format, mixtures=mixtures,
+                            **(model_args or {}))
             summary = summarise(rows, metrics)
             write_results(out / model / ts.name, rows, summary,
                           {"model": model, "set": ts.name, "root": str(ts.root),
@@ -166,14 +175,15 @@ def _value(table: dict[str, Any], row: str, set_name: str, metric: str) -> float
 
 def markdown(table: dict[str, Any]) -> str:
     """The table in Markdown: a column per (set, metric), the best model per column in bold
-    (the oracle rows are not candidates)."""
+    (the lowest WER and CER, the highest of the others; the oracle rows are not candidates)."""
     cols = _columns(table)
     models = table["settings"]["models"]
     best = {}
     for s, m in cols:
         values = [v for r in models if (v := _value(table, r, s, m)) is not None
                   and math.isfinite(v)]
-        best[(s, m)] = max(values) if len(values) > 1 else None
+        pick = min if m in LOWER_IS_BETTER else max
+        best[(s, m)] = pick(values) if len(values) > 1 else None
     head = ["Model", *(f"{s} {LABELS.get(m, m)}" for s, m in cols)]
     lines = ["| " + " | ".join(head) + " |",
              "|" + "|".join([" --- "] + [" ---: "] * len(cols)) + "|"]
