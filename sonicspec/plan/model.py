@@ -201,29 +201,41 @@ class Plan:
         Plans are written one job per line (:meth:`write`), so two passes over the lines find
         the few that matter. Any other layout is read whole.
         """
+        return cls.read_jobs(path, [key])
+
+    @classmethod
+    def read_jobs(cls, path: Path, keys: list[str] | tuple[str, ...]) -> Plan:
+        """:meth:`read_job` for several jobs (a batch, :mod:`sonicspec.plan.batches`): the
+        jobs and the jobs of their inputs, in the plan's order."""
         marker = ', "jobs": [\n'
+        wanted_jobs = set(keys)
         try:
             with open(path) as fh:
                 first = fh.readline()
                 if not first.endswith(marker):
-                    return cls._excerpt(cls.read(path), key)
+                    return cls._excerpt(cls.read(path), keys)
                 header = json.loads(first[: -len(marker)] + "}")
-                job = cls._lines_with_keys(fh, {key})
-                if key not in job:
-                    raise CompileError(f"plan file {path}: no job with key {key[:12]}")
-                fh.seek(0)
-                fh.readline()
-                wanted = set(job[key]["inputs"])
-                items = cls._lines_with_keys(fh, wanted) if wanted else {}
+                found = cls._lines_with_keys(fh, wanted_jobs)
+                missing = wanted_jobs - set(found)
+                if missing:
+                    raise CompileError(f"plan file {path}: no job with key "
+                                       f"{sorted(missing)[0][:12]}")
+                wanted = {k for item in found.values() for k in item["inputs"]} - set(found)
+                if wanted:
+                    fh.seek(0)
+                    fh.readline()
+                    found.update(cls._lines_with_keys(fh, wanted))
         except FileNotFoundError:
             raise CompileError(f"plan file {path}: does not exist") from None
         except (ValueError, KeyError, TypeError) as exc:
             raise CompileError(f"plan file {path}: unreadable ({exc})") from exc
-        missing = wanted - set(items)
+        missing = wanted - set(found)
         if missing:
-            raise CompileError(f"plan file {path}: job {key[:12]} needs "
+            needer = next(k for k in keys if set(found[k]["inputs"]) & missing)
+            raise CompileError(f"plan file {path}: job {needer[:12]} needs "
                                f"{sorted(missing)[0][:12]}, which the plan does not have")
-        order = [items[k] for k in job[key]["inputs"]] + [job[key]]
+        order = [found[k] for key in keys for k in found[key]["inputs"] if k not in wanted_jobs]
+        order += [found[k] for k in keys]
         data = {**header, "jobs": list({item["key"]: item for item in order}.values())}
         return cls.from_dict(data, excerpt=True)
 
@@ -241,11 +253,13 @@ class Plan:
         return found
 
     @classmethod
-    def _excerpt(cls, plan: Plan, key: str) -> Plan:
+    def _excerpt(cls, plan: Plan, keys: list[str] | tuple[str, ...]) -> Plan:
         jobs = plan.by_key()
-        if key not in jobs:
-            raise CompileError(f"plan: no job with key {key[:12]}")
-        order = [jobs[k] for k in jobs[key].inputs] + [jobs[key]]
+        missing = [k for k in keys if k not in jobs]
+        if missing:
+            raise CompileError(f"plan: no job with key {missing[0][:12]}")
+        order = [jobs[k] for key in keys for k in jobs[key].inputs if k not in keys]
+        order += [jobs[k] for k in keys]
         return cls(plan.name, plan.seed, plan.store_dir, plan.output_dir, plan.spec_digest,
                    tuple({j.key: j for j in order}.values()), excerpt=True)
 
