@@ -15,6 +15,10 @@ builds it twice through ``sonicspec build``:
    batch`` process's peak RSS, which runs every shard job one after another: whether memory
    accumulates across a batch's jobs. The two builds' dataset checksums are compared.
 
+3. ``--apartment``: one RIR at the preset in the furnished 100k-triangle apartment
+   (``bench_rlr.apartment_mesh``, as ``bench_preset_rir.py``): the peak RSS of that process,
+   the memory a real scan's mesh, BVH and image-source search add over the fixture room.
+
 A job's memory depends on its shard (groups per shard, the group's length, talkers, RIR
 length), not on how many groups the plan has (the dataset step's is bench_scale.py's
 ``dataset`` section, flat from 10^2 to 10^4 groups), so these are the figures of a
@@ -23,6 +27,7 @@ SonicSet-size plan's jobs.
 Reproduce:
     python bench/bench_rule_memory.py               # ~15-30 min on a loaded 2-core machine
     python bench/bench_rule_memory.py --groups 4 --skip-batched
+    python bench/bench_rule_memory.py --apartment        # the apartment RIR only
 """
 
 from __future__ import annotations
@@ -56,6 +61,39 @@ if _dir and len(sys.argv) > 2 and sys.argv[1] in ("job", "batch"):
 
     atexit.register(_write_rusage)
 '''
+
+
+APARTMENT = """
+import json, resource, sys, time
+from pathlib import Path
+import numpy as np
+tree, tmp = Path(sys.argv[1]), Path(sys.argv[2])
+sys.path[:0] = [str(tree / "bench"), str(tree)]
+import bench_rlr as b
+mesh = b.apartment_mesh(100_000)
+np.savez(tmp / "mesh.npz", vertices=mesh.vertices, faces=mesh.faces,
+         face_material=mesh.face_material)
+(tmp / "materials.json").write_text(json.dumps(list(mesh.materials)))
+s = b.SimulationSettings.from_spec(b.preset_acoustics(), b.SAMPLE_RATE_HZ, b.SPEED_OF_SOUND_M_S)
+scene, regions, _, _ = b.prepared_scene(tmp, s)
+r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+_, facts = b.sonicspec_rir(scene, regions, s, 0, 1)
+r = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"scene_mb": r0, "peak_mb": r.ru_maxrss / 1024, "cpu_s": r.ru_utime + r.ru_stime,
+                  "order": facts["image_source_order"], "faces": len(mesh.faces)}))
+"""
+
+
+def apartment() -> None:
+    import subprocess
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", APARTMENT, str(ROOT), tmp],
+                             capture_output=True, text=True, check=True)
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    print(f"one RIR, sonicset preset, furnished apartment ({r['faces']:,} triangles): peak RSS "
+          f"{r['peak_mb']:.0f} MB (scene prepared: {r['scene_mb']:.0f} MB), CPU {r['cpu_s']:.0f} "
+          f"s, image-source order reached {r['order']}")
 
 
 def write_spec(folder: Path, groups: int) -> Path:
@@ -100,7 +138,13 @@ def main() -> None:
     parser.add_argument("--groups", type=int, default=8, help="train groups (4 per shard)")
     parser.add_argument("--skip-batched", action="store_true")
     parser.add_argument("--keep", type=Path, help="build here (kept) instead of a temp folder")
+    parser.add_argument("--apartment", action="store_true",
+                        help="only the one-RIR apartment measurement (item 3 above)")
     args = parser.parse_args()
+    if args.apartment:
+        apartment()
+        print(f"\ncommand: python bench/{Path(__file__).name} {' '.join(sys.argv[1:])}")
+        return
     from sonicspec.plan.model import STEP_BY_NAME
 
     with tempfile.TemporaryDirectory(prefix="bench-mem-") as tmp:

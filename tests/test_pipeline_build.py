@@ -82,6 +82,31 @@ def test_slurm_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
     assert 0 < submitted < len(plan.jobs), submitted
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="the test SLURM cluster needs root")
+def test_slurm_batched_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
+    """Batches through the SLURM profile (its groups name rules a batched build still has):
+    one SLURM job per batch, the bytes of a local unbatched build."""
+    from sonicspec.testing.slurm import SlurmUnavailable, single_node_slurm
+
+    cluster = tmp_path / "cluster"
+    cluster.mkdir()
+    plan = plan_for(write_spec(cluster))
+    try:
+        with single_node_slurm(tmp_path / "slurm"):
+            result = build(plan, cores=2, profile=ROOT / "workflow/profiles/slurm",
+                           shards_per_batch=2, stream=io.StringIO(),
+                           snakemake_args=["--slurm-init-seconds-before-status-checks", "2",
+                                           "--seconds-between-status-checks", "2",
+                                           "--latency-wait", "5"])
+    except SlurmUnavailable as exc:
+        pytest.skip(str(exc))
+    assert result.code == 0
+    assert _without_markers(build_digest(plan)) == reference[1]
+    assert result.jobs_run == len(plan.jobs)
+    log = max((Path(plan.store_dir) / "logs").glob("snakemake-*.log")).read_text()
+    assert "rule batch:" in log and "rule render:" not in log, log[-3000:]
+
+
 def test_a_cold_numba_cache_elsewhere_builds_the_same_bytes(reference, tmp_path: Path,
                                                             monkeypatch) -> None:
     """The kernels' cache goes where SONICSPEC_NUMBA_CACHE_DIR says, is compiled there once
