@@ -60,6 +60,21 @@ def synthetic_plan(folder: Path, shards: int, scenes: int = 3) -> Plan:
     return Plan("t", 1, str(folder / "store"), str(folder / "out"), "0" * 64, tuple(jobs))
 
 
+def _dry_run_counts(plan: Plan, plan_path: Path, layout: Path
+                    ) -> tuple[dict[str, int], subprocess.CompletedProcess]:
+    """Snakemake's dry run of a batched plan: its job counts per rule."""
+    Path(plan.store_dir).mkdir(parents=True, exist_ok=True)
+    cmd = snakemake_command(plan_path, plan, cores=1, profile=None, dry_run=True, layout=layout)
+    done = subprocess.run(cmd, cwd=plan.store_dir, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    counts = {}
+    for line in (done.stdout + done.stderr).splitlines():
+        parts = line.split()
+        if len(parts) == 2 and parts[1].isdigit():
+            counts[parts[0]] = int(parts[1])
+    return counts, done
+
+
 def test_every_shard_job_is_in_exactly_one_batch(tmp_path: Path) -> None:
     plan = synthetic_plan(tmp_path, shards=10)
     chains = shard_chains(plan)
@@ -153,16 +168,28 @@ def test_a_failed_batch_names_its_failed_member(tmp_path: Path) -> None:
 def test_snakemake_runs_batches_not_shard_jobs(tmp_path: Path) -> None:
     """Snakemake's own dry run of a batched plan: one job per batch, none per shard step."""
     plan = synthetic_plan(tmp_path, shards=12)
-    Path(plan.store_dir).mkdir(parents=True)
     plan_path = plan.write(tmp_path / "plan.json")
     layout = write_layout(plan, plan_path, batch_plan(plan, 4), tmp_path / "layout.json")
-    cmd = snakemake_command(plan_path, plan, cores=1, profile=None, dry_run=True, layout=layout)
-    done = subprocess.run(cmd, cwd=plan.store_dir, capture_output=True, text=True, check=False)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    counts = {}
-    for line in (done.stdout + done.stderr).splitlines():
-        parts = line.split()
-        if len(parts) == 2 and parts[1].isdigit():
-            counts[parts[0]] = int(parts[1])
+    counts, done = _dry_run_counts(plan, plan_path, layout)
     assert counts == {"batch": 3, "corpus": 1, "dataset": 1, "mesh": 3, "navigation": 3,
                       "all": 1, "total": 12}, done.stdout[-2000:]
+
+
+def test_snakemake_runs_only_the_batches_without_their_marker(tmp_path: Path) -> None:
+    """Markers the build wrote (no Snakemake records for them, as after an unbatched build)
+    count as done: Snakemake runs the one batch missing a member, and the dataset."""
+    plan = synthetic_plan(tmp_path, shards=12)
+    batches = batch_plan(plan, 4)
+    workflow_files = []
+    for job in plan.jobs:
+        if job.step not in BATCHED_STEPS and job.step != "dataset":
+            path = Path(WorkflowPlan(plan, tmp_path / "plan.json").artifact(job.step, job.key))
+            path.parent.mkdir(parents=True)
+            path.write_text("{}")
+            workflow_files.append(path)
+    present = {k for b in batches for k in b.members} - {batches[1].members[3]}
+    assert refresh_markers(plan.store_dir, batches, present) == 2
+    plan_path = plan.write(tmp_path / "plan.json")
+    layout = write_layout(plan, plan_path, batches, tmp_path / "layout.json")
+    counts, done = _dry_run_counts(plan, plan_path, layout)
+    assert counts == {"batch": 1, "dataset": 1, "all": 1, "total": 3}, done.stdout[-2000:]
