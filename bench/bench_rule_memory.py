@@ -191,7 +191,8 @@ def main() -> None:
               f"{wall:.0f} s, CPU {cpu:.0f} s")
         for r in batch:
             print(f"| batch of {shards} shards ({shards * 6} jobs) | CPU {r['cpu_s']:.1f} s | "
-                  f"peak RSS {r['maxrss_mb']:.0f} MB | largest single shard job "
+                  f"peak RSS: batch process {r['maxrss_mb']:.0f} MB, its jobs (forked) "
+                  f"{r['children_maxrss_mb']:.0f} MB | largest shard job alone "
                   f"{member_peak:.0f} MB |")
         same = ((Path(plan.output_dir) / "checksums.sha256").read_text()
                 == (Path(plan_b.output_dir) / "checksums.sha256").read_text())
