@@ -5,7 +5,7 @@ fixture scan under three ids, LibriSpeech-layout speakers, small FSD50K and FMA)
 ``specs/sonicset.yaml`` beside them with only the splits made small (``--groups`` train
 groups in one scene, one val and one test group in a scene each; everything else — 60 s
 groups, 3 talkers of 3–5 utterances, noise and music, 4,000 rays with splitting, image-source
-order 3, ``max_rir_length_s: auto``, 24-bit FLAC, 4 groups per shard — is the preset's), and
+order 3, ``max_rir_length_s: auto``, 24-bit FLAC, 16 groups per shard — is the preset's), and
 builds it twice through ``sonicspec build``:
 
 1. one Snakemake job per step and shard: each ``sonicspec job`` process records its exact
@@ -26,7 +26,7 @@ SonicSet-size plan's jobs.
 
 Reproduce:
     python bench/bench_rule_memory.py               # ~15-30 min on a loaded 2-core machine
-    python bench/bench_rule_memory.py --groups 4 --skip-batched
+    python bench/bench_rule_memory.py --groups 16 --skip-batched
     python bench/bench_rule_memory.py --apartment        # the apartment RIR only
 """
 
@@ -135,7 +135,8 @@ def run(spec: Path, rusage: Path, shards_per_batch: int) -> tuple[object, float,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--groups", type=int, default=8, help="train groups (4 per shard)")
+    parser.add_argument("--groups", type=int, default=16,
+                        help="train groups (16 per shard at the preset)")
     parser.add_argument("--skip-batched", action="store_true")
     parser.add_argument("--keep", type=Path, help="build here (kept) instead of a temp folder")
     parser.add_argument("--apartment", action="store_true",
