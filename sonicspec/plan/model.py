@@ -31,21 +31,22 @@ class Step:
 
 
 # mem_mb: each step's measured peak RSS with headroom (bench/RESULTS.md, "Each rule's memory";
-# bench/bench_rule_memory.py: the sonicset preset, 60 s groups of 3 talkers, 4 groups per
-# shard, on the fixture scans; peaks in MB in the comments). A shard's render, mix and export
-# hold its groups' audio: their peaks grow with outputs.groups_per_shard and the group length.
+# bench/bench_rule_memory.py: the sonicset preset, 60 s groups of 3 talkers, 16 groups per
+# shard as the preset has, on the fixture scans; peaks in MB in the comments). A shard's
+# render, mix and export hold its groups' audio: their peaks grow with
+# outputs.groups_per_shard and the group length.
 # mesh, navigation and rir also hold the scene: their figures at ~1 M triangles are bench_scene
 # / bench_navigation's and a preset RIR in the furnished apartment (400 MB).
 STEPS: tuple[Step, ...] = (
     Step("corpus", 2, 1, 1000, 60, "index (or generate) a corpus"),  # 154; grows with files
     Step("mesh", 2, 1, 2500, 30, "build or import a scene, repair it"),  # 204; 1.2-1.6 GB at 1 M
     Step("navigation", 1, 1, 2000, 30, "walkable area of each floor"),  # 177; 865 at 1 M
-    Step("placement", 3, 1, 1000, 10, "mic, sources and trajectories per group"),  # 158
-    Step("arrange", 1, 1, 1000, 10, "utterances and clips per track"),  # 154
-    Step("rir", 18, 1, 1500, 60, "room impulse responses along every trajectory"),  # 350
-    Step("render", 3, 1, 1500, 30, "moving-source convolution of every track"),  # 729
-    Step("mix", 2, 1, 1200, 10, "loudness normalisation and task mixtures"),  # 571
-    Step("export", 6, 1, 1200, 10, "audio files and metadata per group"),  # 563
+    Step("placement", 3, 1, 1000, 10, "mic, sources and trajectories per group"),  # 160
+    Step("arrange", 1, 1, 1000, 10, "utterances and clips per track"),  # 155
+    Step("rir", 18, 1, 1500, 60, "room impulse responses along every trajectory"),  # 357
+    Step("render", 3, 1, 2000, 30, "moving-source convolution of every track"),  # 1115
+    Step("mix", 2, 1, 1500, 10, "loudness normalisation and task mixtures"),  # 864
+    Step("export", 6, 1, 1500, 10, "audio files and metadata per group"),  # 875
     # dataset streams: peak RSS 152-156 MB at 10^2-10^4 groups (bench/bench_scale.py), 3x
     Step("dataset", 3, 1, 500, 10, "dataset.json and manifests"),
 )
