@@ -13,8 +13,12 @@
   polling (``poll_s`` 0.1 s, scaled to the default 1 s poll).
 
 - ``dag``: Snakemake's DAG for a synthetic plan of ``--groups`` (the ``noop`` layout, nothing
-  built): ``snakemake --dry-run`` as ``sonicspec build --dry-run`` runs it, wall seconds and
-  peak RSS of the Snakemake process (it reads the plan, builds the DAG, checks every output).
+  built): ``snakemake --dry-run`` as ``sonicspec build --dry-run`` runs it, wall and CPU
+  seconds and peak RSS of the Snakemake process (it reads the plan, builds the DAG, checks
+  every output), in each of ``--layouts``: ``jobs`` (one Snakemake job per plan job, the
+  layout of plans up to 20,000 jobs), ``grouped`` (the same with the SLURM profile's
+  ``--groups``/``--group-components``) and ``batched`` (``sonicspec.plan.batches``: shards in
+  batches, Snakemake reading the layout file; the head's cost of writing it is shown).
 
 - ``warm``: what compiling the kernels once saves a job. Builds the tests' cut-down demo
   (``tests/build_cases.py``) up to ``render``, then reruns one rir and one render job
@@ -28,7 +32,7 @@ Reproduce:
     python bench/bench_head.py noop --groups 1000 10000
     python bench/bench_head.py head --waiting 1000
     python bench/bench_head.py noop --groups 1000 --code /work/main   # before
-    python bench/bench_head.py dag --groups 100000 1000000
+    python bench/bench_head.py dag --groups 100000 1000000 --layouts jobs grouped batched
     python bench/bench_head.py warm
 """
 
@@ -238,33 +242,77 @@ def head(waiting: int, groups: int, seconds: float, code: Path) -> None:
         print(f"last progress line: {r['last_line']}")
 
 
-def dag(groups: list[int], code: Path, per_shard: int) -> None:
-    sys.path.insert(0, str(ROOT))
-    import resource
+GROUPED = ["--groups", "placement=prep", "arrange=prep", "rir=rir", "render=shard", "mix=shard",
+           "export=shard", "--group-components", "prep=16", "rir=8", "shard=8"]
+"""The SLURM profile's job grouping, passed on the command line (``grouped`` layout)."""
 
+LAYOUT = """
+import json, resource, sys, time
+from pathlib import Path
+from sonicspec.plan.batches import auto_shards_per_batch, batch_plan
+from sonicspec.plan.model import Plan
+from sonicspec.stages.batch import write_layout
+path = Path(sys.argv[1])
+n = None if sys.argv[2] == "auto" else int(sys.argv[2])
+plan = Plan.read(path)
+t0 = time.perf_counter(); r0 = resource.getrusage(resource.RUSAGE_SELF)
+n = auto_shards_per_batch(plan) if n is None else n
+batches = batch_plan(plan, n)
+write_layout(plan, path, batches, Path(sys.argv[3]))
+t1 = time.perf_counter(); r1 = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"wall": t1 - t0, "cpu": r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime,
+                  "batches": len(batches), "shards_per_batch": n}))
+"""
+
+
+def _dry_run(cmd: list[str], cwd: str, env: dict) -> tuple[float, float, float]:
+    """Wall s, CPU s and peak RSS MB of one Snakemake dry run (a child of a fresh child, so
+    its RSS is not mixed with an earlier run's)."""
+    script = ("import json, resource, subprocess, sys, time\n"
+              "t = time.perf_counter()\n"
+              "done = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+              "wall = time.perf_counter() - t\n"
+              "r = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+              "if done.returncode:\n"
+              "    sys.exit(done.stdout[-2000:] + done.stderr[-2000:])\n"
+              "print(json.dumps([wall, r.ru_utime + r.ru_stime, r.ru_maxrss / 1024]))\n")
+    done = subprocess.run([sys.executable, "-c", script, *cmd], cwd=cwd, env=env,
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"snakemake failed: {done.stderr[-4000:]}")
+    return tuple(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+def dag(groups: list[int], code: Path, per_shard: int, layouts: list[str],
+        shards_per_batch: str) -> None:
+    """Snakemake's dry run of each plan size in each layout, one after another."""
+    sys.path.insert(0, str(ROOT))
     from sonicspec.stages.workflow import snakemake_command
 
-    print(f"| groups | groups per shard | jobs | plan file MB | Snakemake dry run wall s | "
-          f"peak RSS MB |  (code: {code})")
-    print("|---|---|---|---|---|---|")
+    print(f"| groups | groups per shard | plan jobs | layout | Snakemake jobs | head: layout "
+          f"written s (CPU s) | dry run wall s | dry run CPU s | peak RSS MB |  (code: {code})")
+    print("|---|---|---|---|---|---|---|---|---|")
     for n in groups:
         with tempfile.TemporaryDirectory(prefix="bench-head-") as tmp:
             plan, _ = synthetic_plan(Path(tmp), n, per_shard=per_shard)
             Path(plan.store_dir).mkdir(parents=True)
             path = plan.write(Path(tmp) / "plan.json")
-            cmd = snakemake_command(path, plan, cores=1, profile=None, dry_run=True)
             env = {**os.environ, "PYTHONPATH": str(code)}
-            before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-            t = time.perf_counter()
-            done = subprocess.run(cmd, cwd=plan.store_dir, env=env, capture_output=True,
-                                  text=True, check=False)
-            wall = time.perf_counter() - t
-            rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-            if done.returncode != 0:
-                raise SystemExit(f"snakemake failed: {done.stdout[-2000:]}{done.stderr[-2000:]}")
-            note = "" if rss > before else " (not above an earlier child's)"
-            print(f"| {n:,} | {per_shard} | {len(plan.jobs):,} | {path.stat().st_size / 1e6:.0f} | "
-                  f"{wall:.1f} | {rss / 1024:.0f}{note} |", flush=True)
+            for layout in layouts:
+                extra, layout_path, head, seen = [], None, "—", len(plan.jobs)
+                if layout == "grouped":
+                    extra = GROUPED
+                elif layout == "batched":
+                    layout_path = Path(tmp) / "layout.json"
+                    r = _child(code, LAYOUT, str(path), shards_per_batch, str(layout_path))
+                    head = f"{r['wall']:.1f} ({r['cpu']:.1f})"
+                    seen = r["batches"] + 1
+                    layout = f"batched, {r['shards_per_batch']} shards per batch"
+                cmd = snakemake_command(path, plan, cores=1, profile=None, dry_run=True,
+                                        extra=extra, layout=layout_path)
+                wall, cpu, rss = _dry_run(cmd, plan.store_dir, env)
+                print(f"| {n:,} | {per_shard} | {len(plan.jobs):,} | {layout} | {seen:,} | "
+                      f"{head} | {wall:.1f} | {cpu:.1f} | {rss:.0f} |", flush=True)
 
 
 def warm_saving(code: Path) -> None:
@@ -322,6 +370,12 @@ def main() -> None:
     parser.add_argument("--waiting", type=int, default=1000)
     parser.add_argument("--per-shard", type=int, default=PER_SHARD,
                         help="groups per shard of the dag section's plan")
+    parser.add_argument("--layouts", nargs="+", default=["jobs", "batched"],
+                        choices=["jobs", "grouped", "batched"],
+                        help="dag: one Snakemake job per plan job (today's default), the same "
+                             "with the SLURM profile's grouping, or batched shards")
+    parser.add_argument("--shards-per-batch", default="auto",
+                        help="dag, batched layout: shards per batch (auto: as a build picks)")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--code", type=Path, default=ROOT)
     args = parser.parse_args()
@@ -330,7 +384,8 @@ def main() -> None:
     elif args.what == "warm":
         warm_saving(args.code.resolve())
     elif args.what == "dag":
-        dag(args.groups, args.code.resolve(), args.per_shard)
+        dag(args.groups, args.code.resolve(), args.per_shard, args.layouts,
+            args.shards_per_batch)
     else:
         head(args.waiting, args.groups[0], args.seconds, args.code.resolve())
     print(f"\ncommand: python bench/{Path(__file__).name} {' '.join(sys.argv[1:])}")

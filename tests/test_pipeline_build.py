@@ -7,6 +7,7 @@ corpora generated with espeak-ng, RIRs, rendering, mixing, export and manifests.
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import subprocess
@@ -17,7 +18,7 @@ import pytest
 from build_cases import ROOT, build_digest, plan_for, write_spec
 
 from sonicspec.plan.model import Plan
-from sonicspec.stages.workflow import run_build
+from sonicspec.stages.workflow import build, run_build
 from sonicspec.store import ArtifactStore
 
 
@@ -81,6 +82,31 @@ def test_slurm_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
     assert 0 < submitted < len(plan.jobs), submitted
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="the test SLURM cluster needs root")
+def test_slurm_batched_build_gives_the_same_bytes(reference, tmp_path: Path) -> None:
+    """Batches through the SLURM profile (its groups name rules a batched build still has):
+    one SLURM job per batch, the bytes of a local unbatched build."""
+    from sonicspec.testing.slurm import SlurmUnavailable, single_node_slurm
+
+    cluster = tmp_path / "cluster"
+    cluster.mkdir()
+    plan = plan_for(write_spec(cluster))
+    try:
+        with single_node_slurm(tmp_path / "slurm"):
+            result = build(plan, cores=2, profile=ROOT / "workflow/profiles/slurm",
+                           shards_per_batch=2, stream=io.StringIO(),
+                           snakemake_args=["--slurm-init-seconds-before-status-checks", "2",
+                                           "--seconds-between-status-checks", "2",
+                                           "--latency-wait", "5"])
+    except SlurmUnavailable as exc:
+        pytest.skip(str(exc))
+    assert result.code == 0
+    assert _without_markers(build_digest(plan)) == reference[1]
+    assert result.jobs_run == len(plan.jobs)
+    log = max((Path(plan.store_dir) / "logs").glob("snakemake-*.log")).read_text()
+    assert "rule batch:" in log and "rule render:" not in log, log[-3000:]
+
+
 def test_a_cold_numba_cache_elsewhere_builds_the_same_bytes(reference, tmp_path: Path,
                                                             monkeypatch) -> None:
     """The kernels' cache goes where SONICSPEC_NUMBA_CACHE_DIR says, is compiled there once
@@ -101,3 +127,37 @@ def test_a_cold_numba_cache_elsewhere_builds_the_same_bytes(reference, tmp_path:
     assert _stamp().is_file() and _stamp().parent == cache
     assert list(cache.rglob("*.nbi")), "nothing compiled into the redirected cache"
     assert {p: p.stat().st_mtime_ns for p in source.rglob("*.nbi")} == before
+
+
+def _without_markers(digest: dict[str, str]) -> dict[str, str]:
+    return {k: v for k, v in digest.items() if not k.startswith("store/batches/")}
+
+
+def test_batched_build_gives_the_same_bytes_and_resumes(reference, tmp_path: Path) -> None:
+    """Shards run in batches (one Snakemake job per batch): the same artifacts and dataset
+    bytes as one Snakemake job per step and shard; a batch missing a member runs again and
+    makes only what is missing."""
+    plan = plan_for(write_spec(tmp_path))
+    stream = io.StringIO()
+    result = build(plan, cores=2, shards_per_batch=2, stream=stream)
+    assert result.code == 0, stream.getvalue()[-3000:]
+    shards = len(plan.by_step()["export"])
+    batches = -(-shards // 2)
+    assert f"batched: {batches} Snakemake jobs of 2 shards each (0 complete)" in stream.getvalue()
+    # every job counted as run, the batches' members from their finished markers
+    assert result.jobs_run == len(plan.jobs), result.ran
+    log = max((Path(plan.store_dir) / "logs").glob("snakemake-*.log")).read_text()
+    assert log.count("rule batch:") == batches and "rule render:" not in log, log[-3000:]
+    digest = build_digest(plan)
+    assert _without_markers(digest) == reference[1]
+    assert len(digest) - len(_without_markers(digest)) == batches
+    # A render lost: its shard's batch runs again, remaking it and what follows from it only.
+    render = plan.by_step()["render"][-1]
+    ArtifactStore(plan.store_dir).remove("render", render.key)
+    stream = io.StringIO()
+    again = build(plan, cores=2, shards_per_batch=2, stream=stream)
+    assert again.code == 0, stream.getvalue()[-3000:]
+    assert f"({batches - 1} complete)" in stream.getvalue()
+    assert {s: n for s, n in again.ran.items() if n} == {
+        "render": 1, "mix": 1, "export": 1, "dataset": 1}, again.ran
+    assert _without_markers(build_digest(plan)) == reference[1]

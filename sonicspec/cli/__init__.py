@@ -28,7 +28,7 @@ from sonicspec.cli.common import EXIT_FAILURE, EXIT_INVALID
 # The commands in the order ``sonicspec --help`` lists them.
 COMMANDS = (spec.add_validate, spec.add_schema, spec.add_init, plan.add_plan, build.add_build,
             scene.add_scene, scene.add_rir, microphones.add_microphones, data.add_report,
-            build.add_job, build.add_verify, data.add_evaluate, data.add_export)
+            build.add_job, build.add_batch, build.add_verify, data.add_evaluate, data.add_export)
 
 
 def build_parser() -> argparse.ArgumentParser:

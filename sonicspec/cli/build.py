@@ -37,7 +37,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     if args.until:
         plan = plan.until(args.until)
     profile = Path(args.profile) if args.profile else None
-    result = build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run)
+    result = build(plan, cores=args.cores, profile=profile, dry_run=args.dry_run,
+                   shards_per_batch=args.shards_per_batch)
     if result.code != 0 or args.dry_run:
         return EXIT_OK if result.code == 0 else EXIT_FAILURE
     if args.until:
@@ -114,6 +115,30 @@ def cmd_job(args: argparse.Namespace) -> int:
     )
     run_job(Plan.read_job(Path(args.plan), args.key), args.key)
     return EXIT_OK
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    import logging
+
+    from sonicspec.stages.batch import run_batch
+
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr
+    )
+    failed = run_batch(args.plan, args.layout, args.key)
+    return EXIT_FAILURE if failed else EXIT_OK
+
+
+def _shards_per_batch(text: str) -> int | None:
+    if text == "auto":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected auto or a whole number >= 0, got {text!r}")
+    return value
 
 
 def _verify_lock(store_dir: Path | None):
@@ -217,6 +242,13 @@ def add_build(sub) -> None:
     )
     p.add_argument("--dry-run", action="store_true", help="show the jobs that would run")
     p.add_argument("--until", metavar="STEP", help="stop after this step (e.g. placement)")
+    p.add_argument(
+        "--shards-per-batch", metavar="N", type=_shards_per_batch, default=None,
+        help="run the placement-to-export jobs of N consecutive shards as one Snakemake job "
+             "(a batch), so Snakemake's DAG stays small for huge plans; the jobs, keys and "
+             "bytes are the same. 0: one Snakemake job per step and shard. auto (default): "
+             "batches for plans of more than 20,000 jobs, about 4,000 of them",
+    )
     output_options(p)
     p.set_defaults(func=cmd_build)
 
@@ -230,6 +262,18 @@ def add_job(sub) -> None:
     p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")
     p.add_argument("key", metavar="KEY", help="the job's content key")
     p.set_defaults(func=cmd_job)
+
+
+def add_batch(sub) -> None:
+    """``sonicspec batch --plan PLAN --layout LAYOUT KEY``."""
+    # Internal, as ``job``.
+    p = sub.add_parser("batch", description="run the jobs of one batch of a batched build "
+                       "in order (used by the workflow; internal)")
+    p.add_argument("--plan", required=True, metavar="PLAN", help="plan JSON file")
+    p.add_argument("--layout", required=True, metavar="LAYOUT",
+                   help="the build's workflow layout file (names the batch's jobs)")
+    p.add_argument("key", metavar="KEY", help="the batch's key")
+    p.set_defaults(func=cmd_batch)
 
 
 def add_verify(sub) -> None:

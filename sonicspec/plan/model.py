@@ -30,16 +30,23 @@ class Step:
     description: str
 
 
+# mem_mb: each step's measured peak RSS with headroom (bench/RESULTS.md, "Each rule's memory";
+# bench/bench_rule_memory.py: the sonicset preset, 60 s groups of 3 talkers, 16 groups per
+# shard as the preset has, on the fixture scans; peaks in MB in the comments). A shard's
+# render, mix and export hold its groups' audio: their peaks grow with
+# outputs.groups_per_shard and the group length.
+# mesh, navigation and rir also hold the scene: their figures at ~1 M triangles are bench_scene
+# / bench_navigation's and a preset RIR in the furnished apartment (400 MB).
 STEPS: tuple[Step, ...] = (
-    Step("corpus", 2, 1, 2000, 60, "index (or generate) a corpus"),
-    Step("mesh", 2, 1, 4000, 30, "build or import a scene, repair it"),
-    Step("navigation", 1, 1, 4000, 30, "walkable area of each floor"),
-    Step("placement", 3, 1, 2000, 10, "mic, sources and trajectories per group"),
-    Step("arrange", 1, 1, 2000, 10, "utterances and clips per track"),
-    Step("rir", 18, 1, 4000, 60, "room impulse responses along every trajectory"),
-    Step("render", 3, 1, 4000, 30, "moving-source convolution of every track"),
-    Step("mix", 2, 1, 4000, 10, "loudness normalisation and task mixtures"),
-    Step("export", 6, 1, 2000, 10, "audio files and metadata per group"),
+    Step("corpus", 2, 1, 1000, 60, "index (or generate) a corpus"),  # 154; grows with files
+    Step("mesh", 2, 1, 2500, 30, "build or import a scene, repair it"),  # 204; 1.2-1.6 GB at 1 M
+    Step("navigation", 1, 1, 2000, 30, "walkable area of each floor"),  # 177; 865 at 1 M
+    Step("placement", 3, 1, 1000, 10, "mic, sources and trajectories per group"),  # 160
+    Step("arrange", 1, 1, 1000, 10, "utterances and clips per track"),  # 155
+    Step("rir", 18, 1, 1500, 60, "room impulse responses along every trajectory"),  # 357
+    Step("render", 3, 1, 2000, 30, "moving-source convolution of every track"),  # 1115
+    Step("mix", 2, 1, 1500, 10, "loudness normalisation and task mixtures"),  # 864
+    Step("export", 6, 1, 1500, 10, "audio files and metadata per group"),  # 875
     # dataset streams: peak RSS 152-156 MB at 10^2-10^4 groups (bench/bench_scale.py), 3x
     Step("dataset", 3, 1, 500, 10, "dataset.json and manifests"),
 )
@@ -201,29 +208,41 @@ class Plan:
         Plans are written one job per line (:meth:`write`), so two passes over the lines find
         the few that matter. Any other layout is read whole.
         """
+        return cls.read_jobs(path, [key])
+
+    @classmethod
+    def read_jobs(cls, path: Path, keys: list[str] | tuple[str, ...]) -> Plan:
+        """:meth:`read_job` for several jobs (a batch, :mod:`sonicspec.plan.batches`): the
+        jobs and the jobs of their inputs, in the plan's order."""
         marker = ', "jobs": [\n'
+        wanted_jobs = set(keys)
         try:
             with open(path) as fh:
                 first = fh.readline()
                 if not first.endswith(marker):
-                    return cls._excerpt(cls.read(path), key)
+                    return cls._excerpt(cls.read(path), keys)
                 header = json.loads(first[: -len(marker)] + "}")
-                job = cls._lines_with_keys(fh, {key})
-                if key not in job:
-                    raise CompileError(f"plan file {path}: no job with key {key[:12]}")
-                fh.seek(0)
-                fh.readline()
-                wanted = set(job[key]["inputs"])
-                items = cls._lines_with_keys(fh, wanted) if wanted else {}
+                found = cls._lines_with_keys(fh, wanted_jobs)
+                missing = wanted_jobs - set(found)
+                if missing:
+                    raise CompileError(f"plan file {path}: no job with key "
+                                       f"{sorted(missing)[0][:12]}")
+                wanted = {k for item in found.values() for k in item["inputs"]} - set(found)
+                if wanted:
+                    fh.seek(0)
+                    fh.readline()
+                    found.update(cls._lines_with_keys(fh, wanted))
         except FileNotFoundError:
             raise CompileError(f"plan file {path}: does not exist") from None
         except (ValueError, KeyError, TypeError) as exc:
             raise CompileError(f"plan file {path}: unreadable ({exc})") from exc
-        missing = wanted - set(items)
+        missing = wanted - set(found)
         if missing:
-            raise CompileError(f"plan file {path}: job {key[:12]} needs "
+            needer = next(k for k in keys if set(found[k]["inputs"]) & missing)
+            raise CompileError(f"plan file {path}: job {needer[:12]} needs "
                                f"{sorted(missing)[0][:12]}, which the plan does not have")
-        order = [items[k] for k in job[key]["inputs"]] + [job[key]]
+        order = [found[k] for key in keys for k in found[key]["inputs"] if k not in wanted_jobs]
+        order += [found[k] for k in keys]
         data = {**header, "jobs": list({item["key"]: item for item in order}.values())}
         return cls.from_dict(data, excerpt=True)
 
@@ -241,11 +260,13 @@ class Plan:
         return found
 
     @classmethod
-    def _excerpt(cls, plan: Plan, key: str) -> Plan:
+    def _excerpt(cls, plan: Plan, keys: list[str] | tuple[str, ...]) -> Plan:
         jobs = plan.by_key()
-        if key not in jobs:
-            raise CompileError(f"plan: no job with key {key[:12]}")
-        order = [jobs[k] for k in jobs[key].inputs] + [jobs[key]]
+        missing = [k for k in keys if k not in jobs]
+        if missing:
+            raise CompileError(f"plan: no job with key {missing[0][:12]}")
+        order = [jobs[k] for key in keys for k in jobs[key].inputs if k not in keys]
+        order += [jobs[k] for k in keys]
         return cls(plan.name, plan.seed, plan.store_dir, plan.output_dir, plan.spec_digest,
                    tuple({j.key: j for j in order}.values()), excerpt=True)
 

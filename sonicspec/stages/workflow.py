@@ -30,8 +30,18 @@ from sonicspec.export.checksums import (
     read_checksums,
     unlisted_files,
 )
+from sonicspec.plan.batches import auto_shards_per_batch, batch_plan
 from sonicspec.plan.model import STEPS, Job, Plan, Step
 from sonicspec.plan.params import read_params
+from sonicspec.stages.batch import (
+    BATCH_RULE,
+    FAILED_LINE,
+    Layout,
+    marker_path,
+    read_layout,
+    refresh_markers,
+    write_layout,
+)
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import finished_dir, progress_path
 from sonicspec.stages.repair import CheckReport, check_existing, present_keys, record_written
@@ -60,8 +70,14 @@ class WorkflowPlan:
         self.store_dir = plan.store_dir
         self._jobs = plan.by_key()
 
+    batched = False
+
     @classmethod
-    def load(cls, path: str | Path) -> WorkflowPlan:
+    def load(cls, path: str | Path, layout: str | Path | None = None) -> WorkflowPlan:
+        """The plan file's workflow; with ``layout``, the batched workflow that file describes
+        (:class:`BatchedWorkflowPlan`; the plan itself is not read)."""
+        if layout:
+            return BatchedWorkflowPlan.read(layout)
         return cls(Plan.read(Path(path)), Path(path))
 
     def steps(self) -> list[Step]:
@@ -100,6 +116,64 @@ class WorkflowPlan:
         """Artifacts nothing else consumes: building them builds everything."""
         consumed = {k for j in self.plan.jobs for k in j.inputs}
         return [self.artifact(j.step, j.key) for j in self.plan.jobs if j.key not in consumed]
+
+
+class BatchedWorkflowPlan(WorkflowPlan):
+    """A batched plan as the Snakefile sees it (:mod:`sonicspec.stages.batch`): the scene,
+    corpus and dataset jobs as steps, the shards' jobs as ``batch`` jobs, all read from the
+    layout file."""
+
+    batched = True
+
+    def __init__(self, layout: Layout) -> None:
+        self.path = layout.plan_path
+        self.store_dir = layout.store_dir
+        self.layout = layout
+        self._layout_path = ""
+
+    @classmethod
+    def read(cls, path: str | Path) -> BatchedWorkflowPlan:
+        out = cls(read_layout(path))
+        out._layout_path = str(path)
+        return out
+
+    def steps(self) -> list[Step]:
+        # Every step of the plan keeps its rule (profiles name them), used or not.
+        return [s for s in STEPS if s.name in self.layout.steps]
+
+    def inputs_of(self, wildcards: Any) -> list[str]:
+        return self.layout.units[wildcards.key]["inputs"]
+
+    def final_artifacts(self) -> list[str]:
+        consumed = {f for u in self.layout.units.values() for f in u["inputs"]}
+        out = []
+        for key, unit in self.layout.units.items():
+            path = (str(marker_path(self.store_dir, key)) if unit["rule"] == BATCH_RULE
+                    else self.artifact(unit["rule"], key))
+            if path not in consumed:
+                out.append(path)
+        return out
+
+    def batch_pattern(self) -> str:
+        return f"{self.store_dir}/batches/{{pre}}/{{key}}.json"
+
+    def batch_log_pattern(self) -> str:
+        return f"{self.store_dir}/logs/{BATCH_RULE}/{{pre}}/{{key}}.log"
+
+    def batch_benchmark_pattern(self) -> str:
+        return f"{self.store_dir}/benchmarks/{BATCH_RULE}/{{pre}}/{{key}}.tsv"
+
+    def batch_command(self) -> str:
+        """``sonicspec batch``'s command line (braces escaped as in :meth:`job_command`)."""
+        plan = shlex.quote(self.path).replace("{", "{{").replace("}", "}}")
+        layout = shlex.quote(self._layout_path).replace("{", "{{").replace("}", "}}")
+        return f"sonicspec batch --plan {plan} --layout {layout} {{params.key}} > {{log}} 2>&1"
+
+    def batch_mem_mb(self, wildcards: Any) -> int:
+        return self.layout.units[wildcards.key]["mem_mb"]
+
+    def batch_runtime(self, wildcards: Any) -> int:
+        return self.layout.units[wildcards.key]["runtime_min"]
 
 
 @dataclass(frozen=True)
@@ -146,6 +220,7 @@ def snakemake_command(
     profile: Path | None,
     dry_run: bool,
     extra: list[str] | None = None,
+    layout: Path | None = None,
 ) -> list[str]:
     wf = workflow_dir()
     cmd = [
@@ -158,6 +233,7 @@ def snakemake_command(
         plan.store_dir,
         "--config",
         f"plan={plan_path}",
+        *([f"layout={layout}"] if layout is not None else []),
         "--rerun-triggers",
         "params",
         "input",
@@ -178,9 +254,9 @@ def snakemake_command(
 _FAILED_LOG = re.compile(r"log: (\S+\.log)")
 
 
-def failed_job_messages(snakemake_log: str, plan: Plan) -> list[str]:
-    """For each failed job in Snakemake's output: the job's label and its last log lines."""
-    jobs = plan.by_key()
+def _failed_logs(snakemake_log: str, plan: Plan) -> list[Path]:
+    """The logs of the failed jobs Snakemake names; for a failed batch, those of its failed
+    members (its log lists them, ``sonicspec.stages.batch.run_batch``), or its own."""
     out = []
     for block in snakemake_log.split("Error in rule ")[1:]:
         match = _FAILED_LOG.search(block)
@@ -189,6 +265,21 @@ def failed_job_messages(snakemake_log: str, plan: Plan) -> list[str]:
         log_path = Path(match.group(1).rstrip(","))
         if not log_path.is_absolute():
             log_path = Path(plan.store_dir) / log_path
+        members = []
+        if block.startswith(BATCH_RULE + ":"):
+            with contextlib.suppress(OSError):  # no log: the batch's own path is named
+                members = [Path(line.split(" log: ", 1)[1].strip())
+                           for line in log_path.read_text(errors="replace").splitlines()
+                           if FAILED_LINE in line and " log: " in line]
+        out += members or [log_path]
+    return out
+
+
+def failed_job_messages(snakemake_log: str, plan: Plan) -> list[str]:
+    """For each failed job in Snakemake's output: the job's label and its last log lines."""
+    jobs = plan.by_key()
+    out = []
+    for log_path in _failed_logs(snakemake_log, plan):
         key = log_path.stem
         label = jobs[key].label if key in jobs else key[:12]
         tail = ""
@@ -296,9 +387,7 @@ def _hours(plan: Plan) -> tuple[int, float]:
 
 def failed_jobs(snakemake_log: str, plan: Plan) -> list[str]:
     """Labels of the jobs Snakemake reports failed, in the plan's order."""
-    keys = {Path(m.group(1).rstrip(",")).stem
-            for block in snakemake_log.split("Error in rule ")[1:]
-            if (m := _FAILED_LOG.search(block)) is not None}
+    keys = {p.stem for p in _failed_logs(snakemake_log, plan)}
     return [j.label for j in plan.jobs if j.key in keys]
 
 
@@ -370,9 +459,15 @@ def build(
     poll_s: float = 1.0,
     on_start: Callable[[subprocess.Popen], None] | None = None,
     snakemake_args: list[str] | None = None,
+    shards_per_batch: int | None = None,
 ) -> BuildResult:
     """Run the plan through Snakemake: check and repair what exists, run exactly the jobs
     whose artifacts are missing, print progress and a summary.
+
+    ``shards_per_batch``: show Snakemake one job per that many shards (their placement to
+    export jobs, :mod:`sonicspec.plan.batches`) instead of one per step and shard; 0 never;
+    None (the default) batches plans of more than 20,000 jobs, at about 4,000 batches. The
+    jobs, their keys and bytes are the same either way.
 
     One build at a time per store (:class:`~sonicspec.store.lock.StoreLock`); the store and
     the dataset folder are claimed with their marker files first, so a build never writes into
@@ -413,19 +508,19 @@ def build(
         present = present_keys(plan, store)
         if not dry_run and len(present) == len(plan.jobs):
             # Nothing to make: Snakemake would spend its DAG (seconds per 10^4 jobs) to say so.
-            code, log_text = 0, ""
+            code, log_text, made = 0, "", set()
             print(format_progress(progress(plan, store), time.monotonic() - start,
                                   len(present)), file=stream)
         else:
             if not dry_run and any(j.step in STEPS_THAT_COMPILE and j.key not in present
                                    for j in plan.jobs):
                 warm_once(stream)  # before the first wave, not in every job of it
-            code, log_text = _run_snakemake(plan, store, present, cores=cores, profile=profile,
-                                            dry_run=dry_run, stream=stream, poll_s=poll_s,
-                                            on_start=on_start,
-                                            snakemake_args=snakemake_args, start=start,
-                                            lock=lock)
-        ran_keys = executed_keys(log_text) & {j.key for j in plan.jobs}
+            code, log_text, made = _run_snakemake(
+                plan, store, present, cores=cores, profile=profile, dry_run=dry_run,
+                stream=stream, poll_s=poll_s, on_start=on_start, snakemake_args=snakemake_args,
+                start=start, lock=lock, shards_per_batch=shards_per_batch)
+        # A batch's members are not Snakemake jobs: their finished markers name them.
+        ran_keys = (executed_keys(log_text) | made) & {j.key for j in plan.jobs}
         jobs = plan.by_key()
         ran = {s.name: 0 for s in STEPS}
         for key in ran_keys:
@@ -475,24 +570,34 @@ def take_finished(folder: Path) -> list[str]:
 
 def _follow(plan: Plan, proc: subprocess.Popen, waiting: dict[str, Job], *, done: dict[str, int],
             totals: dict[str, int], finished: Path, dry_run: bool, stream: TextIO,
-            poll_s: float, start: float, start_done: int) -> None:
+            poll_s: float, start: float, start_done: int) -> set[str]:
     """Print progress until Snakemake ends: counts from the finished-job markers (O(new
-    markers) per poll, ``take_finished``), text from the running jobs' progress files."""
+    markers) per poll, ``take_finished``), text from the running jobs' progress files.
+    Returns the keys of the waiting jobs that finished."""
     last = ""
-    while proc.poll() is None:
-        time.sleep(poll_s)
-        if dry_run:
-            continue
+    made: set[str] = set()
+
+    def count() -> None:
         for key in take_finished(finished):
             job = waiting.pop(key, None)
             if job is not None:
                 done[job.step] += 1
+                made.add(key)
+
+    while proc.poll() is None:
+        time.sleep(poll_s)
+        if dry_run:
+            continue
+        count()
         steps = [StepProgress(step, done[step], totals[step]) for step in totals]
         line = format_progress(steps, time.monotonic() - start, start_done)
         line += _job_progress(plan, waiting)
         if line.split("] ", 1)[-1] != last:
             print(line, file=stream, flush=True)
             last = line.split("] ", 1)[-1]
+    if not dry_run:
+        count()  # the markers of the last jobs, left after the last poll
+    return made
 
 
 def _die_with_parent() -> Callable[[], None] | None:
@@ -562,10 +667,22 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
                    profile: Path | None, dry_run: bool, stream: TextIO, poll_s: float,
                    on_start: Callable[[subprocess.Popen], None] | None,
                    snakemake_args: list[str] | None, start: float,
-                   lock: StoreLock | None = None) -> tuple[int, str]:
+                   lock: StoreLock | None = None,
+                   shards_per_batch: int | None = None) -> tuple[int, str, set[str]]:
     plan_path = plan.write(Path(plan.store_dir) / "plans" / f"{plan.digest}.json")
+    layout = None
+    if shards_per_batch is None:
+        shards_per_batch = auto_shards_per_batch(plan)
+    batches = batch_plan(plan, shards_per_batch)
+    if batches:
+        layout = write_layout(plan, plan_path, batches, Path(plan.store_dir) / "plans" /
+                              f"{plan.digest}-batches-{shards_per_batch}.json")
+        complete = refresh_markers(plan.store_dir, batches, present)
+        print(f"batched: {len(batches)} Snakemake jobs of {shards_per_batch} shard"
+              f"{'s' * (shards_per_batch != 1)} each ({complete} complete) for the "
+              f"{sum(len(b.members) for b in batches)} shard jobs", file=stream)
     cmd = snakemake_command(plan_path, plan, cores=cores, profile=profile, dry_run=dry_run,
-                            extra=snakemake_args)
+                            extra=snakemake_args, layout=layout)
     log_dir = Path(plan.store_dir) / "logs"
     log_dir.mkdir(parents=True, exist_ok=True)
     log_path = log_dir / f"snakemake-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
@@ -599,9 +716,9 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
                 lock.set_group(proc.pid)
             if on_start is not None:
                 on_start(proc)
-            _follow(plan, proc, waiting, done=done, totals=totals, finished=finished,
-                    dry_run=dry_run, stream=stream, poll_s=poll_s, start=start,
-                    start_done=start_done)
+            made = _follow(plan, proc, waiting, done=done, totals=totals, finished=finished,
+                           dry_run=dry_run, stream=stream, poll_s=poll_s, start=start,
+                           start_done=start_done)
         finally:
             # Interrupted, or Snakemake died and left its jobs running: stop them all.
             if proc.poll() is None or group_members(proc.pid):
@@ -616,4 +733,4 @@ def _run_snakemake(plan: Plan, store: ArtifactStore, present: set[str], *, cores
         for message in failed_job_messages(text, plan):
             print(message, file=stream)
         print(f"build failed; Snakemake's log: {log_path}", file=stream)
-    return proc.returncode, text
+    return proc.returncode, text, made

@@ -1,7 +1,8 @@
-# Load the compiled plan; everything else lives in sonicspec.stages.workflow.
+# Load the compiled plan (or, for a batched build, its layout); everything else lives in
+# sonicspec.stages.workflow.
 from sonicspec.stages.workflow import WorkflowPlan
 
-PLAN = WorkflowPlan.load(config["plan"])
+PLAN = WorkflowPlan.load(config["plan"], config.get("layout"))
 STORE = PLAN.store_dir
 
 wildcard_constraints:

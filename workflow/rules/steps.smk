@@ -25,3 +25,28 @@ for step in PLAN.steps():
             runtime=step.runtime_min,
         shell:
             PLAN.job_command()
+
+# A batched build (`sonicspec build --shards-per-batch`, automatic for big plans): the jobs of
+# consecutive shards run in order in one `sonicspec batch` process; its output is a marker
+# written once every member's artifact is in the store (sonicspec.stages.batch).
+if PLAN.batched:
+
+    rule:
+        name:
+            "batch"
+        input:
+            PLAN.inputs_of
+        output:
+            PLAN.batch_pattern(),
+        params:
+            key="{key}",
+        log:
+            PLAN.batch_log_pattern(),
+        benchmark:
+            PLAN.batch_benchmark_pattern()
+        threads: 1
+        resources:
+            mem_mb=PLAN.batch_mem_mb,
+            runtime=PLAN.batch_runtime,
+        shell:
+            PLAN.batch_command()
