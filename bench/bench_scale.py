@@ -17,6 +17,14 @@ the parsed arguments and returns the lines it printed, for RESULTS.md).
 * ``tracks`` — a SonicSet-like 60 s group's tracks (three talkers walking the whole clip)
   in candidate encodings: JSON (as before), float32 and int32 ``.npz``, raw and deflated, and
   frame differences.
+* ``build`` — a real build of ``--groups`` groups (default 1,000; ``--build-seconds`` each,
+  default 5 s) of the demo spec at cheap acoustic settings (100 rays, image-source order 1,
+  0.2 s RIRs, 1 m RIR spacing, shards of 50 groups) through Snakemake on this machine:
+  per step the jobs, CPU (exact ``getrusage`` of each ``sonicspec job`` process, via the
+  ``sitecustomize`` of ``bench_pipeline.py``, and Snakemake's per-job benchmark), peak RSS and
+  summed wall; the dataset folder's bytes per group by file kind and the store's by step.
+  Then the projection to the whole of SonicSet (19,528 groups of 60 s) from per-group costs
+  measured at the ``sonicset`` preset's settings (see ``bench_projection``).
 * ``compare`` (with ``--against CHECKOUT``) — the pipeline tests' one-group spec built by an
   older checkout and by this one, file by file: what the format changes touched, and that
   everything else (audio, supervisions, the recordings apart from ``custom``, the track
@@ -27,6 +35,7 @@ Reproduce:
     python bench/bench_scale.py --only dataset --sizes 100 1000 10000
     python bench/bench_scale.py --only bytes --duration 60
     python bench/bench_scale.py --only tracks
+    nice -n 10 python bench/bench_scale.py --only build --groups 1000 --build-seconds 5
     python bench/bench_scale.py --only compare --against /path/to/checkout/at/346f31f
 """
 
@@ -48,6 +57,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "bench"))
 
 from build_cases import plan_for, write_spec  # noqa: E402  (the tests' cut-down demo)
 
@@ -255,6 +265,163 @@ def bench_tracks(args: argparse.Namespace) -> list[str]:
     return lines
 
 
+def cheap_spec(groups: int, seconds: float) -> str:
+    """specs/demo.yaml cut to cheap acoustics and ``groups`` short groups: 2 % each to val
+    (office) and test (hall), the rest train (living room); shards of 50 groups."""
+    import re
+
+    held = max(1, groups // 50)
+    text = (ROOT / "specs" / "demo.yaml").read_text()
+    edits = (("rays: 4000", "rays: 100"), ("image_source_order: 2", "image_source_order: 1"),
+             ("duration_s: 10.0", f"duration_s: {seconds:g}"),
+             ("utterances_per_speaker: [1, 2]", "utterances_per_speaker: [1, 1]"),
+             ("utterance_gap_s: [0.0, 2.0]", "utterance_gap_s: [0.0, 0.5]"),
+             ("noise_clips: [1, 2]", "noise_clips: [1, 1]"),
+             ("music_clips: [1, 2]", "music_clips: [1, 1]"),
+             ("rir_spacing_m: 0.25", "rir_spacing_m: 1.0"),
+             ("source_travel_distance_m: [1.0, 3.0]", "source_travel_distance_m: [0.5, 1.0]"),
+             ("train: {groups: 4,", f"train: {{groups: {groups - 2 * held},"),
+             ("val: {groups: 1,", f"val: {{groups: {held},"),
+             ("test: {groups: 1,", f"test: {{groups: {held},"),
+             ("groups_per_shard: 2", "groups_per_shard: 50"))
+    for old, new in edits:
+        if old not in text:
+            raise SystemExit(f"specs/demo.yaml changed: {old!r} not found")
+        text = text.replace(old, new)
+    text, n = re.subn(r"max_rir_length_s: auto[^\n]*", "max_rir_length_s: 0.2", text)
+    if n != 1:
+        raise SystemExit("specs/demo.yaml changed: max_rir_length_s: auto not found")
+    return text
+
+
+def _step_table(plan, store: Path, rusage_dir: Path) -> tuple[list[str], dict[str, dict]]:
+    """Per step: jobs, summed wall, CPU (exact getrusage and Snakemake's benchmark), peak RSS."""
+    from bench_pipeline import STEP_NAMES, read_benchmark
+
+    steps: dict[str, dict] = {}
+    for job in plan.jobs:
+        b = read_benchmark(store / "benchmarks" / job.step / job.key[:2] / f"{job.key}.tsv")
+        exact = rusage_dir / f"{job.key}.json"
+        data = json.loads(exact.read_text()) if exact.is_file() else None
+        row = steps.setdefault(job.step, {"jobs": 0, "wall": 0.0, "cpu": 0.0, "bcpu": 0.0,
+                                          "rss": 0.0, "brss": 0.0, "missing": 0})
+        row["jobs"] += 1
+        row["wall"] += b["s"]
+        row["bcpu"] += b["cpu_time"]
+        row["brss"] = max(row["brss"], b["max_rss"])
+        if data is None:
+            row["missing"] += 1
+            row["cpu"] += b["cpu_time"]
+        else:
+            row["cpu"] += data["cpu_s"]
+            row["rss"] = max(row["rss"], data["maxrss_mb"], data["children_maxrss_mb"])
+    total = sum(r["cpu"] for r in steps.values())
+    lines = ["| step | jobs | wall s (sum) | CPU s (exact) | CPU s (benchmark) | share | "
+             "peak RSS MB (exact / benchmark) |", "|---|---|---|---|---|---|---|"]
+    for name in STEP_NAMES:
+        if name in steps:
+            r = steps[name]
+            lines.append(f"| {name} | {r['jobs']} | {r['wall']:.1f} | {r['cpu']:.1f} | "
+                         f"{r['bcpu']:.1f} | {100 * r['cpu'] / total:.1f} % | "
+                         f"{r['rss']:.0f} / {r['brss']:.0f} |")
+    lines.append(f"| **all jobs** | {sum(r['jobs'] for r in steps.values())} | "
+                 f"{sum(r['wall'] for r in steps.values()):.1f} | {total:.1f} | "
+                 f"{sum(r['bcpu'] for r in steps.values()):.1f} | 100 % | "
+                 f"{max(r['rss'] for r in steps.values()):.0f} / "
+                 f"{max(r['brss'] for r in steps.values()):.0f} |")
+    return lines, steps
+
+
+def _bytes_tables(out: Path, store: Path, n: int, seconds: float) -> list[str]:
+    """The dataset folder's bytes per group by file kind, the store's by step."""
+    by_kind: dict[str, list[int]] = {}
+    for p in out.rglob("*"):
+        if not p.is_file():
+            continue
+        rel = p.relative_to(out).as_posix()
+        kind = ("manifests, dataset.json, checksums (shared)" if "/" not in rel
+                or rel.startswith("manifests/") else _kind(rel))
+        got = by_kind.setdefault(kind, [0, 0])
+        got[0] += p.stat().st_size
+        got[1] += 1
+    lines = ["| dataset file kind | bytes per group | bytes per group-second | files per group |",
+             "|---|---|---|---|"]
+    for k, (b, f) in sorted(by_kind.items()):
+        lines.append(f"| {k} | {b / n:,.0f} | {b / n / seconds:,.0f} | {f / n:.2f} |")
+    total = sum(b for b, _ in by_kind.values())
+    lines.append(f"| **dataset folder** | {total / n:,.0f} | {total / n / seconds:,.0f} | "
+                 f"{sum(f for _, f in by_kind.values()) / n:.2f} |")
+    lines += ["", "| store step | bytes per group | files per group |", "|---|---|---|"]
+    all_b = all_f = 0
+    for step_dir in sorted(p for p in store.iterdir() if p.is_dir()):
+        files = [p for p in step_dir.rglob("*") if p.is_file()]
+        b = sum(p.stat().st_size for p in files)
+        all_b, all_f = all_b + b, all_f + len(files)
+        lines.append(f"| {step_dir.name} | {b / n:,.0f} | {len(files) / n:.2f} |")
+    lines.append(f"| **store** | {all_b / n:,.0f} | {all_f / n:.2f} |")
+    return lines
+
+
+def bench_build(args: argparse.Namespace) -> list[str]:
+    """A real build of ``--groups`` short groups at cheap acoustic settings (module docstring)."""
+    import platform
+    import resource
+
+    from bench_pipeline import SITECUSTOMIZE
+
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import load_spec
+    from sonicspec.stages.workflow import run_build
+
+    keep = args.keep.resolve() if args.keep else None
+    with tempfile.TemporaryDirectory(prefix="bench-build-") as tmp_name:
+        tmp = keep or Path(tmp_name)
+        tmp.mkdir(parents=True, exist_ok=True)
+        site, rusage_dir = tmp / "site", tmp / "rusage"
+        site.mkdir(exist_ok=True)
+        rusage_dir.mkdir(exist_ok=True)
+        (site / "sitecustomize.py").write_text(SITECUSTOMIZE)
+        os.environ["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(site), str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+        os.environ["SONICSPEC_BENCH_RUSAGE_DIR"] = str(rusage_dir)
+        spec = tmp / "cheap.yaml"
+        spec.write_text(cheap_spec(args.groups, args.build_seconds))
+        t0 = time.perf_counter()
+        plan = compile_spec(load_spec(spec))
+        plan_s = time.perf_counter() - t0
+        load0 = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        log = tmp / "build.log"
+        with open(log, "w") as stream:
+            code = run_build(plan, cores=args.cores, stream=stream)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if code != 0:
+            raise SystemExit(f"the build failed (exit {code}); see {log}")
+        all_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        out, store = Path(plan.output_dir), Path(plan.store_dir)
+        n = len(list(out.glob("*/*/metadata.json")))
+        if n != args.groups:
+            raise SystemExit(f"{n} group folders written, {args.groups} asked")
+        table, steps = _step_table(plan, store, rusage_dir)
+        jobs_cpu = sum(r["cpu"] for r in steps.values())
+        lines = [f"python {platform.python_version()}, {os.cpu_count()} cpus, {args.cores} cores "
+                 f"for the build, load average {load0:.1f} -> {os.getloadavg()[0]:.1f}",
+                 f"{n} groups of {args.build_seconds:g} s (demo rooms; 100 rays, image-source "
+                 "order 1, 0.2 s RIRs, 1 m RIR spacing, 1 utterance per talker, shards of "
+                 f"50), {len(plan.jobs)} jobs; plan {plan_s:.2f} s",
+                 f"wall {wall:.0f} s; CPU of all jobs {jobs_cpu:.0f} s (exact), whole build "
+                 f"with Snakemake's head {all_cpu:.0f} s; {1000 * jobs_cpu / n:.0f} CPU ms "
+                 f"per group in jobs, {1000 * all_cpu / n:.0f} with the head", ""]
+        lines += table
+        lines.append("")
+        lines += _bytes_tables(out, store, n, args.build_seconds)
+        for line in lines:
+            print(line, flush=True)
+        return lines
+
+
 _BUILD_TINY = """
 import sys
 from pathlib import Path
@@ -319,6 +486,7 @@ BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "bytes": bench_bytes,
     "compare": bench_compare,
     "tracks": bench_tracks,
+    "build": bench_build,
 }
 
 
@@ -332,13 +500,22 @@ def main() -> None:
                         help="seconds per group of the demo build for 'bytes' (default: 10)")
     parser.add_argument("--track-seconds", type=float, default=60.0,
                         help="group length for 'tracks' (default: 60)")
-    parser.add_argument("--keep", type=Path, help="copy the demo build here ('bytes')")
+    parser.add_argument("--keep", type=Path,
+                        help="copy the demo build here ('bytes'); build in this folder, kept "
+                             "('build')")
+    parser.add_argument("--groups", type=int, default=1000,
+                        help="groups of the real build ('build'; default 1000)")
+    parser.add_argument("--build-seconds", type=float, default=5.0,
+                        help="seconds per group of the real build ('build'; default 5)")
+    parser.add_argument("--cores", type=int, default=2,
+                        help="cores for the real build ('build'; default 2)")
     parser.add_argument("--against", type=Path,
                         help="an older checkout to compare outputs with ('compare')")
     args = parser.parse_args()
     argv = " ".join(sys.argv[1:])
     print(f"# python bench/bench_scale.py {argv}".rstrip())
-    for name in args.only or [n for n in BENCHES if n != "compare" or args.against]:
+    for name in args.only or [n for n in BENCHES if n not in ("compare", "build")
+                                   or (n == "compare" and args.against)]:
         print(f"\n## {name}")
         BENCHES[name](args)
 
