@@ -36,7 +36,7 @@ STEPS: tuple[Step, ...] = (
     Step("navigation", 1, 1, 4000, 30, "walkable area of each floor"),
     Step("placement", 3, 1, 2000, 10, "mic, sources and trajectories per group"),
     Step("arrange", 1, 1, 2000, 10, "utterances and clips per track"),
-    Step("rir", 18, 1, 4000, 60, "room impulse responses along every trajectory"),
+    Step("rir", 19, 1, 4000, 60, "room impulse responses along every trajectory"),
     Step("render", 3, 1, 4000, 30, "moving-source convolution of every track"),
     Step("mix", 2, 1, 4000, 10, "loudness normalisation and task mixtures"),
     Step("export", 6, 1, 2000, 10, "audio files and metadata per group"),
