@@ -25,6 +25,11 @@ the parsed arguments and returns the lines it printed, for RESULTS.md).
   summed wall; the dataset folder's bytes per group by file kind and the store's by step.
   Then the projection to the whole of SonicSet (19,528 groups of 60 s) from per-group costs
   measured at the ``sonicset`` preset's settings (see ``bench_projection``).
+* ``projection`` — a real build of the ``sonicset`` preset cut to 16 train groups (one shard,
+  as the full plan's) + 1 val + 1 test group on its inputs in their real layouts (fixture scan,
+  synthetic corpora), and the projection to the whole of SonicSet from its per-group CPU by
+  step, RIR points per group (rir also scaled by the furnished apartment's CPU per RIR) and
+  bytes per group.
 * ``compare`` (with ``--against CHECKOUT``) — the pipeline tests' one-group spec built by an
   older checkout and by this one, file by file: what the format changes touched, and that
   everything else (audio, supervisions, the recordings apart from ``custom``, the track
@@ -36,6 +41,7 @@ Reproduce:
     python bench/bench_scale.py --only bytes --duration 60
     python bench/bench_scale.py --only tracks
     nice -n 10 python bench/bench_scale.py --only build --groups 1000 --build-seconds 5
+    nice -n 10 python bench/bench_scale.py --only projection --preset-groups 16
     python bench/bench_scale.py --only compare --against /path/to/checkout/at/346f31f
 """
 
@@ -422,6 +428,138 @@ def bench_build(args: argparse.Namespace) -> list[str]:
         return lines
 
 
+SONICSET_GROUPS = 19_528
+SONICSET_TRACKS = 58_584  # 57,102 + 741 + 741 talker tracks of 60 s: 976 track-hours in all
+SONICSET_SCENES = 90
+APARTMENT_RIR_CPU_S = 0.19
+"""CPU of one RIR at the preset in the furnished 100k-triangle apartment (bench_preset_rir.py,
+RESULTS.md: 0.185-0.224 s)."""
+
+
+def preset_spec(groups: int) -> str:
+    """specs/sonicset.yaml with ``groups`` train groups in one scene (one shard of 16 when
+    ``groups`` is 16, as in the full plan) and one val and one test group."""
+    text = (ROOT / "specs" / "sonicset.yaml").read_text()
+    for old, new in (
+            ('train: {groups: each_speaker_per_scene, scenes: ["mp3d/*"], scene_count: 62}',
+             f'train: {{groups: {groups}, scenes: ["mp3d/*"], scene_count: 1}}'),
+            ('val: {groups: each_speaker_per_scene, scenes: ["mp3d/*"], scene_count: 19}',
+             'val: {groups: 1, scenes: ["mp3d/*"], scene_count: 1}'),
+            ('test: {groups: 247, scenes: ["mp3d/*"], scene_count: 9}',
+             'test: {groups: 1, scenes: ["mp3d/*"], scene_count: 1}')):
+        if old not in text:
+            raise SystemExit(f"specs/sonicset.yaml changed: {old!r} not found")
+        text = text.replace(old, new)
+    return text
+
+
+def bench_projection(args: argparse.Namespace) -> list[str]:
+    """A real build of the ``sonicset`` preset cut to ``--preset-groups`` train groups (one
+    shard) on its inputs in their real layouts (``sonicspec.testing.sonicset``: the one-room
+    Matterport fixture under three scan ids, synthetic LibriSpeech/FSD50K/FMA), its per-group
+    CPU by step, RIR points and bytes, and the projection to the whole of SonicSet."""
+    import platform
+    import resource
+
+    from bench_pipeline import SITECUSTOMIZE
+
+    from sonicspec.artifacts import decode
+    from sonicspec.plan.compile import compile_spec
+    from sonicspec.spec import load_spec
+    from sonicspec.stages.workflow import run_build
+    from sonicspec.store import ArtifactStore
+    from sonicspec.testing.sonicset import write_sonicset_inputs
+
+    keep = args.keep.resolve() if args.keep else None
+    with tempfile.TemporaryDirectory(prefix="bench-preset-") as tmp_name:
+        tmp = keep or Path(tmp_name)
+        tmp.mkdir(parents=True, exist_ok=True)
+        site, rusage_dir = tmp / "site", tmp / "rusage"
+        site.mkdir(exist_ok=True)
+        rusage_dir.mkdir(exist_ok=True)
+        (site / "sitecustomize.py").write_text(SITECUSTOMIZE)
+        os.environ["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(site), str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+        os.environ["SONICSPEC_BENCH_RUSAGE_DIR"] = str(rusage_dir)
+        if not (tmp / "data").is_dir():
+            write_sonicset_inputs(tmp / "data", ["17DRP5sb8fy", "1LXtFkjw3qL", "1pXnuDYAj8r"],
+                                  {"train-clean-360": 8, "dev-clean": 4, "test-clean": 4})
+        spec = tmp / "sonicset.yaml"
+        spec.write_text(preset_spec(args.preset_groups))
+        plan = compile_spec(load_spec(spec))
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        with open(tmp / "build.log", "w") as stream:
+            code = run_build(plan, cores=args.cores, stream=stream)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if code != 0:
+            raise SystemExit(f"the preset build failed (exit {code}); see {tmp / 'build.log'}")
+        all_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        store, out = Path(plan.store_dir), Path(plan.output_dir)
+        table, _ = _step_table(plan, store, rusage_dir)
+        train = [j for j in plan.jobs if j.params.get("split") == "train"]
+        n = args.preset_groups
+        per_group: dict[str, float] = {}
+        for job in train:
+            data = json.loads((rusage_dir / f"{job.key}.json").read_text())
+            per_group[job.step] = per_group.get(job.step, 0.0) + data["cpu_s"] / n
+        scene_cpu: dict[str, float] = {}
+        for job in plan.jobs:
+            if job.step in ("mesh", "navigation"):
+                data = json.loads((rusage_dir / f"{job.key}.json").read_text())
+                scene_cpu.setdefault(job.step, []).append(data["cpu_s"])
+        points = 0
+        st = ArtifactStore(store)
+        for job in train:
+            if job.step == "rir":
+                for g in decode("rir", st.read_data("rir", job.key)).groups:
+                    points += sum(s.points for s in g.sources)
+        points_per_group = points / n
+        groups_all = len(list(out.glob("*/*/metadata.json")))
+        lines = [f"python {platform.python_version()}, {os.cpu_count()} cpus; the sonicset "
+                 f"preset, {n} train groups (one shard) + 1 val + 1 test of 60 s on the "
+                 f"one-room Matterport fixture; wall {wall:.0f} s, CPU of all processes "
+                 f"{all_cpu:.0f} s", "", *table, ""]
+        lines += _bytes_tables(out, store, groups_all, 60.0)
+        dataset_b = _tree_bytes(out) / groups_all
+        store_b = _tree_bytes(store) / groups_all
+        lines += ["", f"RIR points per train group: {points_per_group:.1f}", "",
+                  "Projection to SonicSet (19,528 groups of 60 s, 58,584 talker tracks: "
+                  f"{SONICSET_TRACKS / 60:,.0f} track-hours, 952 of them train; "
+                  "90 scenes), per-group CPU of the train shard (its job start-up amortised "
+                  "over 16 groups, as in the full plan):", "",
+                  "| step | CPU core-s per group | SonicSet core-hours |", "|---|---|---|"]
+        total = 0.0
+        for step in ("placement", "arrange", "rir", "render", "mix", "export"):
+            c = per_group.get(step, 0.0)
+            total += c * SONICSET_GROUPS / 3600
+            lines.append(f"| {step} | {c:.2f} | {c * SONICSET_GROUPS / 3600:,.1f} |")
+        for step, cpus in scene_cpu.items():
+            h = float(np.mean(cpus)) * SONICSET_SCENES / 3600
+            total += h
+            lines.append(f"| {step} (per scene, fixture scan) | {np.mean(cpus):.2f} / scene | "
+                         f"{h:,.2f} |")
+        ds = 0.86e-3 * SONICSET_GROUPS / 3600  # the dataset step: 0.86 CPU ms per group at 10^4
+        total += ds
+        lines.append(f"| dataset (0.86 CPU ms per group, --only dataset) | 0.0009 | {ds:.3f} |")
+        rir_apartment = points_per_group * APARTMENT_RIR_CPU_S
+        alt = total + (rir_apartment - per_group.get("rir", 0.0)) * SONICSET_GROUPS / 3600
+        lines += [f"| **all** | | **{total:,.1f}** |", "",
+                  f"In furnished scans the rir step costs more per point: {points_per_group:.1f} "
+                  f"points x {APARTMENT_RIR_CPU_S} CPU s per RIR in the 100k-triangle apartment "
+                  f"(bench_preset_rir.py) = {rir_apartment:.1f} core-s per group, "
+                  f"{rir_apartment * SONICSET_GROUPS / 3600:,.1f} core-hours for the rir step "
+                  f"and {alt:,.1f} in all.",
+                  f"Sizes: dataset folder {dataset_b / 1e6:.2f} MB per group -> "
+                  f"{dataset_b * SONICSET_GROUPS / 1e12:.2f} TB; store "
+                  f"{store_b / 1e6:.2f} MB per group -> {store_b * SONICSET_GROUPS / 1e12:.2f} TB "
+                  "(the fixture's audio is synthetic: see the audiofmt section for real audio)."]
+        for line in lines:
+            print(line, flush=True)
+        return lines
+
+
 _BUILD_TINY = """
 import sys
 from pathlib import Path
@@ -487,6 +625,7 @@ BENCHES: dict[str, Callable[[argparse.Namespace], list[str]]] = {
     "compare": bench_compare,
     "tracks": bench_tracks,
     "build": bench_build,
+    "projection": bench_projection,
 }
 
 
@@ -507,6 +646,8 @@ def main() -> None:
                         help="groups of the real build ('build'; default 1000)")
     parser.add_argument("--build-seconds", type=float, default=5.0,
                         help="seconds per group of the real build ('build'; default 5)")
+    parser.add_argument("--preset-groups", type=int, default=16,
+                        help="train groups of the preset build ('projection'; default 16)")
     parser.add_argument("--cores", type=int, default=2,
                         help="cores for the real build ('build'; default 2)")
     parser.add_argument("--against", type=Path,
@@ -514,7 +655,7 @@ def main() -> None:
     args = parser.parse_args()
     argv = " ".join(sys.argv[1:])
     print(f"# python bench/bench_scale.py {argv}".rstrip())
-    for name in args.only or [n for n in BENCHES if n not in ("compare", "build")
+    for name in args.only or [n for n in BENCHES if n not in ("compare", "build", "projection")
                                    or (n == "compare" and args.against)]:
         print(f"\n## {name}")
         BENCHES[name](args)

@@ -41,7 +41,8 @@ def test_plan_summary_says_the_order_each_scene_reached_or_will(tmp_path: Path,
     (line,) = [x for x in ahead.splitlines() if x.startswith("  room: ")]
     assert "not built yet; estimate from one drawn group" in line
     assert "order 2, candidates per order " in line and line.endswith("well under the cap")
-    assert "not built yet, not estimated" in plan_cli("--estimate-scenes", "0", cwd=tmp_path)
+    assert ("  1 more scene not built yet, not estimated (sonicspec plan --summary "
+            "--estimate-scenes N)") in plan_cli("--estimate-scenes", "0", cwd=tmp_path)
 
     # a build whose cap cut order 2 (a cap far below the real one, to make it happen here)
     loaded = load_spec(tmp_path / "spec.yaml")

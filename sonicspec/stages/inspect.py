@@ -283,7 +283,10 @@ def format_outlook(scenes: list[dict[str, Any]]) -> list[str]:
         return []
     lines = [f"image-source order (acoustics.image_source_order {scenes[0]['asked']}), per "
              "scene:"]
+    skipped = [e for e in scenes if (e["estimate"] or {}).get("skipped")]
     for e in scenes:
+        if e in skipped:
+            continue
         head = f"  {e['scene_id']}: "
         if e["built"]:
             why = f" ({e['stopped']})" if e["stopped"] else ""
@@ -302,8 +305,6 @@ def format_outlook(scenes: list[dict[str, Any]]) -> list[str]:
         est = e["estimate"]
         if est is None:
             lines.append(head + "no RIRs asked")
-        elif est.get("skipped"):
-            lines.append(head + "not built yet, not estimated (see --estimate-scenes)")
         elif "error" in est:
             lines.append(head + f"not built yet, not estimated: {est['error']}")
         else:
@@ -318,4 +319,7 @@ def format_outlook(scenes: list[dict[str, Any]]) -> list[str]:
                          f"triangles in {est['mirrors']:,} mirrors): order {est['reached']}, "
                          f"candidates per order {counts} against the cap of {est['cap']:,}: "
                          f"{verdict}")
+    if skipped:
+        lines.append(f"  {len(skipped)} more scene{'s' * (len(skipped) > 1)} not built yet, "
+                     "not estimated (sonicspec plan --summary --estimate-scenes N)")
     return lines
