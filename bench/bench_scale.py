@@ -306,7 +306,10 @@ def _step_table(plan, store: Path, rusage_dir: Path) -> tuple[list[str], dict[st
 
     steps: dict[str, dict] = {}
     for job in plan.jobs:
-        b = read_benchmark(store / "benchmarks" / job.step / job.key[:2] / f"{job.key}.tsv")
+        bench_file = store / "benchmarks" / job.step / job.key[:2] / f"{job.key}.tsv"
+        if not bench_file.is_file():  # not run (yet): a partial build's report
+            continue
+        b = read_benchmark(bench_file)
         exact = rusage_dir / f"{job.key}.json"
         data = json.loads(exact.read_text()) if exact.is_file() else None
         row = steps.setdefault(job.step, {"jobs": 0, "wall": 0.0, "cpu": 0.0, "bcpu": 0.0,
@@ -391,7 +394,8 @@ def bench_build(args: argparse.Namespace) -> list[str]:
             p for p in (str(site), str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
         os.environ["SONICSPEC_BENCH_RUSAGE_DIR"] = str(rusage_dir)
         spec = tmp / "cheap.yaml"
-        spec.write_text(cheap_spec(args.groups, args.build_seconds))
+        if not args.report:
+            spec.write_text(cheap_spec(args.groups, args.build_seconds))
         t0 = time.perf_counter()
         plan = compile_spec(load_spec(spec))
         plan_s = time.perf_counter() - t0
@@ -399,8 +403,10 @@ def bench_build(args: argparse.Namespace) -> list[str]:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         log = tmp / "build.log"
-        with open(log, "w") as stream:
-            code = run_build(plan, cores=args.cores, stream=stream)
+        code = 0
+        if not args.report:
+            with open(log, "w") as stream:
+                code = run_build(plan, cores=args.cores, stream=stream)
         wall = time.perf_counter() - t0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if code != 0:
@@ -408,8 +414,10 @@ def bench_build(args: argparse.Namespace) -> list[str]:
         all_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
         out, store = Path(plan.output_dir), Path(plan.store_dir)
         n = len(list(out.glob("*/*/metadata.json")))
-        if n != args.groups:
+        if n != args.groups and not args.report:
             raise SystemExit(f"{n} group folders written, {args.groups} asked")
+        if args.report:  # what a build stopped part-way made: per group of the plan
+            n = args.groups
         table, steps = _step_table(plan, store, rusage_dir)
         jobs_cpu = sum(r["cpu"] for r in steps.values())
         lines = [f"python {platform.python_version()}, {os.cpu_count()} cpus, {args.cores} cores "
@@ -646,6 +654,8 @@ def main() -> None:
                         help="groups of the real build ('build'; default 1000)")
     parser.add_argument("--build-seconds", type=float, default=5.0,
                         help="seconds per group of the real build ('build'; default 5)")
+    parser.add_argument("--report", action="store_true",
+                        help="'build' with --keep: report what the kept build made, no build")
     parser.add_argument("--preset-groups", type=int, default=16,
                         help="train groups of the preset build ('projection'; default 16)")
     parser.add_argument("--cores", type=int, default=2,
