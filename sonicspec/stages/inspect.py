@@ -206,7 +206,8 @@ def image_source_outlook(loaded: LoadedSpec, plan, *, estimate: int = 3) -> list
 
     store = ArtifactStore(plan.store_dir)
     asked = loaded.spec.acoustics.image_source_order
-    scene_of = {j.key: j.params["scene_id"] for j in plan.jobs if j.step == "mesh"}
+    scene_of = {j.key: read_params("mesh", j.params, j.label).scene_id
+                for j in plan.jobs if j.step == "mesh"}
     scenes: dict[str, dict[str, Any]] = {}
     for job in plan.jobs:
         if job.step != "rir":
@@ -246,7 +247,7 @@ def estimate_image_source_order(loaded: LoadedSpec, scene_id: str) -> dict[str, 
     :func:`image_source_outlook`): order reached, why lower, candidates per order."""
     from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene, scene_regions
     from sonicspec.acoustics.paths.image_sources import image_sources
-    from sonicspec.stages.rir import spec_materials
+    from sonicspec.geometry.materials import material_library
 
     spec = loaded.spec
     mesh, _, _, nav_job, _ = build_scene(loaded, scene_id)
@@ -263,7 +264,9 @@ def estimate_image_source_order(loaded: LoadedSpec, scene_id: str) -> dict[str, 
         return {"error": f"no group could be placed: {exc}"}
     settings = SimulationSettings.from_spec(spec.acoustics.model_dump(mode="json"),
                                             spec.sample_rate_hz, spec.speed_of_sound_m_s)
-    scene = acoustic_scene(mesh, spec_materials(spec.materials), settings)
+    library = material_library(spec.materials.library,
+                               spec.materials.model_dump(mode="json")["custom"])
+    scene = acoustic_scene(mesh, library, settings)
     regions = scene_regions(scene, settings)
     mic = np.asarray(placement["mic_path_m"][0], dtype=np.float64)
     points = np.asarray(placement["speech"][0]["rir_points_m"], dtype=np.float64)
