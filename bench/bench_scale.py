@@ -439,9 +439,10 @@ def bench_build(args: argparse.Namespace) -> list[str]:
 SONICSET_GROUPS = 19_528
 SONICSET_TRACKS = 58_584  # 57,102 + 741 + 741 talker tracks of 60 s: 976 track-hours in all
 SONICSET_SCENES = 90
-APARTMENT_RIR_CPU_S = 0.19
-"""CPU of one RIR at the preset in the furnished 100k-triangle apartment (bench_preset_rir.py,
-RESULTS.md: 0.185-0.224 s)."""
+APARTMENT_RIR_CPU_S = 0.30
+"""CPU per RIR point at the preset (order 3 reached) in the furnished 100k-triangle apartment,
+the 7 points of a 1.5 m walk sharing one image-source search as a rir job's source does
+(``python bench/bench_preset_rir.py .``: 2.1 CPU s; one lone RIR costs 0.71 s)."""
 
 
 def preset_spec(groups: int) -> str:
@@ -556,7 +557,8 @@ def bench_projection(args: argparse.Namespace) -> list[str]:
         lines += [f"| **all** | | **{total:,.1f}** |", "",
                   f"In furnished scans the rir step costs more per point: {points_per_group:.1f} "
                   f"points x {APARTMENT_RIR_CPU_S} CPU s per RIR in the 100k-triangle apartment "
-                  f"(bench_preset_rir.py) = {rir_apartment:.1f} core-s per group, "
+                  f"(bench_preset_rir.py, a walk's points) = {rir_apartment:.1f} core-s per "
+                  "group, "
                   f"{rir_apartment * SONICSET_GROUPS / 3600:,.1f} core-hours for the rir step "
                   f"and {alt:,.1f} in all.",
                   f"Sizes: dataset folder {dataset_b / 1e6:.2f} MB per group -> "
