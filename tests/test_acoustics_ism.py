@@ -179,14 +179,16 @@ def test_candidate_limit_warns_and_reports_completed_order():
     verts, faces = shoebox(5.0, 4.0, 3.0)
     scene = uniform_scene(verts, faces)
     src, mic = np.array([1.2, 1.5, 1.1]), np.array([[3.3, 2.2, 1.7]])
-    with pytest.warns(SonicspecWarning, match="stopping at order 2"):
-        res = image_sources(scene, src, mic, max_order=3, max_candidates=100)
+    with pytest.warns(SonicspecWarning, match="stopping at order 2"):  # the unpruned search
+        res = image_sources(scene, src, mic, max_order=3, max_candidates=100, beams=False)
     assert res.max_order == 2
     assert res.arrivals[0].order.max() == 2
 
 
-@pytest.mark.parametrize("limit", [40, 100, 140, 149, 150, 200])
-def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, limit: int):
+@pytest.mark.parametrize("beams", [False, True])
+@pytest.mark.parametrize("limit", [5, 20, 40, 100, 140, 149, 150, 200])
+def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, limit: int,
+                                                                 beams: bool):
     """The count that stops an order before its images are built gives the same decision and
     arrivals as building them (limits around the 150 order-3 candidates of this shoebox, with
     a path-length limit that keeps every one of them, and ones that keep only some: at 12 m,
@@ -204,7 +206,7 @@ def test_candidate_limit_decided_early_as_by_building_the_images(monkeypatch, li
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 res = image_sources(scene, src, mic, max_order=3, max_candidates=limit,
-                                    max_path_length_m=max_path)
+                                    max_path_length_m=max_path, beams=beams)
             runs.append((res.max_order, res.arrivals[0].times_s.tobytes(),
                          [str(w.message) for w in caught]))
             monkeypatch.undo()
@@ -359,7 +361,7 @@ def test_compiled_prefilter_keeps_every_valid_path_and_drops_most_pairs(monkeypa
         for prefilter in (counting, everything):
             monkeypatch.setattr(KI, "last_reflection_prefilter", prefilter)
             res = image_sources(scene, src, rcv[None], max_order=3, regions=regions,
-                                max_path_length_m=60.0)
+                                max_path_length_m=60.0, beams=False)
             a = res.arrivals[0]
             runs.append((res.max_order, a.times_s.tobytes(), a.amplitudes.tobytes(),
                          a.directions.tobytes()))

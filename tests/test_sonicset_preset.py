@@ -82,7 +82,9 @@ def test_plan_summary_prints_the_papers_table(paper_data: Path) -> None:
     assert rows["total"][:2] == ["90", "1,001"]
     page = (ROOT / "docs" / "guide" / "sonicset.md").read_text(encoding="utf-8")
     start = done.stdout.index("split ")
-    assert done.stdout[start:].strip() in page  # the docs show this very table
+    end = done.stdout.index("\nimage-source order")  # then per scene (estimates of fixtures)
+    assert done.stdout[start:end].strip() in page  # the docs show this very table
+    assert "  87 more scenes not built yet, not estimated" in done.stdout
     # The paper's 57,102 / 247 / 247 and ~952 / 4 / 4 h: training counted per trajectory,
     # validation and test per group (247 is no multiple of three).
     summary = json.loads(cli("plan", "--summary", "--json", "sonicset.yaml",

@@ -54,7 +54,11 @@ from sonicspec.acoustics.metrics import (
 from sonicspec.acoustics.paths.direct import direct_sound
 from sonicspec.acoustics.paths.edge_paths import close_pairs, diffracted_sound
 from sonicspec.acoustics.paths.edges import DiffractingEdges, EdgeChoice, diffracting_edges
-from sonicspec.acoustics.paths.image_sources import image_sources, planar_regions
+from sonicspec.acoustics.paths.image_sources import (
+    PlanarRegions,
+    image_sources,
+    planar_regions,
+)
 from sonicspec.acoustics.receivers.synthesis import synthesize_early, synthesize_rir
 from sonicspec.acoustics.room.scene import AcousticScene
 from sonicspec.acoustics.room.simplify import simplify_flat_areas
@@ -97,6 +101,12 @@ __all__ = [
 MONO: Mapping[str, Any] = {"kind": "mono", "trajectory": {"kind": "static"}}
 
 
+MIRROR_STRICT_M = 1e-4
+"""``mirror_tolerance_m`` at which only exactly flat surfaces merge (planar_regions' default)."""
+MIRROR_ANGLE_RAD = 0.5
+"""Largest angle between a triangle's normal and its mirror's plane at scan tolerances: a
+small triangle's normal tilts far with millimetres of noise; its vertices decide."""
+
 @dataclass(frozen=True)
 class SimulationSettings:
     """What the engine needs to simulate RIRs: the spec's ``acoustics`` section in the
@@ -131,6 +141,7 @@ class SimulationSettings:
     roulette_db: float = 0.0
     horizontal_guiding: float = 0.0
     simplify_tolerance_m: float = 0.0
+    mirror_tolerance_m: float = MIRROR_STRICT_M
     diffraction: bool = False
     diffraction_max_edges: int = 256
     max_rir_cap_s: float = 10.0
@@ -187,6 +198,16 @@ class SimulationSettings:
             return None
         return air_energy_coefficient_per_m(self.bands_hz, self.temperature_c,
                                             self.relative_humidity_pct)
+
+
+def scene_regions(scene: AcousticScene, settings: SimulationSettings) -> PlanarRegions:
+    """The image-source mirrors of ``scene``: :func:`planar_regions` at the settings'
+    ``mirror_tolerance_m`` (exactly flat surfaces at the default; scan tolerances above it,
+    normals within :data:`MIRROR_ANGLE_RAD`)."""
+    tol = float(settings.mirror_tolerance_m)
+    if tol <= MIRROR_STRICT_M:
+        return planar_regions(scene)
+    return planar_regions(scene, angle_tol_rad=MIRROR_ANGLE_RAD, distance_tol_m=tol)
 
 
 def acoustic_scene(mesh: SceneMesh, library: MaterialLibrary, settings: SimulationSettings
@@ -347,7 +368,7 @@ def simulate_rirs(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarray
     mic = np.asarray(mic_m, dtype=np.float64).reshape(3)
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
-    regions = regions if regions is not None else planar_regions(scene)
+    regions = regions if regions is not None else scene_regions(scene, settings)
     early = early_arrivals(scene, mic, points, settings, regions,
                            directional=needs_directions(microphone))
     traces = trace_rays(scene, mic, points, rng,
@@ -496,7 +517,7 @@ def early_arrivals(scene: AcousticScene, mic_m: np.ndarray, sources_m: np.ndarra
     points = np.asarray(sources_m, dtype=np.float64).reshape(-1, 3)
     air = settings.air()
     c = settings.speed_of_sound_m_s
-    regions = regions if regions is not None else planar_regions(scene)
+    regions = regions if regions is not None else scene_regions(scene, settings)
     order = settings.image_source_order if image_source_order is None else image_source_order
     direct = direct_sound(scene, mic, points, air, c)
     ism = image_sources(scene, mic, points, order, air, c, regions,

@@ -45,7 +45,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
         layouts, unread = None, str(err)
     summary = summarize(loaded.spec, layouts)
     if args.summary:
-        print(json.dumps(summary.to_dict(), indent=2) if args.json else format_summary(summary))
+        orders = None
+        if unread is None:
+            from sonicspec.stages.inspect import format_outlook, image_source_outlook
+
+            orders = image_source_outlook(loaded, compile_plan(loaded, args),
+                                          estimate=args.estimate_scenes)
+        if args.json:
+            print(json.dumps({**summary.to_dict(), "image_source_order": orders}, indent=2))
+        else:
+            print(format_summary(summary))
+            for line in format_outlook(orders or []):
+                print(line)
         if unread is not None and not args.json:
             print(f"(? : counted from the data, which is not there: {unread})")
             missing = missing_data(loaded.spec, loaded.base_dir.resolve())
@@ -105,8 +116,19 @@ def add_plan(sub) -> None:
     p.add_argument(
         "--summary",
         action="store_true",
-        help="only the counts the spec fixes (no data needed: nothing is read)",
+        help="only the counts the spec fixes (no data needed), and per scene the "
+        "image-source order the build reached or will (when the data is there)",
     )
     p.add_argument("--keys", action="store_true", help="also list every job's key and label")
+    p.add_argument(
+        "--estimate-scenes",
+        type=int,
+        default=3,
+        metavar="N",
+        help="with --summary: per scene, the image-source order its RIRs reached (read from "
+        "the store) or, for up to N scenes not built yet, an estimate from the scene's "
+        "traced mesh and one drawn group (candidates per order against the cap; "
+        "default 3, 0 for none)",
+    )
     output_options(p)
     p.set_defaults(func=cmd_plan)

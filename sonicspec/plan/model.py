@@ -43,7 +43,7 @@ STEPS: tuple[Step, ...] = (
     Step("navigation", 1, 1, 2000, 30, "walkable area of each floor"),  # 177; 865 at 1 M
     Step("placement", 3, 1, 1000, 10, "mic, sources and trajectories per group"),  # 160
     Step("arrange", 1, 1, 1000, 10, "utterances and clips per track"),  # 155
-    Step("rir", 18, 1, 1500, 60, "room impulse responses along every trajectory"),  # 357
+    Step("rir", 19, 1, 1500, 60, "room impulse responses along every trajectory"),  # 357
     Step("render", 3, 1, 2000, 30, "moving-source convolution of every track"),  # 1115
     Step("mix", 2, 1, 1500, 10, "loudness normalisation and task mixtures"),  # 864
     Step("export", 6, 1, 1500, 10, "audio files and metadata per group"),  # 875

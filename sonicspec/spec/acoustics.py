@@ -151,6 +151,19 @@ class AcousticsSpec(SpecModel):
         "towards the scan's noise (a mesh with 2 mm noise loses two thirds of its triangles "
         "at 0.02 m, a quarter of the 8.6 cm wavelength at 4 kHz; validate warns above it).",
     )
+    mirror_tolerance_m: float = Field(
+        0.0001,
+        ge=0.0001,
+        le=0.05,
+        description="Image-source mirrors: edge-connected triangles of one material whose "
+        "vertices lie within this distance of a common plane (their normals within 0.5 rad "
+        "of it) reflect as one flat mirror, on the plane fitted to them, metres. The default "
+        "merges only exactly flat surfaces (procedural rooms, CAD). A scan's walls are never "
+        "flat to a tenth of a millimetre: with 2 mm vertex noise every triangle stays a mirror "
+        "of its own and the image-source search needs hundreds of times more candidates; "
+        "0.01 merges them (the sonicset presets use it), an error of the order of that noise "
+        "in each reflection's delay.",
+    )
     histogram_bin_s: float = Field(
         0.001, gt=0, le=0.05, description="Width of the energy-time histogram bins, seconds."
     )

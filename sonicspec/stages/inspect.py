@@ -241,3 +241,140 @@ def format_facts(facts: SceneFacts) -> str:
     if facts.plot is not None:
         lines.append(f"floor plan: {facts.plot}")
     return "\n".join(lines)
+
+
+def image_source_outlook(loaded: LoadedSpec, plan, *, estimate: int = 3) -> list[dict[str, Any]]:
+    """Per scene of ``plan``: the image-source order asked and what the build reached or will.
+
+    Where the store holds the scene's RIR artifacts, the order they reached (the lowest over
+    every source's points, as the rir facts record it) and why it is lower; otherwise, for the
+    first ``estimate`` such scenes, an estimate: the scene built as the mesh step builds it,
+    simplified and merged into mirrors as the rir step does, one group's placement drawn with
+    the spec's rules, and the image-source search from its microphone to one talker's RIR
+    points — the candidates per order against the cap. The rest are listed, not estimated."""
+    from sonicspec.acoustics.paths.image_sources import MAX_CANDIDATES
+    from sonicspec.artifacts import decode
+    from sonicspec.store import ArtifactStore
+
+    store = ArtifactStore(plan.store_dir)
+    asked = loaded.spec.acoustics.image_source_order
+    scene_of = {j.key: read_params("mesh", j.params, j.label).scene_id
+                for j in plan.jobs if j.step == "mesh"}
+    scenes: dict[str, dict[str, Any]] = {}
+    for job in plan.jobs:
+        if job.step != "rir":
+            continue
+        sid = next((scene_of[k] for k in job.inputs if k in scene_of), "?")
+        entry = scenes.setdefault(sid, {"scene_id": sid, "asked": asked, "rir_jobs": 0,
+                                        "built": 0, "sources": 0, "lower": 0, "reached": None,
+                                        "stopped": None, "estimate": None})
+        entry["rir_jobs"] += 1
+        if not store.exists("rir", job.key):
+            continue
+        entry["built"] += 1
+        for group in decode("rir", store.read_data("rir", job.key)).groups:
+            for source in group.sources:
+                if source.image_source_order is None:  # written before it was recorded
+                    continue
+                entry["sources"] += 1
+                entry["lower"] += source.image_source_order < asked
+                if entry["reached"] is None or source.image_source_order < entry["reached"]:
+                    entry["reached"] = source.image_source_order
+                    entry["stopped"] = source.image_source_order_stopped
+    left = estimate
+    for entry in scenes.values():
+        if entry["built"] or entry["scene_id"] == "?" or asked == 0:
+            continue
+        if left <= 0:
+            entry["estimate"] = {"skipped": True}
+            continue
+        left -= 1
+        entry["estimate"] = estimate_image_source_order(loaded, entry["scene_id"])
+        entry["estimate"]["cap"] = MAX_CANDIDATES
+    return list(scenes.values())
+
+
+def estimate_image_source_order(loaded: LoadedSpec, scene_id: str) -> dict[str, Any]:
+    """The image-source search of one drawn group of ``scene_id`` (see
+    :func:`image_source_outlook`): order reached, why lower, candidates per order."""
+    from sonicspec.acoustics.engine import SimulationSettings, acoustic_scene, scene_regions
+    from sonicspec.acoustics.paths.image_sources import image_sources
+    from sonicspec.geometry.materials import material_library
+
+    spec = loaded.spec
+    mesh, _, _, nav_job, _ = build_scene(loaded, scene_id)
+    nav = build_navigation(mesh, nav_settings(read_params("navigation", nav_job.params)))
+    params = PlacementParams(
+        groups=("inspect",), split="inspect", seed=spec.seed, scene_id=scene_id,
+        placement=spec.placement, trajectory=spec.trajectory, microphone=spec.microphone,
+        speakers=spec.mixture.speakers, noise=spec.corpora.noise is not None,
+        music=spec.corpora.music is not None)
+    try:
+        placement = place_group(nav, placement_settings(params), params, "inspect",
+                                rng_for(spec.seed, "inspect", scene_id))
+    except PlacementError as exc:
+        return {"error": f"no group could be placed: {exc}"}
+    settings = SimulationSettings.from_spec(spec.acoustics.model_dump(mode="json"),
+                                            spec.sample_rate_hz, spec.speed_of_sound_m_s)
+    library = material_library(spec.materials.library,
+                               spec.materials.model_dump(mode="json")["custom"])
+    scene = acoustic_scene(mesh, library, settings)
+    regions = scene_regions(scene, settings)
+    mic = np.asarray(placement["mic_path_m"][0], dtype=np.float64)
+    points = np.asarray(placement["speech"][0]["rir_points_m"], dtype=np.float64)
+    c = settings.speed_of_sound_m_s
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SonicspecWarning)
+        found = image_sources(scene, mic, points, settings.image_source_order, settings.air(),
+                              c, regions, max_path_length_m=c * settings.rir_limit_s)
+    return {"reached": found.max_order, "stopped": found.stopped,
+            "candidates": list(found.candidates), "mirrors": regions.n_regions,
+            "traced_faces": scene.n_faces, "points": len(points)}
+
+
+def format_outlook(scenes: list[dict[str, Any]]) -> list[str]:
+    """:func:`image_source_outlook` as lines for a terminal."""
+    if not scenes:
+        return []
+    lines = [f"image-source order (acoustics.image_source_order {scenes[0]['asked']}), per "
+             "scene:"]
+    skipped = [e for e in scenes if (e["estimate"] or {}).get("skipped")]
+    for e in scenes:
+        if e in skipped:
+            continue
+        head = f"  {e['scene_id']}: "
+        if e["built"]:
+            why = f" ({e['stopped']})" if e["stopped"] else ""
+            part = (f"; {e['built']} of {e['rir_jobs']} rir jobs built"
+                    if e["built"] < e["rir_jobs"] else "")
+            if e["reached"] is None:
+                lines.append(head + "built before the order was recorded" + part)
+            elif e["lower"]:
+                lines.append(head + f"order {e['reached']} reached{why} for {e['lower']} of "
+                             f"{e['sources']} sources' RIRs; the ray tracer covers the higher "
+                             f"orders, less exactly{part}")
+            else:
+                lines.append(head + f"order {e['reached']} reached by all {e['sources']} "
+                             f"sources' RIRs{part}")
+            continue
+        est = e["estimate"]
+        if est is None:
+            lines.append(head + "no RIRs asked")
+        elif "error" in est:
+            lines.append(head + f"not built yet, not estimated: {est['error']}")
+        else:
+            counts = " / ".join(f"{n:,}" for n in est["candidates"]) or "none"
+            peak = max(est["candidates"], default=0)
+            verdict = (f"the cap cuts it to order {est['reached']} ({est['stopped']})"
+                       if est["stopped"] else
+                       "near the cap: other positions may be cut" if peak > est["cap"] // 2
+                       else "well under the cap")
+            lines.append(head + f"not built yet; estimate from one drawn group "
+                         f"({est['points']} RIR points, {est['traced_faces']:,} traced "
+                         f"triangles in {est['mirrors']:,} mirrors): order {est['reached']}, "
+                         f"candidates per order {counts} against the cap of {est['cap']:,}: "
+                         f"{verdict}")
+    if skipped:
+        lines.append(f"  {len(skipped)} more scene{'s' * (len(skipped) > 1)} not built yet, "
+                     "not estimated (sonicspec plan --summary --estimate-scenes N)")
+    return lines

@@ -32,12 +32,12 @@ from sonicspec.acoustics.engine import (
     refined_early_paths,
     rir_results,
     scene_edges,
+    scene_regions,
     simulate_rirs,
     with_diffraction_focus,
 )
 from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
-from sonicspec.acoustics.paths.image_sources import planar_regions
 from sonicspec.artifacts import (
     GroupPlacement,
     RirData,
@@ -261,7 +261,7 @@ def run(ctx) -> None:
     settings = SimulationSettings.from_spec(params.acoustics.model_dump(mode="json"),
                                             params.sample_rate_hz, params.speed_of_sound_m_s)
     scene = acoustic_scene(mesh, spec_materials(params.materials), settings)
-    regions = planar_regions(scene)
+    regions = scene_regions(scene, settings)
     placements = artifacts.read(ctx, "placement").groups
     scene_name = f"scene {mesh_art.data.get('scene_id', '?')!r}"
     patterns = source_patterns(params.directivity, ctx.job.paths, settings.bands_hz)

@@ -7,6 +7,25 @@ the same material are therefore merged into one planar region first; a reflectio
 when it lies inside the union of the region's triangles (which is the region polygon, holes and
 non-convex outlines included, without building an outline).
 
+Pruning, before any path is backtracked (the image tree of a furnished or scanned room has
+millions of candidates by order 3):
+
+* reach: a region can only be reflected in next if some part of it lies on the side the last
+  reflection sends sound to (Borish 1984);
+* beams: sound reflected at a region leaves along the rays from the image through that region,
+  so only regions that cone of rays meets (bounding spheres against a cone round the last
+  region's sphere) can hold the next reflection. Both are exact: a pruned candidate has no
+  valid path, so they change no arrival;
+* audibility (``audible_floor_db``, off by default): a candidate whose paths cannot come
+  within that many dB of the free-field direct sound — its reflections' product, bounded over
+  the bands, times the direct distance over the image's distance (no later path is shorter or
+  reflects more) — is dropped with its whole subtree; those are the only arrivals it changes;
+* the last order: only images a receiver can hear through their last region (the segment
+  from the receiver to the image crosses its plane within the region's sphere) are kept —
+  the backtracking would reject the others anyway;
+* the count cap (``max_candidates``), last: an order that still needs more candidates is not
+  searched, and the result says so (``stopped``).
+
 Validity of a candidate path (Borish 1984, backtracking from the receiver): every reflection
 point must lie inside its region, between its two neighbouring path points' sides of the plane,
 and every path segment (source → first reflection → … → receiver) must be free — or pass
@@ -38,6 +57,8 @@ T = TypeVar("T")
 __all__ = ["ImageSourceResult", "PlanarRegions", "image_sources", "planar_regions"]
 
 _NO_REACH = np.zeros((2, 0, 0), dtype=bool)
+MAX_CANDIDATES = 2_000_000
+"""The default cap on one order's candidate images after pruning (about 0.3 GB of them)."""
 # Regions above this count skip the P×P "can one region be reached from another" table.
 _MAX_REGIONS_FOR_REACH_TABLE = 3000
 
@@ -104,7 +125,11 @@ def planar_regions(
     -------
     PlanarRegions
         Region planes are the area-weighted mean of their triangles' planes (exact when the
-        triangles are exactly coplanar).
+        triangles are exactly coplanar). Above the default distance tolerance (scan
+        tolerances), a region grows from its largest triangle and takes edge-connected
+        neighbours whose normals are within ``angle_tol_rad`` of its plane so far and whose
+        vertices lie within ``distance_tol_m`` of it, so a curved surface does not chain
+        into one mirror.
 
     Notes
     -----
@@ -135,21 +160,16 @@ def planar_regions(
     off = np.abs(np.einsum("ij,ikj->ik", nrm_a, vb) - np.take(scene.plane_d, fa)[:, None])
     classes = scene.coefficient_classes()[0]
     same_mat = np.take(classes, fa) == np.take(classes, fb)
-    link = cos_ok & (off.max(axis=1) <= distance_tol_m) & same_mat
-    graph = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(n_faces, n_faces))
-    n_regions, label = connected_components(graph, directed=False)
-    label = label.astype(np.int64)
-
-    area = scene.face_areas_m2
-    weighted = np.zeros((n_regions, 3))
-    np.add.at(weighted, label, nrm * area[:, None])
-    normals = weighted / np.linalg.norm(weighted, axis=1, keepdims=True)
-    centroid = scene.vertices[faces].mean(axis=1)
-    d_num = np.zeros(n_regions)
-    np.add.at(d_num, label, area * np.einsum("ij,ij->i", normals[label], centroid))
-    d_den = np.zeros(n_regions)
-    np.add.at(d_den, label, area)
-    plane_d = d_num / d_den
+    if distance_tol_m > _STRICT_TOL:
+        # Scan tolerances: neighbour tests would chain round a gently curved surface, so each
+        # region grows from its largest face and takes a neighbour only when all its
+        # vertices lie within the tolerance of the region's plane so far.
+        label, n_regions = _seeded_regions(scene, fa[same_mat], fb[same_mat], angle_tol_rad,
+                                           distance_tol_m)
+    else:
+        link = cos_ok & (off.max(axis=1) <= distance_tol_m) & same_mat
+        label, n_regions = _components(fa[link], fb[link], n_faces)
+    normals, plane_d = _fitted_planes(scene, label, n_regions)
 
     region_faces = np.argsort(label, kind="stable")
     region_start = np.searchsorted(label[region_faces], np.arange(n_regions + 1))
@@ -166,6 +186,51 @@ def planar_regions(
     )
 
 
+_STRICT_TOL = 1e-4  # planar_regions' default tolerances: exactly planar faces
+
+
+def _components(fa: np.ndarray, fb: np.ndarray, n_faces: int) -> tuple[np.ndarray, int]:
+    """Connected components of the faces linked by the pairs ``(fa, fb)``: labels, count."""
+    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(n_faces, n_faces))
+    n_regions, label = connected_components(graph, directed=False)
+    return label.astype(np.int64), int(n_regions)
+
+
+def _seeded_regions(scene: AcousticScene, fa: np.ndarray, fb: np.ndarray,
+                    angle_tol_rad: float, distance_tol_m: float) -> tuple[np.ndarray, int]:
+    """Regions grown over the face pairs ``(fa, fb)`` (sharing an edge and a material) from
+    the largest unassigned face: a face joins when its normal is within ``angle_tol_rad`` of
+    the region's plane and its vertices within ``distance_tol_m`` of it (the plane refitted
+    as faces join, :func:`~._image_source_kernels.grow_regions`)."""
+    n_faces = scene.n_faces
+    both_a, both_b = np.concatenate([fa, fb]), np.concatenate([fb, fa])
+    order = np.argsort(both_a, kind="stable")
+    adj = both_b[order].astype(np.int64)
+    adj_start = np.searchsorted(both_a[order], np.arange(n_faces + 1)).astype(np.int64)
+    seeds = np.argsort(-scene.face_areas_m2, kind="stable").astype(np.int64)
+    label = np.empty(n_faces, dtype=np.int64)
+    n_regions = KI.grow_regions(seeds, adj_start, adj, scene.normals, scene.face_areas_m2,
+                                scene.vertices, scene.faces, float(np.cos(angle_tol_rad)),
+                                float(distance_tol_m), label)
+    return label, int(n_regions)
+
+
+def _fitted_planes(scene: AcousticScene, label: np.ndarray, n_regions: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Each region's plane: the area-weighted mean of its triangles' normals and offsets."""
+    nrm, faces = scene.normals, scene.faces
+    area = scene.face_areas_m2
+    weighted = np.zeros((n_regions, 3))
+    np.add.at(weighted, label, nrm * area[:, None])
+    normals = weighted / np.linalg.norm(weighted, axis=1, keepdims=True)
+    centroid = scene.vertices[faces].mean(axis=1)
+    d_num = np.zeros(n_regions)
+    np.add.at(d_num, label, area * np.einsum("ij,ij->i", normals[label], centroid))
+    d_den = np.zeros(n_regions)
+    np.add.at(d_den, label, area)
+    return normals, d_num / d_den
+
+
 @dataclass(frozen=True, eq=False)
 class ImageSourceResult:
     """Image-source arrivals per receiver and the order that was completed.
@@ -180,6 +245,10 @@ class ImageSourceResult:
     stopped: str | None = None
     """Why ``max_order`` is lower than asked (``"order 3 needs more than 2,000,000
     candidates"``), None when the asked order was reached."""
+    candidates: tuple[int, ...] = ()
+    """Candidate images searched per order (1, 2, …), after pruning."""
+    inaudible: int = 0
+    """Candidates dropped below ``audible_floor_db`` (their subtrees not counted)."""
 
 
 def _region_extremes(scene: AcousticScene, regions: PlanarRegions
@@ -305,7 +374,9 @@ def image_sources(
     speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
     regions: PlanarRegions | None = None,
     max_path_length_m: float | None = None,
-    max_candidates: int = 2_000_000,
+    max_candidates: int | None = None,
+    audible_floor_db: float | None = None,
+    beams: bool = True,
 ) -> ImageSourceResult:
     """Specular reflections of order 1…``max_order`` from a source to every receiver.
 
@@ -329,10 +400,17 @@ def image_sources(
     max_path_length_m : float, optional
         Drop paths longer than this (e.g. ``c ×`` the RIR length). Safe pruning: a valid
         path's length never decreases with further reflections.
-    max_candidates : int
-        Largest number of candidate images of one order. If the next order would exceed it,
-        the search stops at the previous order with a :class:`SonicspecWarning` (the result's
-        ``max_order`` says which order was completed).
+    max_candidates : int, optional
+        Largest number of candidate images of one order, after pruning (default
+        :data:`MAX_CANDIDATES`): a last resort. If the
+        next order would exceed it, the search stops at the previous order with a
+        :class:`SonicspecWarning` (the result's ``max_order`` and ``stopped`` say so).
+    audible_floor_db : float, optional
+        Drop candidates whose paths cannot come within this many dB of the free-field direct
+        sound at any receiver (``20 log10`` of the bound in the module docstring; e.g. 60).
+        None keeps every candidate (exact).
+    beams : bool
+        Beam pruning (exact; False only to compare against the unpruned search).
 
     Returns
     -------
@@ -363,6 +441,8 @@ def image_sources(
             f"regions: expected the planar regions of this scene ({scene.n_faces} faces), "
             f"got regions of {len(regions.face_region)} faces"
         )
+    if max_candidates is None:
+        max_candidates = MAX_CANDIDATES
     src = source[0]
     n_rcv = len(receivers)
     tol = scene.eps_m
@@ -372,7 +452,28 @@ def image_sources(
     normals = regions.normals
     counts = None if reach is None else regions.memoized(
         ("reach_counts", tol), lambda: reach.sum(axis=2))
-    candidates = _CandidateTest(normals, regions.plane_d, tol, reach, counts)
+    spheres = (regions.memoized("region_spheres", lambda: _region_spheres(scene, regions))
+               if beams and regions.n_regions else np.zeros((0, 4)))
+    hull_pts, hull_start = (regions.memoized("region_outlines",
+                                             lambda: _region_outlines(scene, regions))
+                            if beams and max_order >= 2 else (np.zeros((0, 3)),
+                                                              np.zeros(1, np.int64)))
+    # How far a valid reflection point (on the region's plane) may lie outside its outline
+    # (the corners projected onto that plane): the probe rays of large regions run along the
+    # normal, so none; a small region's off-plane triangles tilt by at most the angle
+    # tolerance over twice the distance tolerance; with room to spare.
+    margin = (4.0 * scene.eps_m + 2.0 * regions.distance_tol_m
+              + 1e-6 * max(1.0, float(np.abs(scene.vertices).max(initial=0.0))))
+    floor = 0.0
+    if audible_floor_db is not None:
+        if not audible_floor_db > 0:
+            raise AcousticsError(f"audible_floor_db: expected > 0 dB, got {audible_floor_db}")
+        floor = 10.0 ** (-float(audible_floor_db) / 20.0)
+    direct_m = np.linalg.norm(receivers - source[0], axis=1)
+    region_gain = np.sqrt(regions.reflection_energy.max(axis=1)) if regions.n_regions else (
+        np.zeros(0))
+    candidates = _CandidateTest(normals, regions.plane_d, tol, reach, counts, spheres, floor,
+                                direct_m, hull_pts, hull_start, margin)
 
     per_receiver: list[list[Arrivals]] = [[] for _ in range(n_rcv)]
     # The image tree, one order at a time: levels[k] holds the images after k+1 reflections
@@ -383,24 +484,31 @@ def image_sources(
     levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     iso = IDENTITY[None].copy()  # [M | b] of the current level: image = M @ source + b
     side = np.zeros(1, dtype=np.int64)
+    gain = np.ones(1)
     last_pos = src[None, :]
     completed = 0
     stopped = None
+    searched: list[int] = []
+    dropped = np.zeros(1, dtype=np.int64)
     for order in range(1, max_order + 1):
         # Candidates (parent image, region), compiled: at most min(pairs, limit) rows.
         last_plane = levels[-1][2] if order > 1 else None
         count = max_candidates + 1  # decided without building the images
-        if not _provably_too_many(candidates, last_pos, last_plane, side, receivers,
-                                  max_path_length_m, max_candidates):
+        last = bool(len(spheres)) and order == max_order
+        if not _provably_too_many(candidates, last_pos, last_plane, side, gain, receivers,
+                                  max_path_length_m, max_candidates, last):
             rows = min(_pair_bound(candidates, last_pos, last_plane, side), max_candidates)
             parent, plane = np.empty(rows, np.int64), np.empty(rows, np.int64)
             new_pos, new_side = np.empty((rows, 3)), np.empty(rows, np.int64)
+            new_gain = np.empty(rows)
             count = KI.next_order(
                 np.ascontiguousarray(last_pos, dtype=np.float64),
                 _own_planes(last_pos, last_plane), side.astype(np.int64), normals,
                 regions.plane_d, tol, reach if reach is not None else _NO_REACH, receivers,
                 -1.0 if max_path_length_m is None else float(max_path_length_m),
-                max_candidates, parent, plane, new_pos, new_side)
+                max_candidates, parent, plane, new_pos, new_side, spheres, gain, floor,
+                direct_m, region_gain, new_gain, dropped, hull_pts, hull_start, margin,
+                last, float(tol))
         if count > max_candidates:
             warnings.warn(
                 f"image sources: order {order} needs more than {max_candidates} candidates; "
@@ -411,8 +519,9 @@ def image_sources(
             )
             stopped = f"order {order} needs more than {max_candidates:,} candidates"
             break
-        parent, plane, new_pos, new_side = (x[:count] for x in (parent, plane, new_pos,
-                                                                 new_side))
+        parent, plane, new_pos, new_side, gain = (
+            x[:count] for x in (parent, plane, new_pos, new_side, new_gain))
+        searched.append(int(count))
         levels.append((parent, new_pos, plane))
         iso = _mirrored(iso[parent], normals[plane], regions.plane_d[plane])
         side, last_pos = new_side, new_pos
@@ -439,7 +548,8 @@ def image_sources(
         for parts in per_receiver
     )
     return ImageSourceResult(arrivals=arrivals, max_order=completed,
-                             stopped=stopped if completed < max_order else None)
+                             stopped=stopped if completed < max_order else None,
+                             candidates=tuple(searched), inaudible=int(dropped[0]))
 
 
 def _mirrored(iso: np.ndarray, normal: np.ndarray, plane_d: np.ndarray) -> np.ndarray:
@@ -455,13 +565,55 @@ def _mirrored(iso: np.ndarray, normal: np.ndarray, plane_d: np.ndarray) -> np.nd
 class _CandidateTest:
     """Which (parent image, region) pairs make candidate images: the region planes, the
     off-plane tolerance, the reach table (None: every region is reachable) and its row sums
-    ``reach_counts[side, q]``, the regions reachable from each side of ``q``."""
+    ``reach_counts[side, q]``, the regions reachable from each side of ``q``; the regions'
+    bounding spheres for beam pruning (``(0, 4)``: none), the audibility floor (an amplitude
+    ratio, 0: none) and the direct distance to each receiver."""
 
     normals: np.ndarray
     plane_d: np.ndarray
     tol: float
     reach: np.ndarray | None
     reach_counts: np.ndarray | None
+    spheres: np.ndarray
+    floor: float
+    direct_m: np.ndarray
+    hull_pts: np.ndarray
+    hull_start: np.ndarray
+    margin: float
+
+
+def _region_outlines(scene: AcousticScene, regions: PlanarRegions
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Each region's convex outline on its plane, corners in order: ``points (K, 3)`` and
+    ``starts (P+1,)``; a degenerate region (fewer than 3 corners) gets none."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    chunks, counts = [], []
+    for p in range(regions.n_regions):
+        fcs = regions.region_faces[regions.region_start[p]:regions.region_start[p + 1]]
+        n = regions.normals[p]
+        pts = scene.vertices[np.unique(scene.faces[fcs])]
+        pts = pts - np.outer(pts @ n - regions.plane_d[p], n)  # onto the plane
+        u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        try:
+            pts = pts[ConvexHull(np.column_stack([pts @ u, pts @ v])).vertices]
+        except (QhullError, ValueError):
+            pts = pts[:0]
+        chunks.append(pts)
+        counts.append(len(pts))
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return np.ascontiguousarray(np.concatenate(chunks)), starts
+
+
+def _region_spheres(scene: AcousticScene, regions: PlanarRegions) -> np.ndarray:
+    """``(P, 4)``: a sphere enclosing each region (centre, radius), from its widened bounding
+    box (:func:`_region_boxes`), for beam pruning."""
+    boxes = _region_boxes(scene, regions)
+    centre = boxes.mean(axis=1)
+    radius = 0.5 * np.linalg.norm(boxes[:, 1] - boxes[:, 0], axis=1)
+    return np.ascontiguousarray(np.column_stack([centre, radius * (1.0 + 1e-9) + 1e-9]))
 
 
 def _own_planes(last_pos: np.ndarray, last_plane: np.ndarray | None) -> np.ndarray:
@@ -484,9 +636,11 @@ def _provably_too_many(
     last_pos: np.ndarray,
     last_plane: np.ndarray | None,
     side: np.ndarray,
+    gain: np.ndarray,
     receivers: np.ndarray,
     max_path_length_m: float | None,
     limit: int,
+    last: bool,
 ) -> bool:
     """Whether the next order has more than ``limit`` candidates, decided without building
     the images (in a scan, order 3 overflows after ~0.5 s of building them otherwise).
@@ -501,7 +655,9 @@ def _provably_too_many(
     return bool(KI.more_candidates_than(
         np.ascontiguousarray(last_pos, dtype=np.float64), _own_planes(last_pos, last_plane),
         side.astype(np.int64), candidates.normals, candidates.plane_d, candidates.tol, reach,
-        receivers, -1.0 if max_path_length_m is None else float(max_path_length_m), limit))
+        receivers, -1.0 if max_path_length_m is None else float(max_path_length_m), limit,
+        candidates.spheres, gain, candidates.floor, candidates.direct_m, candidates.hull_pts,
+        candidates.hull_start, candidates.margin, last, candidates.tol))
 
 
 def _chains(levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]], rows: np.ndarray
