@@ -47,6 +47,7 @@ MAX_DRIFT_PPM = 1000.0
 MIN_CORRELATION = 0.1  # noise alone correlates ~1/sqrt(chirp samples) (< 0.02 for 1 s at 16 kHz)
 PEAK_DBFS = -6.0  # the loudest sample of a take's files
 SINC_HALF_TAPS = 32
+FIRST_ARRIVAL_S = 0.02  # how far before the strongest arrival the direct sound is sought
 
 
 @dataclass(frozen=True)
@@ -61,17 +62,19 @@ class Chirp:
     amplitude: float = 0.5
     fade_s: float = 0.01
 
-    def samples(self, rate: int) -> np.ndarray:
+    def samples(self, rate: float) -> np.ndarray:
+        """The sweep sampled at ``rate`` (Hz; a recorder's rate may be fractional: the
+        playback rate times its drift ratio)."""
         from scipy.signal import chirp
 
         if not 0 < self.f_start_hz < self.f_stop_hz < rate / 2:
             raise DatasetError(f"chirp: {self.f_start_hz}–{self.f_stop_hz} Hz does not fit "
                                f"below the Nyquist frequency of {rate} Hz")
-        n = int(round(self.duration_s * rate))
+        n = round(self.duration_s * rate)
         t = np.arange(n) / rate
         x = chirp(t, self.f_start_hz, self.duration_s, self.f_stop_hz, method="logarithmic",
                   phi=-90)
-        fade = int(round(self.fade_s * rate))
+        fade = round(self.fade_s * rate)
         if fade:
             ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(fade) / fade)
             x[:fade] *= ramp
@@ -158,10 +161,10 @@ def write_sheet(dataset: str | Path, out: str | Path, split: str = "test", *,
             raise DatasetError(f"{folder.root / group.id}: the dry talkers are silent")
         gain = 10 ** (PEAK_DBFS / 20) / peak
         sweep = chirp.samples(rate)
-        take = Take(int(round(lead_s * rate)), len(sweep), int(round(gap_s * rate)), n,
-                    int(round(tail_s * rate)))
+        take = Take(round(lead_s * rate), len(sweep), round(gap_s * rate), n,
+                    round(tail_s * rate))
         files = []
-        for k, (name, d) in enumerate(zip(group.speakers, dry), start=1):
+        for k, (name, d) in enumerate(zip(group.speakers, dry, strict=True), start=1):
             x = np.zeros(take.length)
             x[take.content_start:take.content_start + len(d)] = gain * d
             if k == 1:
@@ -229,14 +232,33 @@ def matched_filter(x: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return r, rho
 
 
-def refine_peak(r: np.ndarray, i: int, half: int = 64) -> float:
-    """The peak of ``r`` near ``i`` to a fraction of a sample: a parabola through the three
-    samples around the maximum of the Hilbert envelope of ``r[i-half : i+half]``."""
+def whitened(sweep: np.ndarray, rate: float, chirp: Chirp | None = None) -> np.ndarray:
+    """The sweep weighted by its instantaneous frequency over the start frequency,
+    ``exp(t / L)`` with ``L = T / ln(f1 / f0)`` (Farina's inverse-filter weighting, reversed):
+    correlating with it gives a flat spectrum over the sweep's band (the plain matched
+    filter's falls 3 dB per octave, and its broad low-frequency peak blurs the direct sound
+    into the first reflections)."""
+    c = chirp or Chirp()
+    t = np.arange(len(sweep)) / rate
+    rate_l = c.duration_s / math.log(c.f_stop_hz / c.f_start_hz)
+    w = np.exp(t / rate_l)
+    return sweep * w / np.linalg.norm(sweep * w)
+
+
+def refine_peak(r: np.ndarray, i: int, rate: float, half: int = 64) -> float:
+    """The first arrival of the chirp near the correlation's maximum ``i``, to a fraction of a
+    sample: on the Hilbert envelope of ``r`` from :data:`FIRST_ARRIVAL_S` before ``i``, the
+    first local maximum that reaches half the largest (a strong reflection can top the direct
+    sound; the direct sound comes first), refined by a parabola through its three samples."""
     from scipy.signal import hilbert
 
-    lo, hi = max(0, i - half), min(len(r), i + half + 1)
+    lo = max(0, i - int(FIRST_ARRIVAL_S * rate) - half)
+    hi = min(len(r), i + half + 1)
     env = np.abs(hilbert(r[lo:hi]))
-    k = int(np.argmax(env))
+    top = float(env[min(i - lo, len(env) - 1)])
+    k = int(np.argmax(env >= 0.5 * max(top, float(env.max()) * 0.5)))
+    while k + 1 < len(env) and env[k + 1] >= env[k]:
+        k += 1
     if 0 < k < len(env) - 1:
         a, b, c = env[k - 1], env[k], env[k + 1]
         den = a - 2 * b + c
@@ -246,37 +268,44 @@ def refine_peak(r: np.ndarray, i: int, half: int = 64) -> float:
     return lo + k + float(np.clip(frac, -0.5, 0.5))
 
 
-def find_chirps(x: np.ndarray, sweep: np.ndarray, spacing: int, where: str
-                ) -> tuple[float, float, float]:
+def find_chirps(x: np.ndarray, sweep: np.ndarray, spacing: int, rate: float, where: str,
+                chirp: Chirp | None = None) -> tuple[float, float, float]:
     """The start and end chirps' arrivals in ``x`` (recorder samples, sub-sample) and the
     weaker of their normalised correlations. ``spacing`` is their distance in playback samples;
     the second is searched within :data:`MAX_DRIFT_PPM` of it."""
     if len(x) < len(sweep):
         raise DatasetError(f"{where}: {len(x)} samples, shorter than the sync chirp "
                            f"({len(sweep)}); the recording is cut short")
-    r, rho = matched_filter(x, sweep)
-    first = int(np.argmax(rho))
-    best = float(rho[first])
+    from scipy.signal import fftconvolve
+
+    _, rho = matched_filter(x, sweep)
+    # Timing on the whitened correlation (the room's impulse response, band-limited to the
+    # sweep: a sharp direct-sound peak); the normalised one scores it.
+    r = fftconvolve(x, whitened(sweep, rate, chirp)[::-1], mode="valid")
+    mag = np.abs(r)
+    first = int(np.argmax(mag))
+    best = float(abs(rho[first]))  # a loudspeaker wired in reverse polarity still counts
     if best < MIN_CORRELATION:
         raise DatasetError(f"{where}: sync chirp not found: the best normalised correlation "
                            f"with it is {best:.3f} (at {first} samples; at least "
                            f"{MIN_CORRELATION} expected); was loudspeaker 1 (the sync "
                            "loudspeaker) audible and the recording started before the take?")
-    slack = int(math.ceil(spacing * MAX_DRIFT_PPM * 1e-6)) + 2
+    slack = math.ceil(spacing * MAX_DRIFT_PPM * 1e-6) + 2
     candidates = []
     for sign in (1, -1):
         centre = first + sign * spacing
         lo, hi = max(0, centre - slack), min(len(rho), centre + slack + 1)
         if lo < hi:
-            j = lo + int(np.argmax(rho[lo:hi]))
-            candidates.append((float(rho[j]), j))
+            j = lo + int(np.argmax(mag[lo:hi]))
+            if lo < j < hi - 1 or lo == 0 or hi == len(rho):  # a peak, not a slope's edge
+                candidates.append((float(abs(rho[j])), j))
     other = max(candidates, default=None)
     if other is None or other[0] < MIN_CORRELATION:
         seen = f"{other[0]:.3f} at {other[1]} samples" if other else "none (outside the file)"
         # Is the other chirp there, only farther than a plausible drift?
-        far = [j for j in np.argsort(rho)[::-1][:50]
+        far = [j for j in np.argsort(mag)[::-1][:50]
                if abs(abs(int(j) - first) - spacing) > slack and abs(int(j) - first) > len(sweep)
-               and rho[j] >= MIN_CORRELATION]
+               and abs(rho[j]) >= MIN_CORRELATION]
         if far:
             ppm = (abs(int(far[0]) - first) / spacing - 1) * 1e6
             raise DatasetError(f"{where}: the chirps are {abs(int(far[0]) - first)} samples "
@@ -290,7 +319,7 @@ def find_chirps(x: np.ndarray, sweep: np.ndarray, spacing: int, where: str
                            f"(at least {MIN_CORRELATION} expected); the recording stops early "
                            "or started late")
     a, b = sorted((first, other[1]))
-    return refine_peak(r, a), refine_peak(r, b), min(best, other[0])
+    return refine_peak(r, a, rate), refine_peak(r, b, rate), min(best, other[0])
 
 
 # --- resampling onto the playback clock -----------------------------------------------------
@@ -340,7 +369,7 @@ class Alignment:
     correlation: float
 
 
-def align_take(x: np.ndarray, rate: int, take: dict[str, Any], sweep: np.ndarray,
+def align_take(x: np.ndarray, rate: int, take: dict[str, Any], chirp: Chirp,
                where: str) -> tuple[Alignment, np.ndarray]:
     """Align one recording (channels, samples) to its take; returns the alignment and the
     talkers' span on the playback clock, ``(channels, content)`` samples."""
@@ -348,10 +377,25 @@ def align_take(x: np.ndarray, rate: int, take: dict[str, Any], sweep: np.ndarray
     if rate != take["sample_rate_hz"]:
         raise DatasetError(f"{where}: recorded at {rate} Hz, the sheet plays at "
                            f"{take['sample_rate_hz']} Hz; record at the sheet's rate")
-    mono = x.sum(axis=0)
     spacing = lay.end_chirp - lay.start_chirp
-    t0, t1, corr = find_chirps(mono, sweep, spacing, where)
+    shortest = int((spacing + lay.chirp) * (1 - MAX_DRIFT_PPM * 1e-6))
+    if x.shape[1] < shortest:
+        raise DatasetError(f"{where}: {x.shape[1]} samples ({x.shape[1] / rate:.3f} s), "
+                           f"shorter than the schedule: the take plays {spacing + lay.chirp} "
+                           f"samples ({(spacing + lay.chirp) / rate:.3f} s) from its first "
+                           "chirp to the end of its last; record the whole take")
+    mono = x.sum(axis=0)
+    t0, t1, corr = find_chirps(mono, chirp.samples(rate), spacing, rate, where, chirp)
     ratio = (t1 - t0) / spacing
+    if abs(ratio - 1.0) <= MAX_DRIFT_PPM * 1e-6:
+        # Again with the sweep as the drifting recorder hears it (sampled at rate * ratio):
+        # the played sweep's correlation peak moves with the drift (by about 0.8 samples for
+        # 50 ppm over a 1 s sweep at 16 kHz), the same for both chirps, so the ratio holds but
+        # the offset does not.
+        heard = rate * ratio
+        t0, t1, corr = find_chirps(mono, chirp.samples(heard), round(spacing * ratio),
+                                   heard, where, chirp)
+        ratio = (t1 - t0) / spacing
     ppm = (ratio - 1.0) * 1e6
     if abs(ppm) > MAX_DRIFT_PPM:
         raise DatasetError(f"{where}: a clock drift of {ppm:+.1f} ppm from the chirps "
@@ -361,7 +405,7 @@ def align_take(x: np.ndarray, rate: int, take: dict[str, Any], sweep: np.ndarray
     need = start + lay.content * ratio + SINC_HALF_TAPS
     if need > x.shape[1]:
         raise DatasetError(f"{where}: {x.shape[1]} samples ({x.shape[1] / rate:.3f} s), the "
-                           f"take's talkers end at sample {int(math.ceil(need))} "
+                           f"take's talkers end at sample {math.ceil(need)} "
                            f"({need / rate:.3f} s): the recording is shorter than the "
                            "schedule")
     cut = resample_at(x, start, ratio, lay.content)
@@ -386,8 +430,7 @@ def align(recordings: str | Path, sheet: str | Path, out: str | Path) -> list[Al
     for take in manifest["takes"]:
         path = recordings / take["recording"]
         x, rate = _read_wav(path)
-        result, cut = align_take(x, rate, take, chirp.samples(take["sample_rate_hz"]),
-                                 str(path))
+        result, cut = align_take(x, rate, take, chirp, str(path))
         item = out / take["split"] / take["item"]
         _write_wav(item / "mixture.wav", cut, rate, subtype="FLOAT")
         for ls in take["loudspeakers"]:
