@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import re
 from fractions import Fraction
 from pathlib import Path
 
@@ -236,6 +237,17 @@ def test_errors_name_the_file_and_the_value(kit: dict, tmp_path: Path) -> None:
         align(rec, tmp_path / "nosheet", tmp_path / "out")
     with pytest.raises(DatasetError, match=r"no recording of 2 take\(s\), first test/000000"):
         align(tmp_path, sheet, tmp_path / "out")
+
+
+def test_playback_needs_the_dry_stems_and_the_split(kit: dict, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    data = write_dataset(tmp_path / "data")
+    with pytest.raises(DatasetError, match=r"split 'val' not in the dataset; it has \['test'\]"):
+        write_sheet(data, tmp_path / "sheet", "val")
+    (data / "test/000001/source2_dry.wav").unlink()
+    assert main(["playback", str(data), "--out", str(tmp_path / "sheet")]) == 2
+    assert re.search(r"test/000001: no source2_dry file; the dataset was built without "
+                     r"mixture.targets: \[dry\]", capsys.readouterr().err)
 
 
 def test_the_cli_plays_aligns_and_evaluates(kit: dict, tmp_path: Path,
