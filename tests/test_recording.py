@@ -187,14 +187,17 @@ def test_evaluate_scores_the_cut_set_like_any_split(kit: dict) -> None:
     assert all(r["si_snr"] >= 100.0 for r in top)
 
 
-def test_resample_at_matches_a_sinusoid_at_a_drifted_clock() -> None:
+@pytest.mark.parametrize("hz", [1234.5, 6000.0])
+def test_resample_at_matches_a_sinusoid_at_a_drifted_clock(hz: float) -> None:
+    """The exact reference: a sinusoid evaluated at the drifted instants (the kernel's
+    pass-band ripple, about -86 dB with the Kaiser window, bounds the error)."""
     n = 4000
-    f = 1234.5 / RATE
+    f = hz / RATE
     x = np.sin(2 * np.pi * f * np.arange(n))
     y = resample_at(x, 100.25, 1.00005, 3000)[0]
     t = 100.25 + np.arange(3000) * 1.00005
     err = y[50:-50] - np.sin(2 * np.pi * f * t[50:-50])
-    assert np.max(np.abs(err)) < 1e-3
+    assert np.max(np.abs(err)) < 1e-4
 
 
 def test_matched_filter_normalised_peak_is_one_on_the_chirp() -> None:
