@@ -44,7 +44,7 @@ from sonicspec.dataload.folder import DatasetError, DatasetFolder
 
 SHEET_VERSION = 1
 MAX_DRIFT_PPM = 1000.0
-MIN_CORRELATION = 0.1  # noise alone correlates ~1/sqrt(chirp samples) (< 0.02 for 1 s at 16 kHz)
+MIN_CORRELATION = 0.1  # noise alone: at most about 0.04 over a minute (1 s sweep at 16 kHz)
 PEAK_DBFS = -6.0  # the loudest sample of a take's files
 SINC_HALF_TAPS = 32
 PHASES = 2048  # the resampling kernel's table: fractional offsets per sample
