@@ -21,6 +21,7 @@ from sonicspec.dataload.folder import DatasetError
 from sonicspec.dataload.recording import (
     Chirp,
     align,
+    align_take,
     matched_filter,
     read_sheet,
     resample_at,
@@ -205,6 +206,16 @@ def test_matched_filter_normalised_peak_is_one_on_the_chirp() -> None:
     x = np.concatenate([np.zeros(500), sweep, np.zeros(300)])
     _, rho = matched_filter(x, sweep)
     assert int(np.argmax(rho)) == 500 and rho[500] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_a_multichannel_reversed_polarity_recording_aligns_the_same(kit: dict) -> None:
+    take = kit["manifest"]["takes"][0]
+    y, _ = sf.read(kit["tmp"] / "rec" / take["recording"])
+    before = next(a for a in kit["result"] if a.group == take["group"])
+    a, cut = align_take(np.stack([-y, -0.5 * y]), RATE, take, Chirp(), "two channels")
+    assert abs(a.start_chirp - before.start_chirp) < 0.01
+    assert a.drift_ppm == pytest.approx(before.drift_ppm, abs=0.01)
+    assert cut.shape == (2, take["layout_samples"]["content"])
 
 
 def _one_take(kit: dict, tmp: Path, y: np.ndarray) -> Path:
