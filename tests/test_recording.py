@@ -32,23 +32,23 @@ RATE = 16000
 GROUPS = {"test/000000": 2.0, "test/000001": 1.5}  # group -> talkers' length, seconds
 
 
-def write_dataset(root: Path) -> Path:
+def write_dataset(root: Path, rate: int = RATE) -> Path:
     """A dataset folder as `sonicspec build` writes it (dataset.json, metadata.json per
     group, the dry stems ``source<k>_dry.wav`` beside the tracks), with speech-like talkers:
     noise bursts in the speech band (80 Hz – 7 kHz) shaped by a syllable-rate envelope."""
     rng = np.random.default_rng(7)
-    speech_band = butter(8, (80, 7000), "bandpass", fs=RATE, output="sos")
+    speech_band = butter(8, (80, min(7000, 0.45 * rate)), "bandpass", fs=rate, output="sos")
     groups = []
     for gid, seconds in GROUPS.items():
-        n = int(seconds * RATE)
-        meta = {"sample_rate_hz": RATE, "num_samples": n}
-        t = np.arange(n) / RATE
+        n = int(seconds * rate)
+        meta = {"sample_rate_hz": rate, "num_samples": n}
+        t = np.arange(n) / rate
         for k in (1, 2):
             env = np.maximum(0.0, np.sin(2 * np.pi * (3 + k) * t + k)) ** 2
             x = 0.3 * env * sosfiltfilt(speech_band, rng.standard_normal(n))
             (root / gid).mkdir(parents=True, exist_ok=True)
-            sf.write(root / gid / f"source{k}_dry.wav", x, RATE, subtype="FLOAT")
-            sf.write(root / gid / f"source{k}.wav", 0.5 * x, RATE, subtype="FLOAT")
+            sf.write(root / gid / f"source{k}_dry.wav", x, rate, subtype="FLOAT")
+            sf.write(root / gid / f"source{k}.wav", 0.5 * x, rate, subtype="FLOAT")
             meta[f"source{k}"] = {"file": f"{gid}/source{k}.wav"}
         (root / gid / "metadata.json").write_text(json.dumps(meta))
         groups.append({"group": gid, "split": "test",
@@ -258,6 +258,12 @@ def test_playback_needs_the_dry_stems_and_the_split(kit: dict, tmp_path: Path,
     data = write_dataset(tmp_path / "data")
     with pytest.raises(DatasetError, match=r"split 'val' not in the dataset; it has \['test'\]"):
         write_sheet(data, tmp_path / "sheet", "val")
+    # At 8 kHz (LibriMix wav8k) the sweep stops at 3.2 kHz, below the Nyquist frequency.
+    with pytest.raises(DatasetError, match=r"chirp: 100.0–6000.0 Hz does not fit below the "
+                       r"Nyquist frequency of 8000 Hz"):
+        Chirp().samples(8000)
+    low = write_sheet(write_dataset(tmp_path / "data8k", rate=8000), tmp_path / "s8k")
+    assert low["chirp"]["f_stop_hz"] == 3200.0
     (data / "test/000001/source2_dry.wav").unlink()
     assert main(["playback", str(data), "--out", str(tmp_path / "sheet")]) == 2
     assert re.search(r"test/000001: no source2_dry file; the dataset was built without "

@@ -138,16 +138,21 @@ def _first_position(group, name: str) -> list[float] | None:
 
 
 def write_sheet(dataset: str | Path, out: str | Path, split: str = "test", *,
-                chirp: Chirp = Chirp(), lead_s: float = 0.5, gap_s: float = 0.5,
+                chirp: Chirp | None = None, lead_s: float = 0.5, gap_s: float = 0.5,
                 tail_s: float = 1.0) -> dict[str, Any]:
     """Write the playback sheet of ``split`` of a built dataset into ``out``; returns the
     manifest (also ``out/manifest.json``). Each talker's file is its dry stem
-    (``source<k>_dry``: a dataset built with ``mixture.targets: [dry]``)."""
+    (``source<k>_dry``: a dataset built with ``mixture.targets: [dry]``). The chirp
+    defaults to :class:`Chirp` with its top at most 0.4 times the lowest sample rate (6 kHz
+    from 16 kHz up, 3.2 kHz at 8 kHz)."""
     folder = DatasetFolder(dataset)
     out = Path(out)
     groups = folder.groups(split)
     if not groups:
         raise DatasetError(f"{folder.root}: split {split!r} has no groups")
+    if chirp is None:
+        lowest = min(g.sample_rate_hz for g in groups)
+        chirp = Chirp(f_stop_hz=min(Chirp.f_stop_hz, 0.4 * lowest))
     takes, rows = [], []
     for group in groups:
         rate = group.sample_rate_hz
