@@ -22,6 +22,7 @@ from sonicspec.dataload.recording import (
     Chirp,
     align,
     align_take,
+    find_chirps,
     matched_filter,
     read_sheet,
     resample_at,
@@ -216,6 +217,20 @@ def test_a_multichannel_reversed_polarity_recording_aligns_the_same(kit: dict) -
     assert abs(a.start_chirp - before.start_chirp) < 0.01
     assert a.drift_ppm == pytest.approx(before.drift_ppm, abs=0.01)
     assert cut.shape == (2, take["layout_samples"]["content"])
+
+
+def test_the_direct_sound_is_found_before_a_stronger_reflection() -> None:
+    """A reflection 3 ms after the direct sound and stronger than it (a loudspeaker facing a
+    wall): the arrival is the direct sound's, not the correlation's maximum."""
+    sweep = Chirp().samples(RATE)
+    x = np.zeros(60000)
+    x[1000:1000 + len(sweep)] += sweep
+    x[40000:40000 + len(sweep)] += sweep
+    h = np.zeros(200)
+    h[100], h[148] = 0.6, 1.0
+    t0, t1, corr = find_chirps(np.convolve(x, h), sweep, 39000, RATE, "wall")
+    assert t0 == pytest.approx(1100, abs=0.1) and t1 == pytest.approx(40100, abs=0.1)
+    assert corr > 0.5
 
 
 def _one_take(kit: dict, tmp: Path, y: np.ndarray) -> Path:
