@@ -256,7 +256,10 @@ def facing_to_mic_deg(entry: dict[str, Any], mic_path: np.ndarray | None,
     between its front (its track's ``yaw_deg``) and the direction from it to the microphone,
     degrees in [0, 180] (0: it faces the microphone, 180: its back is turned), every
     :data:`FACING_EVERY`-th frame. None for a source without a facing track (omni)."""
-    values = track_values(entry.get("track"), root)
+    track = entry.get("track")
+    if not isinstance(track, dict) or "yaw_deg" not in (track.get("arrays") or track):
+        return None  # an omni source: no archive opened
+    values = track_values(track, root)
     yaw, pos = values.get("yaw_deg"), values.get("positions_m")
     if yaw is None or pos is None:
         return None
