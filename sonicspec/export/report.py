@@ -74,6 +74,8 @@ def _environment():
 def _fmt_num(x: Any, digits: int = 3) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "–"
+    if isinstance(x, str):  # a rule, e.g. a split's groups: each_speaker_per_scene
+        return x
     if isinstance(x, int):
         return f"{x:,}"
     return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
@@ -171,7 +173,7 @@ def _realism(spec: dict[str, Any], groups: list[dict[str, Any]], splits: Sequenc
         entry = {"role": role, "pattern": d["pattern"], "facing": d.get("facing", "walk"),
                  "head_turn": (f"{turn['std_deg']:g}° RMS, {turn['time_constant_s']:g} s"
                                if isinstance(turn, dict) else None),
-                 "plot": None}
+                 "plot": None, "sofa_path": None}
         if d["pattern"] != "sofa":
             entry["plot"] = plots.directivity_polar(d["pattern"], pattern_by_name(d["pattern"]),
                                                     bands)
