@@ -288,3 +288,15 @@ def test_speakers_counted_from_folder_names_are_the_indexs(tmp_path: Path) -> No
     index = index_librispeech(tmp_path / "ls", subsets)
     assert librispeech_speakers(tmp_path / "ls", subsets) == {
         s: sorted(index.speakers(s)) for s in subsets}
+
+
+def test_the_realistic_preset_plans_the_papers_table(paper_data: Path) -> None:
+    """sonicset_realistic adds realism, not data: on the same inputs `plan --summary` gives
+    the paper preset's table (scenes, speakers, groups, tracks, hours)."""
+    text = (ROOT / "specs" / "sonicset_realistic.yaml").read_text()
+    (paper_data / "sonicset_realistic.yaml").write_text(text)
+    done = cli("plan", "--summary", "sonicset_realistic.yaml", cwd=paper_data)
+    assert done.returncode == 0, done.stderr
+    paper = cli("plan", "--summary", "sonicset.yaml", cwd=paper_data)
+    assert table(done.stdout) == table(paper.stdout)
+    assert table(done.stdout)["train"][:4] == ["62", "921", "19,034", "57,102"]

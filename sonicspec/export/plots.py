@@ -154,24 +154,25 @@ def plot_rir(rir: np.ndarray, sample_rate_hz: float, bands_hz, path: Path, *, ti
     return path
 
 
-def plot_device_layout(name: str, path: Path) -> Path:
-    """A device preset's capsules seen from above (x its front, y its left) and from the
-    side (x, z), numbered as its channels; directional capsules with their axes, a rigid
-    sphere drawn as its outline. Written atomically."""
+def draw_device_layout(fig, name: str) -> None:
+    """Draw a device preset's capsules into ``fig`` (a matplotlib figure): seen from above
+    (x its front, y its left) and from the side (x, z), numbered as its channels;
+    directional capsules with their axes, a rigid sphere drawn as its outline. The report
+    (:mod:`sonicspec.export.report_plots`) and :func:`plot_device_layout` share it."""
+    from matplotlib.patches import Circle
+
     from sonicspec.acoustics.receivers.devices import device
-    from sonicspec.atomic import atomic_path
 
     dev = device(name)
-    plt = _pyplot()
     caps = dev.capsules
     p_mm = caps.offsets_m * 1000.0
-    fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+    axes = fig.subplots(1, 2)
     reach = max(float(np.abs(p_mm).max()), 5.0) * 1.3
     for ax, (i, j), label in ((axes[0], (0, 1), ("x: front (mm)", "y: left (mm)")),
                               (axes[1], (0, 2), ("x: front (mm)", "z: up (mm)"))):
         if caps.sphere_radius_m is not None:
-            ax.add_patch(plt.Circle((0, 0), caps.sphere_radius_m * 1000.0, fill=False,
-                                    ls="--", color="0.5", label="rigid sphere"))
+            ax.add_patch(Circle((0, 0), caps.sphere_radius_m * 1000.0, fill=False,
+                                ls="--", color="0.5", label="rigid sphere"))
         order = np.argsort(p_mm[:, 3 - i - j]) if caps.sphere_radius_m is not None else \
             np.arange(len(p_mm))
         ax.scatter(p_mm[order, i], p_mm[order, j], s=40, zorder=3, color="tab:blue")
@@ -195,6 +196,16 @@ def plot_device_layout(name: str, path: Path) -> Path:
     axes[1].set_title("from the side")
     fig.suptitle(f"{dev.name}: {dev.title}\n{len(caps)} capsules, aperture "
                  f"{dev.aperture_m * 1000:.1f} mm, {dev.body}", fontsize=10)
+
+
+def plot_device_layout(name: str, path: Path) -> Path:
+    """A device preset's layout (:func:`draw_device_layout`) as an image file. Written
+    atomically."""
+    from sonicspec.atomic import atomic_path
+
+    plt = _pyplot()
+    fig = plt.figure(figsize=(10, 5))
+    draw_device_layout(fig, name)
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

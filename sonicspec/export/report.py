@@ -74,6 +74,8 @@ def _environment():
 def _fmt_num(x: Any, digits: int = 3) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "–"
+    if isinstance(x, str):  # a rule, e.g. a split's groups: each_speaker_per_scene
+        return x
     if isinstance(x, int):
         return f"{x:,}"
     return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
@@ -140,6 +142,51 @@ def _plan_summary(info: rd.DatasetInfo, groups, splits, view) -> dict[str, Any]:
                 ("clip length (s)", mixture.get("duration_s")),
                 ("speakers per group", mixture.get("speakers")),
                 ("seed", spec.get("seed"))) if v is not None}}
+
+
+def _realism(spec: dict[str, Any], groups: list[dict[str, Any]], splits: Sequence[str]
+             ) -> dict[str, Any]:
+    """The sections on the realism of issue 30, each None when the dataset does not use it:
+    ``facing`` (a histogram per split of where directional talkers face relative to the
+    microphone, with shares towards / sideways / away), ``patterns`` (each role's source
+    directivity other than omni, drawn per octave band) and ``devices`` (the device presets
+    the groups record, with their layout)."""
+    from sonicspec.acoustics.directivity import pattern_by_name
+    from sonicspec.units import bands_below_nyquist
+
+    per = {s: np.asarray([a for g in groups if g["split"] == s for src in g["sources"]
+                          if src["role"] == "speech" for a in src.get("facing_to_mic_deg") or []],
+                         dtype=np.float64) for s in splits}
+    facing = None
+    if any(v.size for v in per.values()):
+        facing = {"plot": plots.histogram(
+                      per, "talker's facing relative to the direction to the microphone "
+                      "(0: facing it)", "deg"),
+                  "shares": {s: rd.facing_shares(v) for s, v in per.items()},
+                  "n": {s: int(v.size) for s, v in per.items()}}
+    bands = bands_below_nyquist(float(spec.get("sample_rate_hz") or 16000))
+    patterns = []
+    for role, d in sorted((spec.get("directivity") or {}).items()):
+        if not isinstance(d, dict) or d.get("pattern", "omni") == "omni":
+            continue
+        turn = d.get("head_turn")
+        entry = {"role": role, "pattern": d["pattern"], "facing": d.get("facing", "walk"),
+                 "head_turn": (f"{turn['std_deg']:g}° RMS, {turn['time_constant_s']:g} s"
+                               if isinstance(turn, dict) else None),
+                 "plot": None, "sofa_path": None}
+        if d["pattern"] != "sofa":
+            entry["plot"] = plots.directivity_polar(d["pattern"], pattern_by_name(d["pattern"]),
+                                                    bands)
+        else:
+            entry["sofa_path"] = d.get("sofa_path")
+        patterns.append(entry)
+    counts: dict[str, int] = {}
+    for g in groups:
+        if g.get("device"):
+            counts[g["device"]] = counts.get(g["device"], 0) + 1
+    devices = [{"name": name, "groups": n, "plot": plots.device_layout(name)}
+               for name, n in sorted(counts.items())]
+    return {"facing": facing, "patterns": patterns or None, "devices": devices or None}
 
 
 def _distributions(spec, groups, splits) -> list[dict[str, Any]]:
@@ -330,6 +377,8 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
                      "kinds": sorted({k for v in augmented.values() for k in v})}
                     if any(augmented.values()) else None)
 
+    realism = _realism(spec, groups, splits)
+
     files_dir = files_dir_of(path)
     pages_dir = files_dir / "groups"
     sampled = set(rd.sample_groups(groups, group_pages, int(spec.get("seed", 0))))
@@ -383,6 +432,7 @@ def write_report(dataset: str | Path, output: str | Path | None = None, *,
         "distributions": distributions,
         "direct": direct,
         "augmentation": augmentation,
+        "realism": realism,
         "bands_hz": bands_hz, "band_plots": band_plots,
         "scenes": scenes,
         "rows": rows, "groups": len(groups), "group_pages": len(pages_written),

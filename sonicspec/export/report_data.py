@@ -246,6 +246,46 @@ def microphone_path(meta: dict[str, Any], root: Path | None = None) -> np.ndarra
     return pos if np.ptp(pos, axis=0).max() > 0 else None
 
 
+FACING_EVERY = 10
+"""The report's facing histogram takes every 10th 10 ms frame of a facing track (0.1 s)."""
+
+
+def facing_to_mic_deg(entry: dict[str, Any], mic_path: np.ndarray | None,
+                      mic: np.ndarray | None, root: Path | None) -> list[float] | None:
+    """Where a directional source faces relative to the microphone: the horizontal angle
+    between its front (its track's ``yaw_deg``) and the direction from it to the microphone,
+    degrees in [0, 180] (0: it faces the microphone, 180: its back is turned), every
+    :data:`FACING_EVERY`-th frame. None for a source without a facing track (omni)."""
+    track = entry.get("track")
+    if not isinstance(track, dict) or "yaw_deg" not in (track.get("arrays") or track):
+        return None  # an omni source: no archive opened
+    values = track_values(track, root)
+    yaw, pos = values.get("yaw_deg"), values.get("positions_m")
+    if yaw is None or pos is None:
+        return None
+    pos, yaw = pos.reshape(-1, 3), yaw.reshape(-1)
+    n = min(len(pos), len(yaw))
+    if mic_path is not None and len(mic_path) >= n:
+        to_mic = mic_path[:n, :2] - pos[:n, :2]
+    elif mic is not None:
+        to_mic = mic[None, :2] - pos[:n, :2]
+    else:
+        return None
+    bearing = np.degrees(np.arctan2(to_mic[:, 1], to_mic[:, 0]))
+    angle = np.abs((yaw[:n] - bearing + 180.0) % 360.0 - 180.0)
+    return [round(float(a), 2) for a in angle[::FACING_EVERY]]
+
+
+def facing_shares(angles: np.ndarray) -> dict[str, float] | None:
+    """Shares of facing angles towards the microphone (< 45°), sideways (45–135°) and away
+    (> 135°); None without angles."""
+    if not angles.size:
+        return None
+    return {"towards": float(np.mean(angles < 45.0)),
+            "sideways": float(np.mean((angles >= 45.0) & (angles <= 135.0))),
+            "away": float(np.mean(angles > 135.0))}
+
+
 def _moving_distances(entry: dict[str, Any], mic_path: np.ndarray, root: Path | None
                       ) -> tuple[float, ...] | None:
     """Source–microphone distance at the first and last frame and its minimum, both moving:
@@ -352,6 +392,7 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
             "rir_cut": rir_cut(e.get("rir_tail"), rate),
             "image_source_order": e.get("image_source_order"),
         }
+        s["facing_to_mic_deg"] = facing_to_mic_deg(e, mic_path, mic, root)
         if role == "speech":
             s.update(path_length_m=_num(e.get("path_length_m")),
                      speed_m_s=_speed(e, rate, speed_m_s, span, n),
@@ -371,6 +412,7 @@ def group_facts(meta: dict[str, Any], speed_m_s: float | None = None,
         "mixtures": [(m.get("name"), m.get("file")) for m in meta.get("mixtures") or []],
         "num_samples": n, "sample_rate_hz": meta.get("sample_rate_hz"),
         "rir_key": (meta.get("keys") or {}).get("rir"),
+        "device": (meta.get("capsules") or {}).get("device"),
     }
     facts.update(augmentation_facts(meta))
     for role in ROLES:

@@ -221,3 +221,41 @@ def rirs_and_edcs(rirs: Mapping[str, np.ndarray], sample_rate_hz: float) -> str:
     for ax in (ax_w, ax_e):
         ax.tick_params(labelsize=7)
     return svg_uri(fig)
+
+
+def directivity_polar(name: str, pattern, bands_hz: Sequence[float]) -> str:
+    """A source pattern in the horizontal plane, one line per octave band (0°: where the
+    source faces), dB re on-axis; ``pattern``: a
+    :class:`~sonicspec.acoustics.directivity.DirectivityPattern`."""
+    fig = _figure(3.4, 3.2, (0.1, 0.9, 0.1, 0.84))
+    ax = fig.add_subplot(projection="polar")
+    az = np.radians(np.linspace(-180.0, 180.0, 145))
+    local = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], axis=1)
+    gains = np.asarray(pattern.gains(local, bands_hz), dtype=np.float64)
+    db = np.maximum(20.0 * np.log10(np.maximum(np.abs(gains), 1e-6)), -30.0)
+    for b, f in enumerate(bands_hz):
+        ax.plot(az, db[:, b] + 30.0, lw=1.2, color=f"C{b % 10}",
+                label=f"{f / 1000:g} kHz" if f >= 1000 else f"{f:g} Hz")
+    ax.set_ylim(0.0, 31.0)
+    ax.set_yticks([10.0, 20.0, 30.0], ["-20 dB", "-10 dB", "0 dB"], fontsize=6)
+    ax.set_theta_zero_location("N")
+    ax.tick_params(labelsize=6.5)
+    ax.set_title(f"{name} (0°: the front)", fontsize=8)
+    ax.legend(fontsize=5.5, loc="lower left", bbox_to_anchor=(0.92, -0.05), frameon=False)
+    return svg_uri(fig)
+
+
+def device_layout(name: str) -> str:
+    """A device preset's capsules from above and from the side (the drawing
+    ``sonicspec microphones --plot`` makes: :func:`sonicspec.export.plots.draw_device_layout`)."""
+    from sonicspec.export.plots import draw_device_layout
+
+    fig = _figure(6.4, 3.2, (0.09, 0.98, 0.14, 0.8))
+    draw_device_layout(fig, name)
+    for ax in fig.axes:
+        ax.title.set_fontsize(8)
+        ax.xaxis.label.set_fontsize(7)
+        ax.yaxis.label.set_fontsize(7)
+        ax.tick_params(labelsize=6.5)
+    fig._suptitle.set_fontsize(8)
+    return svg_uri(fig)

@@ -10,7 +10,7 @@ from sonicspec.errors import SonicspecError
 from sonicspec.spec.load import did_you_mean
 from sonicspec.spec.schema import SCHEMA_FILENAME
 
-PRESETS = ("array", "binaural", "demo", "sonicset", "sonicset_release")
+PRESETS = ("array", "binaural", "demo", "sonicset", "sonicset_realistic", "sonicset_release")
 
 
 def schema_line(target: str) -> str:
