@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from sonicspec.artifacts.records import FileRecord
 from sonicspec.errors import StageError
 from sonicspec.export.checksums import checksums_text, file_record
 from sonicspec.export.manifests import csv_text, jsonl
@@ -65,7 +66,8 @@ def test_streamed_outputs_are_what_the_whole_in_memory_step_wrote(tmp_path: Path
     assert summary["manifests"] == ["manifests/train_recordings.jsonl",
                                     "manifests/train_supervisions.jsonl", "manifests/train.csv"]
     own = [file_record(out, out / rel) for rel in [*summary["manifests"], "dataset.json"]]
-    assert (out / "checksums.sha256").read_text() == checksums_text(expected["files"] + own)
+    recorded = [FileRecord.model_validate(f) for f in expected["files"]]
+    assert (out / "checksums.sha256").read_text() == checksums_text(recorded + own)
     assert not [p for p in out.rglob("*") if ".tmp-" in p.name]
     assert not [p for p in Path(plan.store_dir).iterdir() if p.name.startswith(".tmp-")]
 

@@ -366,6 +366,8 @@ KEYED_BY_DATA = {
     ("rir", "first.broadband"): "the library's broadband figures per name",
     ("workflow", "env"): "environment variables",
     ("workflow", "result.not_made"): "unfinished jobs per step",
+    ("dataset", "self.files"): "a split's open manifest files per name (recordings, "
+                               "supervisions)",
 }
 NOT_TYPED_YET = {
     # the mesh step's report (weld, repair, leak as the library's reports dump them; its keys
@@ -374,17 +376,25 @@ NOT_TYPED_YET = {
     ("inspect", "report"), ("inspect", "weld"), ("inspect", "rep"), ("inspect", "rep['after']"),
     ("inspect", "rep['before']"), ("inspect", "leak"), ("inspect", "place"),
     ("navigation", "mesh_art.data"), ("rir", "mesh_art.data"),
-    # the export step's file records ({path, bytes, sha256, ...}) and group records, streamed
-    # by the dataset step and re-checked by repair and the check cache; next: FileRecord and
-    # ExportGroup models in sonicspec.artifacts
-    ("export", "g"), ("dataset", "g"), ("dataset", "r"), ("dataset", "record"),
-    ("dataset", "self.files"), ("dataset", "ctx.store.read_data('export', key)"),
+    # the corpus artifact's skipped files (the dataset step's and the build summary's), the
+    # dataset folder's marker and a dataset artifact's provenance, read by repair. (The export
+    # and dataset steps' file and group records and checked.json are typed since:
+    # sonicspec.artifacts.records.)
     ("dataset", "ctx.store.read_data('corpus', k)"), ("corpus", "data"),
-    ("repair", "data"), ("repair", "group"), ("repair", "r"), ("repair", "record"),
     ("repair", "marker"), ("repair", "store.read('dataset', key).provenance"),
-    ("checked", "data"), ("checked", "r"), ("workflow", "files[0]"),
+    ("workflow", "files[0]"),
+    # came with the batched workflows (issue 27): the batch layout file's header and units
+    ("batch", "header"), ("batch", "unit"), ("workflow", "self.layout.units[wildcards.key]"),
+    ("workflow", "unit"), ("workflow", "u"),
+    # came with `plan --summary`'s image-source order (issue 27): its per-scene entries and
+    # the library's estimate, and the placement it reads for one scene
+    ("inspect", "e"), ("inspect", "est"), ("inspect", "entry"), ("inspect", "e['estimate'] or {}"),
+    ("inspect", "scenes[0]"), ("inspect", "placement"), ("inspect", "placement['speech'][0]"),
+    ("inspect", "spec.materials.model_dump(mode='json')"),
 }
-STRING_LOOKUPS_LEFT = 110  # +4: a diffuse background's signals per kind; +1 a facing array
+# 166 on main once the batched workflows and the image-source order summary were merged (+56);
+# 120 with the export/dataset records and checked.json typed (-46).
+STRING_LOOKUPS_LEFT = 120
 
 
 def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:

@@ -31,6 +31,11 @@ rir           :class:`RirData` (one ``(points, channels, samples)`` float32 stac
 render        :class:`RenderData` (one ``(channels, clip samples)`` float32 array per track
               and kind, named in :attr:`RenderedTrack.arrays`)
 mix           :class:`MixData` (``gains``: groups x :attr:`MixData.gain_columns`)
+export        :class:`~.records.ExportData`: per group its files
+              (:class:`~.records.FileRecord`), Lhotse entries and metadata path
+              (``file_count``)
+dataset       :class:`~.records.DatasetData`: the dataset's own files, manifests and
+              counts per split (``group_count``)
 ============  =====================================================================
 """
 
@@ -45,6 +50,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.edges import EdgeChoice
+from sonicspec.artifacts.records import DatasetData, ExportData
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.corpora import CorpusIndex
 from sonicspec.errors import StageError
@@ -388,12 +394,14 @@ def read_path_set(arrays, prefix: str) -> PathSet:
                    np.asarray(arrays[f"{prefix}_departures"], dtype=np.float64))
 
 
-MODELS: dict[str, type[_Data]] = {
+MODELS: dict[str, type[BaseModel]] = {
     "placement": PlacementData,
     "arrange": ArrangeData,
     "rir": RirData,
     "render": RenderData,
     "mix": MixData,
+    "export": ExportData,
+    "dataset": DatasetData,
 }
 
 
