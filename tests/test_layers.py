@@ -370,16 +370,10 @@ KEYED_BY_DATA = {
                                "supervisions)",
 }
 NOT_TYPED_YET = {
-    # the mesh step's report (weld, repair, leak as the library's reports dump them; its keys
-    # are present only where the step ran that part, so its bytes need a model that keeps
-    # "absent" apart from null) and the mesh artifact's scene id
-    ("inspect", "report"), ("inspect", "weld"), ("inspect", "rep"), ("inspect", "rep['after']"),
-    ("inspect", "rep['before']"), ("inspect", "leak"), ("inspect", "place"),
-    ("navigation", "mesh_art.data"), ("rir", "mesh_art.data"),
     # the corpus artifact's skipped files (the dataset step's and the build summary's), the
     # dataset folder's marker and a dataset artifact's provenance, read by repair. (The export
     # and dataset steps' file and group records and checked.json are typed since:
-    # sonicspec.artifacts.records.)
+    # sonicspec.artifacts.records; the mesh step's report: sonicspec.artifacts.mesh_report.)
     ("dataset", "ctx.store.read_data('corpus', k)"), ("corpus", "data"),
     ("repair", "marker"), ("repair", "store.read('dataset', key).provenance"),
     ("workflow", "files[0]"),
@@ -393,8 +387,8 @@ NOT_TYPED_YET = {
     ("inspect", "spec.materials.model_dump(mode='json')"),
 }
 # 166 on main once the batched workflows and the image-source order summary were merged (+56);
-# 120 with the export/dataset records and checked.json typed (-46).
-STRING_LOOKUPS_LEFT = 120
+# 120 with the export/dataset records and checked.json typed (-46), 94 with the mesh report (-26).
+STRING_LOOKUPS_LEFT = 94
 
 
 def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
@@ -408,8 +402,7 @@ def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
     assert len(found) == STRING_LOOKUPS_LEFT
     # the RIR step and the placement read none but named inputs and the library's figures
     assert {r for m, _, r, _ in found if m in ("rir", "placement", "motion", "render")} == {
-        "ctx.job.paths", "broadband", "first.broadband", "mesh_art.data", "signals", "point",
-        "out"}
+        "ctx.job.paths", "broadband", "first.broadband", "signals", "point", "out"}
 
 
 def test_the_string_lookup_counter_sees_reads_and_gets() -> None:

@@ -20,8 +20,10 @@ step          data (arrays)
 corpus        role, kind, counts per split, problems, skipped files (``index_json``:
               the :class:`~sonicspec.audio.corpora.CorpusIndex` as compact JSON bytes;
               :func:`corpus_index_arrays`, :func:`read_corpus_index`)
-mesh          the mesh stage's report (the :class:`~sonicspec.geometry.mesh.SceneMesh`
-              arrays; :func:`mesh_arrays`, :func:`read_mesh`)
+mesh          :class:`~.mesh_report.MeshData`: the mesh stage's report (weld, repair,
+              leak: only what ran) and the mesh's facts (the
+              :class:`~sonicspec.geometry.mesh.SceneMesh` arrays; :func:`mesh_arrays`,
+              :func:`read_mesh`)
 navigation    scene id and each floor's grid facts (each floor's grids;
               :func:`navigation_arrays`, :func:`read_navigation`)
 placement     :class:`PlacementData` (``group_count``)
@@ -50,6 +52,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.edges import EdgeChoice
+from sonicspec.artifacts.mesh_report import MeshData
 from sonicspec.artifacts.records import DatasetData, ExportData
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.corpora import CorpusIndex
@@ -400,6 +403,7 @@ MODELS: dict[str, type[BaseModel]] = {
     "rir": RirData,
     "render": RenderData,
     "mix": MixData,
+    "mesh": MeshData,
     "export": ExportData,
     "dataset": DatasetData,
 }
