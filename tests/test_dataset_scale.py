@@ -91,6 +91,22 @@ def test_a_failure_midway_leaves_no_half_file(tmp_path: Path, monkeypatch) -> No
     assert not out.exists() or not [p for p in out.rglob("*") if p.is_file()]
 
 
+def test_an_export_record_that_does_not_read_names_its_group(tmp_path: Path) -> None:
+    plan_file, key = write_dataset_inputs(tmp_path, 4, groups_per_shard=2)
+    plan = Plan.read(plan_file)
+    store = ArtifactStore(plan.store_dir)
+    export_key = next(k for k in plan.by_key()[key].inputs if store.exists("export", k))
+    art = store.read("export", export_key)
+    data = json.loads(json.dumps(art.data))
+    del data["groups"][1]["duration_s"]
+    store.remove("export", export_key)
+    store.write("export", export_key, art.arrays, data=data, params={})
+    group = data["groups"][1]["group"]
+    with pytest.raises(StageError, match=rf"group {group} does not read \(duration_s: Field "
+                                         r"required\)"):
+        run_job(plan, key)
+
+
 @pytest.mark.slow
 def test_peak_memory_at_ten_times_the_groups_is_within_one_and_a_half_times(
         tmp_path: Path) -> None:

@@ -436,6 +436,11 @@ def read(ctx, step: str) -> Any:
     return decode(step, ctx.store.read_data(step, keys[0]), ctx.job.label)
 
 
+def first_error(err: ValidationError) -> str:
+    """A validation error's first problem, ``field.path: message``."""
+    return _first(err)
+
+
 def _first(err: ValidationError) -> str:
     e = err.errors()[0]
     return f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from sonicspec import __version__, artifacts
 from sonicspec.artifacts.records import DatasetData, ExportGroup, SplitCount
@@ -47,6 +48,17 @@ def _compact(value: Any) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
 
 
+class _GroupId(BaseModel):
+    """An export group record's id (the rest is read when the group is written)."""
+
+    model_config = ConfigDict(extra="ignore")
+    group: str
+
+
+class _Shard(BaseModel):
+    groups: list[dict[str, Any]]
+
+
 def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     """Every export record's groups as lines of ``spool``; ``(group id, offset)`` in group
     order."""
@@ -54,10 +66,11 @@ def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     keys = ctx.input_keys("export")
     for n, key in enumerate(keys):
         ctx.progress(f"reading export records: {n}/{len(keys)}")
-        data = artifacts.decode("export", ctx.store.read_data("export", key), ctx.job.label)
-        for g in data.groups:
-            index.append((g.group, spool.tell()))
-            spool.write(_compact(g.model_dump(mode="json")).encode("utf-8") + b"\n")
+        # checked as it is read back (one group at a time); here only the group ids are read
+        raw = _Shard.model_validate(ctx.store.read_data("export", key))
+        for g in raw.groups:
+            index.append((_GroupId.model_validate(g).group, spool.tell()))
+            spool.write(_compact(g).encode("utf-8") + b"\n")
     index.sort()
     for (a, _), (b, _) in itertools.pairwise(index):
         if a == b:
@@ -66,10 +79,16 @@ def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     return index
 
 
-def _groups(spool: IO[bytes], index: list[tuple[str, int]]) -> Iterator[ExportGroup]:
-    for _, offset in index:
+def _groups(ctx: JobContext, spool: IO[bytes], index: list[tuple[str, int]]
+            ) -> Iterator[ExportGroup]:
+    for group, offset in index:
         spool.seek(offset)
-        yield ExportGroup.model_validate(json.loads(spool.readline()))
+        try:
+            yield ExportGroup.model_validate_json(spool.readline())
+        except ValidationError as err:
+            raise StageError(f"{ctx.job.label}: the export record of group {group} does not "
+                             f"read ({artifacts.first_error(err)}); was it made by another "
+                             "sonicspec version?", ctx.job.key) from None
 
 
 class _SplitWriters:
@@ -131,7 +150,7 @@ def run(ctx: JobContext) -> None:
                                     (*CSV_COLUMNS, "scale") if scaled else CSV_COLUMNS)
             summary = stack.enter_context(open_atomic(out / "dataset.json"))
             summary.write(_compact(head)[:-1] + ',"groups":[')
-            for n, g in enumerate(_groups(spool, index)):
+            for n, g in enumerate(_groups(ctx, spool, index)):
                 if n % 1000 == 0:
                     ctx.progress(f"writing manifests: {n}/{len(index)} groups")
                 writers.group(g)
