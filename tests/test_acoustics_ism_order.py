@@ -10,6 +10,7 @@ summary collects).
 from __future__ import annotations
 
 import logging
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -57,9 +58,10 @@ def test_a_jittered_scan_reports_the_order_it_reached(monkeypatch) -> None:
 
 
 def test_the_rir_job_says_which_scene_and_group_got_a_lower_order(caplog) -> None:
-    facts = [{"image_source_order": 3, "image_source_order_stopped": None},
-             {"image_source_order": 2,
-              "image_source_order_stopped": "order 3 needs more than 2,000,000 candidates"}]
+    # the fields of the engine's RirFacts the step reads
+    facts = [SimpleNamespace(image_source_order=3, image_source_order_stopped=None),
+             SimpleNamespace(image_source_order=2, image_source_order_stopped=(
+                 "order 3 needs more than 2,000,000 candidates"))]
     assert rir_stage._order_reached(facts, 3) == {
         "image_source_order": 2, "image_source_order_asked": 3,
         "image_source_order_stopped": "order 3 needs more than 2,000,000 candidates"}

@@ -185,6 +185,8 @@ def test_the_blocks_are_found_and_most_run() -> None:
             assert code == readme_python(), f"{where}: not the block test_api runs"
         elif "tests/test_dataload.py" in reason:  # test_dataload runs data.md's blocks
             assert file == "docs/guide/data.md", where
+        elif "tests/test_pipeline_augment.py" in reason:  # it runs the loader's block
+            assert file == "docs/guide/augmentation.md", where
         else:
             pytest.fail(f"{where}: a skipped block must name the test that runs it")
 

@@ -153,6 +153,20 @@ def test_the_loader_applies_the_same_block_on_the_fly(built) -> None:
     assert math.isfinite(float(np.max(np.abs(x["mixture"]))))
 
 
+def test_the_guide_s_loader_block_runs_on_a_built_dataset(built, monkeypatch) -> None:
+    """docs/guide/augmentation.md's training-script block, on this module's dataset."""
+    spec_path, out = built
+    text = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "augmentation.md"
+            ).read_text(encoding="utf-8")
+    (block,) = [b for b in re.findall(r"^```python\n(.*?)^```", text, re.S | re.M)
+                if "SonicspecDataset" in b]
+    monkeypatch.chdir(spec_path.parent)
+    code = block.replace('"spec.yaml"', repr(spec_path.name)).replace('"out/demo"', repr(str(out)))
+    namespace: dict = {}
+    exec(compile(code, "docs/guide/augmentation.md", "exec"), namespace)
+    assert json.loads(namespace["item"]["augmentation"])  # the item's draw
+
+
 def test_the_report_shows_the_draws(built, tmp_path: Path) -> None:
     from sonicspec.export.report import write_report
 

@@ -8,6 +8,7 @@ One module per command group; each registers its commands' arguments beside thei
 * ``scene`` -- ``scene inspect``, ``rir`` (looking at a room)
 * ``microphones`` -- ``microphones`` (the device presets and their layouts)
 * ``data``  -- ``report``, ``evaluate``, ``export`` (using a built dataset)
+* ``recording`` -- ``playback``, ``align`` (a real recorded test set)
 * ``common`` -- exit codes and the steps the groups share (load a spec, compile, preflight)
 
 Exit codes: 0 success (a valid spec), 2 an invalid spec or bad arguments, 1 any other failure.
@@ -22,13 +23,14 @@ import sys
 from collections.abc import Sequence
 
 from sonicspec import __version__
-from sonicspec.cli import build, data, microphones, plan, scene, spec
+from sonicspec.cli import build, data, microphones, plan, recording, scene, spec
 from sonicspec.cli.common import EXIT_FAILURE, EXIT_INVALID
 
 # The commands in the order ``sonicspec --help`` lists them.
 COMMANDS = (spec.add_validate, spec.add_schema, spec.add_init, plan.add_plan, build.add_build,
             scene.add_scene, scene.add_rir, microphones.add_microphones, data.add_report,
-            build.add_job, build.add_batch, build.add_verify, data.add_evaluate, data.add_export)
+            build.add_job, build.add_batch, build.add_verify, data.add_evaluate, data.add_export,
+            recording.add_playback, recording.add_align)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -45,10 +45,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         layouts, unread = None, str(err)
     summary = summarize(loaded.spec, layouts)
     if args.summary:
+        from sonicspec.stages.inspect import format_outlook, image_source_outlook
+
         orders = None
         if unread is None:
-            from sonicspec.stages.inspect import format_outlook, image_source_outlook
-
             orders = image_source_outlook(loaded, compile_plan(loaded, args),
                                           estimate=args.estimate_scenes)
         if args.json:

@@ -317,8 +317,8 @@ def estimate_image_source_order(loaded: LoadedSpec, scene_id: str) -> dict[str, 
                                spec.materials.model_dump(mode="json")["custom"])
     scene = acoustic_scene(mesh, library, settings)
     regions = scene_regions(scene, settings)
-    mic = np.asarray(placement["mic_path_m"][0], dtype=np.float64)
-    points = np.asarray(placement["speech"][0]["rir_points_m"], dtype=np.float64)
+    mic = np.asarray(placement.mic_path_m[0], dtype=np.float64)
+    points = np.asarray(placement.speech[0].rir_points_m, dtype=np.float64)
     c = settings.speed_of_sound_m_s
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SonicspecWarning)
