@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from sonicspec.artifacts.records import FileRecord
 from sonicspec.errors import StageError
 from sonicspec.export.checksums import checksums_text, file_record
 from sonicspec.export.manifests import csv_text, jsonl
@@ -65,7 +66,8 @@ def test_streamed_outputs_are_what_the_whole_in_memory_step_wrote(tmp_path: Path
     assert summary["manifests"] == ["manifests/train_recordings.jsonl",
                                     "manifests/train_supervisions.jsonl", "manifests/train.csv"]
     own = [file_record(out, out / rel) for rel in [*summary["manifests"], "dataset.json"]]
-    assert (out / "checksums.sha256").read_text() == checksums_text(expected["files"] + own)
+    recorded = [FileRecord.model_validate(f) for f in expected["files"]]
+    assert (out / "checksums.sha256").read_text() == checksums_text(recorded + own)
     assert not [p for p in out.rglob("*") if ".tmp-" in p.name]
     assert not [p for p in Path(plan.store_dir).iterdir() if p.name.startswith(".tmp-")]
 
@@ -87,6 +89,22 @@ def test_a_failure_midway_leaves_no_half_file(tmp_path: Path, monkeypatch) -> No
     out = Path(plan.output_dir)
     assert len(calls) > 40
     assert not out.exists() or not [p for p in out.rglob("*") if p.is_file()]
+
+
+def test_an_export_record_that_does_not_read_names_its_group(tmp_path: Path) -> None:
+    plan_file, key = write_dataset_inputs(tmp_path, 4, groups_per_shard=2)
+    plan = Plan.read(plan_file)
+    store = ArtifactStore(plan.store_dir)
+    export_key = next(k for k in plan.by_key()[key].inputs if store.exists("export", k))
+    art = store.read("export", export_key)
+    data = json.loads(json.dumps(art.data))
+    del data["groups"][1]["duration_s"]
+    store.remove("export", export_key)
+    store.write("export", export_key, art.arrays, data=data, params={})
+    group = data["groups"][1]["group"]
+    with pytest.raises(StageError, match=rf"group {group} does not read \(duration_s: Field "
+                                         r"required\)"):
+        run_job(plan, key)
 
 
 @pytest.mark.slow

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sonicspec.errors import GeometryError, SonicspecWarning
+from sonicspec.errors import GeometryError, SonicspecWarning, StageError
 from sonicspec.geometry.mesh import SceneMesh
 from sonicspec.geometry.procedural import add_obstacles, box_obstacle, shoebox
 from sonicspec.geometry.repair import RepairSettings, leak_test, mesh_stats, repair_mesh
@@ -486,3 +486,33 @@ def test_air_test_layers_never_put_overlapping_boxes_together():
     np.fill_diagonal(overlap, False)
     assert not np.any(overlap & (colour[:, None] == colour[None]))
     assert colour.max() < 20  # greedy colouring stays near the largest overlap count
+
+
+def test_the_mesh_steps_report_reads_as_typed_fields_and_keeps_its_bytes(house, repaired):
+    # Issue 29: the mesh step's report (weld, repair, leak as the library's reports dump
+    # them) is a model; what the step did not run stays absent (not null), and a report read
+    # from JSON is written back byte for byte.
+    from sonicspec.artifacts import decode, encode
+    from sonicspec.artifacts.mesh_report import SceneReport
+    from sonicspec.geometry.repair import weld_seams
+    from sonicspec.hashing import canonical_json
+
+    _, weld = weld_seams(house.damaged, 0.01)
+    leak = leak_test(house.damaged, np.random.default_rng(3), 2000)
+    assert leak.places  # the damaged house leaks: places with labels, materials, sizes
+    _, rep = repaired
+    report = {"scene_id": "house", "kind": "mesh", "weld": weld.to_dict(),
+              "repair": rep.to_dict(), "warnings": ["w"], "leak": leak.to_dict()}
+    typed = SceneReport.model_validate(report)
+    assert typed.leak.places[0].describe() == leak.places[0].describe()
+    assert typed.repair.after.watertight and typed.weld.distance_m == 0.01
+    assert canonical_json(typed.model_dump(mode="json")) == canonical_json(report)
+    facts = {"materials": ["a"], "labels": [], "bounds_m": [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]],
+             "faces": 12}
+    room = {"scene_id": "room", "kind": "shoebox", "repair": None, **facts}
+    assert encode("mesh", room) == room  # no weld, leak or warnings: absent, not null
+    assert decode("mesh", room).weld is None and "weld" not in encode("mesh", room)
+    scan = {"scene_id": "scan", "kind": "mesh", "weld": weld.to_dict(), **facts}
+    assert encode("mesh", scan) == scan  # repair disabled: absent, not null
+    with pytest.raises(StageError, match=r"repair\.before\.vertices: Field required"):
+        decode("mesh", {**scan, "repair": {"before": {}}})

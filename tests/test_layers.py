@@ -366,23 +366,17 @@ KEYED_BY_DATA = {
     ("rir", "first.broadband"): "the library's broadband figures per name",
     ("workflow", "env"): "environment variables",
     ("workflow", "result.not_made"): "unfinished jobs per step",
+    ("dataset", "self.files"): "a split's open manifest files per name (recordings, "
+                               "supervisions)",
 }
 NOT_TYPED_YET = {
-    # the mesh step's report (weld, repair, leak as the library's reports dump them; its keys
-    # are present only where the step ran that part, so its bytes need a model that keeps
-    # "absent" apart from null) and the mesh artifact's scene id
-    ("inspect", "report"), ("inspect", "weld"), ("inspect", "rep"), ("inspect", "rep['after']"),
-    ("inspect", "rep['before']"), ("inspect", "leak"), ("inspect", "place"),
-    ("navigation", "mesh_art.data"), ("rir", "mesh_art.data"),
-    # the export step's file records ({path, bytes, sha256, ...}) and group records, streamed
-    # by the dataset step and re-checked by repair and the check cache; next: FileRecord and
-    # ExportGroup models in sonicspec.artifacts
-    ("export", "g"), ("dataset", "g"), ("dataset", "r"), ("dataset", "record"),
-    ("dataset", "self.files"), ("dataset", "ctx.store.read_data('export', key)"),
+    # the corpus artifact's skipped files (the dataset step's and the build summary's), the
+    # dataset folder's marker and a dataset artifact's provenance, read by repair. (The export
+    # and dataset steps' file and group records and checked.json are typed since:
+    # sonicspec.artifacts.records; the mesh step's report: sonicspec.artifacts.mesh_report.)
     ("dataset", "ctx.store.read_data('corpus', k)"), ("corpus", "data"),
-    ("repair", "data"), ("repair", "group"), ("repair", "r"), ("repair", "record"),
     ("repair", "marker"), ("repair", "store.read('dataset', key).provenance"),
-    ("checked", "data"), ("checked", "r"), ("workflow", "files[0]"),
+    ("workflow", "files[0]"),
     # plan --summary's image-source outlook per scene (the --json output, built and printed
     # as dicts); next: an ImageSourceOutlook record with to_dict()
     ("inspect", "e"), ("inspect", "est"), ("inspect", "entry"), ("inspect", "e['estimate'] or {}"),
@@ -393,8 +387,9 @@ NOT_TYPED_YET = {
     ("workflow", "unit"), ("workflow", "u"),
 }
 # 110 after the morning's merges (+4 a diffuse background's signals per kind, +1 a facing
-# array), +38 the image-source outlook, +15 the batch layout
-STRING_LOOKUPS_LEFT = 163
+# array), +38 the image-source outlook, +15 the batch layout: 163; -46 the export and dataset
+# steps' file and group records and checked.json typed, -26 the mesh step's report typed.
+STRING_LOOKUPS_LEFT = 91
 
 
 def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
@@ -408,8 +403,7 @@ def test_stages_read_rir_facts_and_placements_as_typed_fields() -> None:
     assert len(found) == STRING_LOOKUPS_LEFT
     # the RIR step and the placement read none but named inputs and the library's figures
     assert {r for m, _, r, _ in found if m in ("rir", "placement", "motion", "render")} == {
-        "ctx.job.paths", "broadband", "first.broadband", "mesh_art.data", "signals", "point",
-        "out"}
+        "ctx.job.paths", "broadband", "first.broadband", "signals", "point", "out"}
 
 
 def test_the_string_lookup_counter_sees_reads_and_gets() -> None:

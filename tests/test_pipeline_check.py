@@ -9,7 +9,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pytest
+from pydantic import ValidationError
 
+from sonicspec.artifacts.records import FileRecord
 from sonicspec.plan.model import Job, Plan
 from sonicspec.stages.checked import CheckCache
 from sonicspec.stages.context import finished_dir, mark_finished
@@ -33,7 +36,10 @@ def built(tmp_path: Path) -> tuple[Plan, ArtifactStore, Path]:
               "sha256": hashlib.sha256(body).hexdigest()}
     store.write("placement", placement.key, {"mic": np.zeros(3)})
     store.write("export", export.key, {"peak": np.ones(1)},
-                data={"groups": [{"id": "train/0", "files": [record], "tracks": [0.5] * 100}]})
+                data={"groups": [{"group": "train/0", "split": "train", "scene_id": "room",
+                                  "metadata": {"path": None}, "files": [record],
+                                  "recordings": [{"tracks": [0.5] * 100}],
+                                  "supervisions": [], "duration_s": 1.0}]})
     return plan, store, out
 
 
@@ -91,3 +97,42 @@ def test_the_head_takes_each_finished_job_once(tmp_path: Path) -> None:
     assert take_finished(finished_dir(tmp_path)) == []
     mark_finished(tmp_path, keys[0])
     assert take_finished(finished_dir(tmp_path)) == [keys[0]]
+
+
+def test_an_export_record_that_does_not_read_is_made_again(tmp_path: Path) -> None:
+    plan, store, _ = built(tmp_path)
+    export = plan.jobs[1]
+    store.remove("export", export.key)
+    store.write("export", export.key, {"peak": np.ones(1)},
+                data={"groups": [{"group": "train/0", "files": [{"path": "train/0.flac",
+                                                                 "size": 500}]}]})
+    report = check(plan, store)
+    assert [f.job.key for f in report.findings] == [export.key]
+    assert "export artifact does not read" in report.findings[0].problem
+    assert not store.exists("export", export.key)
+
+
+def test_checked_json_reads_and_writes_back_the_same_bytes(tmp_path: Path) -> None:
+    plan, store, _ = built(tmp_path)
+    check(plan, store)
+    cache_file = CheckCache.of_store(plan.store_dir).path
+    before = cache_file.read_bytes()
+    assert b'"written"' in before and b'"train/0.flac",500,' in before
+    cache = CheckCache.of_store(plan.store_dir)
+    cache._dirty = True  # force the write
+    cache.save()
+    assert cache_file.read_bytes() == before
+    cache_file.write_text('{"artifacts": {"k": 3}, "files": {}}')  # not this version's: reset
+    assert CheckCache.of_store(plan.store_dir).artifact_ok("k", "3") is False
+
+
+def test_a_file_record_leaves_out_what_it_does_not_carry() -> None:
+    own = FileRecord(path="dataset.json", sha256="0" * 64, bytes=12)
+    assert own.model_dump(mode="json") == {"path": "dataset.json", "sha256": "0" * 64,
+                                           "bytes": 12}
+    audio = {"kind": "speech", "name": "source1", "path": "train/0/source1.flac",
+             "sha256": "1" * 64, "bytes": 9, "channels": 2, "num_samples": 16000,
+             "sample_rate_hz": 16000, "scale": 0.25}
+    assert FileRecord.model_validate(audio).model_dump(mode="json") == audio
+    with pytest.raises(ValidationError, match="size"):
+        FileRecord.model_validate({"path": "a.flac", "size": 3})

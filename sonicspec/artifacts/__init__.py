@@ -20,8 +20,10 @@ step          data (arrays)
 corpus        role, kind, counts per split, problems, skipped files (``index_json``:
               the :class:`~sonicspec.audio.corpora.CorpusIndex` as compact JSON bytes;
               :func:`corpus_index_arrays`, :func:`read_corpus_index`)
-mesh          the mesh stage's report (the :class:`~sonicspec.geometry.mesh.SceneMesh`
-              arrays; :func:`mesh_arrays`, :func:`read_mesh`)
+mesh          :class:`~.mesh_report.MeshData`: the mesh stage's report (weld, repair,
+              leak: only what ran) and the mesh's facts (the
+              :class:`~sonicspec.geometry.mesh.SceneMesh` arrays; :func:`mesh_arrays`,
+              :func:`read_mesh`)
 navigation    scene id and each floor's grid facts (each floor's grids;
               :func:`navigation_arrays`, :func:`read_navigation`)
 placement     :class:`PlacementData` (``group_count``)
@@ -31,6 +33,11 @@ rir           :class:`RirData` (one ``(points, channels, samples)`` float32 stac
 render        :class:`RenderData` (one ``(channels, clip samples)`` float32 array per track
               and kind, named in :attr:`RenderedTrack.arrays`)
 mix           :class:`MixData` (``gains``: groups x :attr:`MixData.gain_columns`)
+export        :class:`~.records.ExportData`: per group its files
+              (:class:`~.records.FileRecord`), Lhotse entries and metadata path
+              (``file_count``)
+dataset       :class:`~.records.DatasetData`: the dataset's own files, manifests and
+              counts per split (``group_count``)
 ============  =====================================================================
 """
 
@@ -45,6 +52,8 @@ from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 from sonicspec.acoustics.late.tails import TailFacts
 from sonicspec.acoustics.moving.delays import PathSet
 from sonicspec.acoustics.paths.edges import EdgeChoice
+from sonicspec.artifacts.mesh_report import MeshData
+from sonicspec.artifacts.records import DatasetData, ExportData
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.corpora import CorpusIndex
 from sonicspec.errors import StageError
@@ -388,12 +397,15 @@ def read_path_set(arrays, prefix: str) -> PathSet:
                    np.asarray(arrays[f"{prefix}_departures"], dtype=np.float64))
 
 
-MODELS: dict[str, type[_Data]] = {
+MODELS: dict[str, type[BaseModel]] = {
     "placement": PlacementData,
     "arrange": ArrangeData,
     "rir": RirData,
     "render": RenderData,
     "mix": MixData,
+    "mesh": MeshData,
+    "export": ExportData,
+    "dataset": DatasetData,
 }
 
 
@@ -422,6 +434,11 @@ def read(ctx, step: str) -> Any:
     if len(keys) != 1:
         raise StageError(f"{ctx.job.label}: expected one {step} input, found {len(keys)}")
     return decode(step, ctx.store.read_data(step, keys[0]), ctx.job.label)
+
+
+def first_error(err: ValidationError) -> str:
+    """A validation error's first problem, ``field.path: message``."""
+    return _first(err)
 
 
 def _first(err: ValidationError) -> str:

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from sonicspec.artifacts.mesh_report import SceneReport
 from sonicspec.errors import GeometryError, SonicspecWarning
 from sonicspec.geometry import procedural as proc
 from sonicspec.geometry.mesh import SceneMesh
@@ -77,7 +78,7 @@ def load_scan(scene: MeshSceneSpec, paths: dict[str, str], *, obj_labels: bool =
 
 def build_scene_mesh(
     params: MeshParams, paths: dict[str, str], rng: np.random.Generator
-) -> tuple[SceneMesh, dict[str, Any]]:
+) -> tuple[SceneMesh, SceneReport]:
     """The repaired scene mesh of a ``mesh`` job and a report of what was done."""
     from sonicspec.geometry.materials import assign_materials, load_library
     from sonicspec.geometry.repair import RepairSettings, leak_test, repair_mesh, weld_seams
@@ -89,7 +90,7 @@ def build_scene_mesh(
     if not isinstance(scene, MeshSceneSpec):
         mesh = proc.add_obstacles(_room(scene), obstacles)
         report["repair"] = None
-        return mesh, report
+        return mesh, SceneReport.model_validate(report)
 
     # seams welded here rather than in the loader, so the report says what was joined
     mesh, weld = weld_seams(load_scan(scene, paths, obj_labels=params.obj_labels, weld=False),
@@ -121,4 +122,4 @@ def build_scene_mesh(
                 raise GeometryError(message)
             warnings.warn(message, SonicspecWarning, stacklevel=2)
             report.setdefault("warnings", []).append(message)
-    return mesh, report
+    return mesh, SceneReport.model_validate(report)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sonicspec.artifacts.records import FileRecord
 from sonicspec.atomic import open_atomic, write_text
 from sonicspec.errors import SpecError, StoreError
 from sonicspec.export.files import write_json
@@ -35,26 +36,27 @@ REPORT_FILES = "report_files"
 STORE_STEP_FOLDERS = ("plans", "corpus", "mesh")  # what a store made before markers has
 
 
-def file_record(out: Path, path: Path) -> dict[str, Any]:
-    """``{"path", "sha256", "bytes"}`` of a file just written under the dataset folder."""
-    return {"path": path.relative_to(out).as_posix(), "sha256": file_sha256(path),
-            "bytes": path.stat().st_size}
+def file_record(out: Path, path: Path, **facts: Any) -> FileRecord:
+    """The :class:`~sonicspec.artifacts.records.FileRecord` (path, SHA-256, bytes and
+    ``facts``: kind, name, channels ...) of a file just written under the dataset folder."""
+    return FileRecord(path=path.relative_to(out).as_posix(), sha256=file_sha256(path),
+                      bytes=path.stat().st_size, **facts)
 
 
-def checksum_line(record: dict[str, Any]) -> str:
+def checksum_line(record: FileRecord) -> str:
     """One line of ``checksums.sha256`` (``<sha256>  <path>`` and a newline)."""
-    return f"{record['sha256']}  {record['path']}\n"
+    return f"{record.sha256}  {record.path}\n"
 
 
-def checksums_text(records: list[dict[str, Any]]) -> str:
-    return "".join(checksum_line(r) for r in sorted(records, key=lambda r: r["path"]))
+def checksums_text(records: Iterable[FileRecord]) -> str:
+    return "".join(checksum_line(r) for r in sorted(records, key=lambda r: r.path))
 
 
-def write_checksums(out: Path, records: list[dict[str, Any]]) -> Path:
+def write_checksums(out: Path, records: Iterable[FileRecord]) -> Path:
     return write_text(out / CHECKSUMS_NAME, checksums_text(records))
 
 
-def write_checksums_merged(out: Path, lines: Iterable[str], records: list[dict[str, Any]]
+def write_checksums_merged(out: Path, lines: Iterable[str], records: Iterable[FileRecord]
                            ) -> Path:
     """``checksums.sha256`` from ``lines`` already sorted by path (streamed, e.g. from a
     spool file) and a few more ``records``, merged in path order without holding the lines.
@@ -62,7 +64,7 @@ def write_checksums_merged(out: Path, lines: Iterable[str], records: list[dict[s
     def path_of(line: str) -> str:
         return line[66:-1]
 
-    extra = [checksum_line(r) for r in sorted(records, key=lambda r: r["path"])]
+    extra = [checksum_line(r) for r in sorted(records, key=lambda r: r.path)]
     with open_atomic(out / CHECKSUMS_NAME) as fh:
         fh.writelines(heapq.merge(lines, extra, key=path_of))
     return out / CHECKSUMS_NAME

@@ -19,8 +19,8 @@ import json
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
 
+from sonicspec.artifacts.records import CheckedContent, FileRecord
 from sonicspec.atomic import write_text
 
 CACHE_NAME = "checked.json"
@@ -30,12 +30,12 @@ class CheckCache:
     def __init__(self, path: Path) -> None:
         self.path = path
         try:
-            data = json.loads(path.read_text())
-            self._artifacts: dict[str, str] = dict(data["artifacts"])
-            self._files: dict[str, list] = dict(data["files"])
-            self._written: dict[str, list] = dict(data.get("written", {}))
-        except (OSError, ValueError, KeyError, TypeError):
-            self._artifacts, self._files, self._written = {}, {}, {}
+            content = CheckedContent.model_validate_json(path.read_bytes())
+        except (OSError, ValueError):  # missing, or not what this version writes: start over
+            content = CheckedContent(artifacts={}, files={})
+        self._artifacts = dict(content.artifacts)
+        self._files = dict(content.files)
+        self._written = content.written_records()
         self._dirty = False
 
     @classmethod
@@ -50,27 +50,27 @@ class CheckCache:
             self._artifacts[key] = fingerprint
             self._dirty = True
 
-    def written(self, key: str, fingerprint: str) -> list[dict[str, Any]] | None:
+    def written(self, key: str, fingerprint: str) -> list[FileRecord] | None:
         """The dataset files artifact ``key`` records (``path``, ``bytes``, ``sha256``), if
         they were read from it while it had ``fingerprint``; else None (read them again)."""
         entry = self._written.get(key)
-        if not entry or entry[0] != fingerprint:
+        if entry is None or entry[0] != fingerprint:
             return None
-        return [{"path": p, "bytes": b, "sha256": h} for p, b, h in entry[1]]
+        return list(entry[1])
 
     def mark_written(self, key: str, fingerprint: str,
-                     records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+                     records: Iterable[FileRecord]) -> list[FileRecord]:
         """Remember the files artifact ``key`` (with ``fingerprint``) records; returns those
         that carry a checksum (the others are not checked)."""
-        kept = [r for r in records if "sha256" in r]
-        self._written[key] = [fingerprint, [[r["path"], r.get("bytes"), r["sha256"]]
-                                            for r in kept]]
+        kept = [FileRecord(path=r.path, bytes=r.bytes, sha256=r.sha256)
+                for r in records if r.sha256 is not None]
+        self._written[key] = (fingerprint, kept)
         self._dirty = True
         return kept
 
     @staticmethod
-    def _file_token(st: os.stat_result, sha256: str) -> list:
-        return [st.st_size, st.st_mtime_ns, sha256]
+    def _file_token(st: os.stat_result, sha256: str) -> tuple[int, int, str]:
+        return (st.st_size, st.st_mtime_ns, sha256)
 
     def file_ok(self, path: Path, st: os.stat_result, sha256: str) -> bool:
         return self._files.get(str(path)) == self._file_token(st, sha256)
@@ -110,7 +110,10 @@ class CheckCache:
         nothing)."""
         if not self._dirty and self.path.is_file():
             return
-        write_text(self.path, json.dumps({"artifacts": self._artifacts, "files": self._files,
-                                          "written": self._written},
+        content = CheckedContent(
+            artifacts=self._artifacts, files=self._files,
+            written={k: (fp, [(r.path, r.bytes, r.sha256) for r in records])
+                     for k, (fp, records) in self._written.items()})
+        write_text(self.path, json.dumps(content.model_dump(mode="json"),
                                          sort_keys=True, separators=(",", ":")))
         self._dirty = False

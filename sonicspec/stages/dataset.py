@@ -23,8 +23,10 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
 
-from sonicspec import __version__
+from sonicspec import __version__, artifacts
+from sonicspec.artifacts.records import DatasetData, ExportGroup, SplitCount
 from sonicspec.atomic import open_atomic
 from sonicspec.errors import StageError
 from sonicspec.export.checksums import (
@@ -46,6 +48,17 @@ def _compact(value: Any) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
 
 
+class _GroupId(BaseModel):
+    """An export group record's id (the rest is read when the group is written)."""
+
+    model_config = ConfigDict(extra="ignore")
+    group: str
+
+
+class _Shard(BaseModel):
+    groups: list[dict[str, Any]]
+
+
 def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     """Every export record's groups as lines of ``spool``; ``(group id, offset)`` in group
     order."""
@@ -53,8 +66,10 @@ def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     keys = ctx.input_keys("export")
     for n, key in enumerate(keys):
         ctx.progress(f"reading export records: {n}/{len(keys)}")
-        for g in ctx.store.read_data("export", key)["groups"]:
-            index.append((g["group"], spool.tell()))
+        # checked as it is read back (one group at a time); here only the group ids are read
+        raw = _Shard.model_validate(ctx.store.read_data("export", key))
+        for g in raw.groups:
+            index.append((_GroupId.model_validate(g).group, spool.tell()))
             spool.write(_compact(g).encode("utf-8") + b"\n")
     index.sort()
     for (a, _), (b, _) in itertools.pairwise(index):
@@ -64,10 +79,16 @@ def _spool_groups(ctx: JobContext, spool: IO[bytes]) -> list[tuple[str, int]]:
     return index
 
 
-def _groups(spool: IO[bytes], index: list[tuple[str, int]]) -> Iterator[dict[str, Any]]:
-    for _, offset in index:
+def _groups(ctx: JobContext, spool: IO[bytes], index: list[tuple[str, int]]
+            ) -> Iterator[ExportGroup]:
+    for group, offset in index:
         spool.seek(offset)
-        yield json.loads(spool.readline())
+        try:
+            yield ExportGroup.model_validate_json(spool.readline())
+        except ValidationError as err:
+            raise StageError(f"{ctx.job.label}: the export record of group {group} does not "
+                             f"read ({artifacts.first_error(err)}); was it made by another "
+                             "sonicspec version?", ctx.job.key) from None
 
 
 class _SplitWriters:
@@ -85,8 +106,8 @@ class _SplitWriters:
         self.written.append(rel)
         return self.stack.enter_context(open_atomic(self.out / rel))
 
-    def group(self, g: dict[str, Any]) -> None:
-        split = g["split"]
+    def group(self, g: ExportGroup) -> None:
+        split = g.split
         if split != self.split:
             self.split = split
             if "lhotse" in self.manifests:
@@ -95,10 +116,11 @@ class _SplitWriters:
             if "csv" in self.manifests:
                 self.csv = csv_writer(self._open(f"manifests/{split}.csv"), self.columns)
         if "lhotse" in self.manifests:
-            self.files["recordings"].writelines(jsonl_line(r) for r in g["recordings"])
-            self.files["supervisions"].writelines(jsonl_line(s) for s in g["supervisions"])
+            self.files["recordings"].writelines(jsonl_line(r) for r in g.recordings)
+            self.files["supervisions"].writelines(jsonl_line(s) for s in g.supervisions)
         if "csv" in self.manifests:
-            self.csv.writerows(dict(f, split=split, group=g["group"]) for f in g["files"])
+            self.csv.writerows(dict(f.model_dump(mode="json"), split=split, group=g.group)
+                               for f in g.files)
 
 
 def run(ctx: JobContext) -> None:
@@ -113,7 +135,7 @@ def run(ctx: JobContext) -> None:
                                  for role, files in sorted(skipped.items())},
         "description": params.spec.description,
     }
-    counts: dict[str, dict[str, Any]] = {}
+    counts: dict[str, list[int]] = {}  # split -> [groups, files]
     seconds: dict[str, float] = {}
     last_path = ""
     scratch = Path(ctx.plan.store_dir)
@@ -128,38 +150,39 @@ def run(ctx: JobContext) -> None:
                                     (*CSV_COLUMNS, "scale") if scaled else CSV_COLUMNS)
             summary = stack.enter_context(open_atomic(out / "dataset.json"))
             summary.write(_compact(head)[:-1] + ',"groups":[')
-            for n, g in enumerate(_groups(spool, index)):
+            for n, g in enumerate(_groups(ctx, spool, index)):
                 if n % 1000 == 0:
                     ctx.progress(f"writing manifests: {n}/{len(index)} groups")
                 writers.group(g)
                 summary.write(("\n" if n == 0 else ",\n") + _compact(
-                    {"group": g["group"], "split": g["split"], "scene_id": g["scene_id"],
-                     "metadata": g["metadata"]}))
-                c = counts.setdefault(g["split"], {"groups": 0, "files": 0})
-                c["groups"] += 1
-                c["files"] += len(g["files"])
-                seconds[g["split"]] = seconds.get(g["split"], 0.0) + g["duration_s"]
-                for record in sorted(g["files"], key=lambda r: r["path"]):
-                    if record["path"] <= last_path:
-                        raise StageError(f"{ctx.job.label}: file {record['path']} comes "
+                    {"group": g.group, "split": g.split, "scene_id": g.scene_id,
+                     "metadata": g.metadata.model_dump(mode="json")}))
+                c = counts.setdefault(g.split, [0, 0])
+                c[0] += 1
+                c[1] += len(g.files)
+                seconds[g.split] = seconds.get(g.split, 0.0) + g.duration_s
+                for record in sorted(g.files, key=lambda r: r.path):
+                    if record.path <= last_path:
+                        raise StageError(f"{ctx.job.label}: file {record.path} comes "
                                          f"after {last_path} in group order; group ids must "
                                          "not be prefixes of one another", ctx.job.key)
-                    last_path = record["path"]
+                    last_path = record.path
                     sums.write(checksum_line(record))
-            for split, c in counts.items():
-                # The same sum in the same (group) order as before: the same rounding.
-                c["audio_hours"] = round(seconds[split] / 3600.0, 6)
+            # The same sum in the same (group) order as before: the same rounding.
+            splits = {split: SplitCount(groups=c[0], files=c[1],
+                                        audio_hours=round(seconds[split] / 3600.0, 6))
+                      for split, c in sorted(counts.items())}
             files_written = writers.written
             tail = {"manifests": files_written, "name": params.spec.name,
                     "sonicspec_version": __version__,
                     "spec": params.spec.model_dump(mode="json"),
                     "spec_version": params.spec.sonicspec,
-                    "splits": dict(sorted(counts.items()))}
+                    "splits": {k: v.model_dump(mode="json") for k, v in splits.items()}}
             summary.write(("\n" if index else "") + "]," + _compact(tail)[1:] + "\n")
         own = [file_record(out, out / rel) for rel in [*files_written, "dataset.json"]]
         sums.seek(0)
         write_checksums_merged(out, sums, own)
     ctx.write({"group_count": np.array([len(index)], dtype=np.int64)},
-              {"dataset_json": "dataset.json", "manifests": files_written,
-               "splits": dict(sorted(counts.items())),
-               "files": [*own, file_record(out, out / CHECKSUMS_NAME)]})
+              artifacts.encode("dataset", DatasetData(
+                  dataset_json="dataset.json", manifests=files_written, splits=splits,
+                  files=[*own, file_record(out, out / CHECKSUMS_NAME)])))

@@ -33,6 +33,7 @@ from sonicspec.artifacts import (
     RirGroup,
     RirSource,
 )
+from sonicspec.artifacts.records import ExportData, ExportGroup, FileRecord, MetadataRef
 from sonicspec.audio.arrange import Segment
 from sonicspec.audio.augment import (
     GroupAugmentation,
@@ -68,7 +69,7 @@ class _GroupWriter:
         self.out, self.folder, self.group = out, folder, group
         self.outputs = params.outputs
         self.rate = params.sample_rate_hz
-        self.files: list[dict[str, Any]] = []
+        self.files: list[FileRecord] = []
         self.recordings: list[dict[str, Any]] = []
         self.rec_ids: dict[str, str] = {}
         self.scales: dict[str, float] = {}
@@ -90,10 +91,10 @@ class _GroupWriter:
             self.scales[path.relative_to(self.folder).as_posix()] = 1.0 if scale is None else scale
         rel = path.relative_to(self.out).as_posix()
         x2 = np.atleast_2d(x)
-        entry = {"kind": kind, "name": name, **file_record(self.out, path),
-                 "channels": int(x2.shape[0]), "num_samples": int(x2.shape[1]),
-                 "sample_rate_hz": self.rate, **({"scale": scale} if scaled else {})}
-        self.files.append(entry)
+        self.files.append(file_record(self.out, path, kind=kind, name=name,
+                                      channels=int(x2.shape[0]), num_samples=int(x2.shape[1]),
+                                      sample_rate_hz=self.rate,
+                                      scale=float(scale) if scaled else None))
         if not float_wav:
             rec_id = f"{self.group.replace('/', '_')}_{name.replace('/', '_')}"
             self.rec_ids[name] = rec_id
@@ -159,7 +160,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                  placement: GroupPlacement, rir: RirGroup, rir_arrays: dict[str, Any],
                  keys: dict[str, str], walk: Walk,
                  backgrounds: dict[str, Any] | None = None,
-                 augmentation: GroupAugmentation | None = None) -> dict[str, Any]:
+                 augmentation: GroupAugmentation | None = None) -> ExportGroup:
     """Write one group's folder; its record for ``dataset``. ``backgrounds``: the render's
     diffuse background fields by role (recorded in the metadata); ``augmentation``: the
     group's draw of the spec's device and channel effects."""
@@ -247,7 +248,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                                           augmentation=measured))
     mic_ref = TrackReference(**track_file.add("microphone", *microphone_track(line, w.rate)))
     track_file.write()
-    w.files.append({"kind": "tracks", "name": "tracks", **file_record(out, track_file.path)})
+    w.files.append(file_record(out, track_file.path, kind="tracks", name="tracks"))
     speech_entries = {n: e for n, e in entries.items() if isinstance(e, SpeechTrack)}
     metadata = GroupMetadata(
         group=group, split=split, scene_id=params.scene_id, mic_m=tuple(placement.mic_m),
@@ -259,8 +260,8 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
         augmentation=augmentation.draw if augmentation is not None else None)
     if outputs.metadata:
         metadata.write(w.folder / "metadata.json")
-        w.files.append({"kind": "metadata", "name": "metadata",
-                        **file_record(out, w.folder / "metadata.json")})
+        w.files.append(file_record(out, w.folder / "metadata.json", kind="metadata",
+                                   name="metadata"))
     # A supervision per utterance on every recording it is heard in: its source's own file
     # and each mixture that contains the source.
     rows = []
@@ -275,11 +276,12 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             rows.extend(SupervisionEntry(f"{stem}_{k}", rec, seg.start, seg.end, w.rate,
                                          seg.text, speaker).to_lhotse()
                         for k, seg in enumerate(segs))
-    return {"group": group, "split": split, "scene_id": params.scene_id,
-            "metadata": {"path": f"{split}/{index}/metadata.json" if outputs.metadata
-                         else None},
-            "files": w.files, "recordings": w.recordings, "supervisions": rows,
-            "duration_s": render.clip_samples / w.rate}
+    return ExportGroup(
+        group=group, split=split, scene_id=params.scene_id,
+        metadata=MetadataRef(path=f"{split}/{index}/metadata.json" if outputs.metadata
+                             else None),
+        files=w.files, recordings=w.recordings, supervisions=rows,
+        duration_s=render.clip_samples / w.rate)
 
 
 def run(ctx: JobContext) -> None:
@@ -312,5 +314,5 @@ def run(ctx: JobContext) -> None:
         groups.append(export_group(out, params, render_art.arrays, r, m, arr, placement,
                                    rir_group, rir_art.arrays, {**keys, "export": ctx.job.key},
                                    walk, render_params.backgrounds, aug))
-    ctx.write({"file_count": np.array([sum(len(g["files"]) for g in groups)], dtype=np.int64)},
-              {"groups": groups})
+    ctx.write({"file_count": np.array([sum(len(g.files) for g in groups)], dtype=np.int64)},
+              artifacts.encode("export", ExportData(groups=groups)))

@@ -12,8 +12,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pydantic import BaseModel
 
 from sonicspec.artifacts import GroupPlacement
+from sonicspec.artifacts.mesh_report import LeakFacts, RepairFacts, WeldFacts
 from sonicspec.artifacts.scenes import build_scene_mesh
 from sonicspec.errors import CompileError, PlacementError, SonicspecWarning
 from sonicspec.geometry.navigation import build_navigation
@@ -68,12 +70,12 @@ class SceneFacts:
     diffraction_edges: EdgeChoice | None
     surface_area_m2: float
     air_volume_m3: float
-    weld: dict[str, Any] | None
-    """The mesh step's report of the seams welded on load (``WeldReport.to_dict``)."""
-    repair: dict[str, Any] | None
-    """Its repair report (``RepairReport.to_dict``)."""
-    leak: dict[str, Any] | None
-    """Its leak test (``LeakReport.to_dict``)."""
+    weld: WeldFacts | None
+    """The mesh step's report of the seams welded on load."""
+    repair: RepairFacts | None
+    """Its repair report."""
+    leak: LeakFacts | None
+    """Its leak test."""
     warnings: tuple[str, ...]
     materials_m2: dict[str, float]
     labels: tuple[str, ...]
@@ -94,7 +96,7 @@ class SceneFacts:
             "diffraction_edges": (None if self.diffraction_edges is None
                                   else self.diffraction_edges.to_dict()),
             "surface_area_m2": self.surface_area_m2, "air_volume_m3": self.air_volume_m3,
-            "weld": self.weld, "repair": self.repair, "leak": self.leak,
+            "weld": _json(self.weld), "repair": _json(self.repair), "leak": _json(self.leak),
             "warnings": list(self.warnings), "materials_m2": self.materials_m2,
             "labels": list(self.labels), "floors": [g.to_dict() for g in self.floors],
             "placement": (None if self.placement is None
@@ -145,15 +147,14 @@ def inspect_scene(loaded: LoadedSpec, scene_id: str, *, plot: Path | None = None
 
         plot_floor_plan(mesh, nav, placement, plot, title=f"{spec.name}: {scene_id}")
     return SceneFacts(
-        scene_id=scene_id, kind=report["kind"],
+        scene_id=scene_id, kind=report.kind,
         bounds_m=(tuple(lo.tolist()), tuple(hi.tolist())),
         vertices=int(mesh.vertices.shape[0]), faces=int(mesh.faces.shape[0]),
         simplify_tolerance_m=spec.acoustics.simplify_tolerance_m,
         traced_faces=len(traced_faces), diffraction_edges=edges,
         surface_area_m2=float(areas.sum()), air_volume_m3=float(mesh.air_volume()),
-        # the mesh step's report: untyped JSON (keys present as the step found them)
-        weld=report.get("weld"), repair=report.get("repair"), leak=report.get("leak"),
-        warnings=tuple(caught + report.get("warnings", [])),
+        weld=report.weld, repair=report.repair, leak=report.leak,
+        warnings=tuple(caught + report.warnings),
         materials_m2=dict(sorted(by_material.items(), key=lambda kv: -kv[1])),
         labels=tuple(mesh.labels), floors=tuple(nav.grids),
         placement=placement, placement_error=placement_error,
@@ -178,10 +179,8 @@ def _edge_choice(vertices: np.ndarray, faces: np.ndarray, max_edges: int,
                              near_m=near).choice()
 
 
-def _leak_place(place: dict[str, Any]) -> str:
-    from sonicspec.geometry.repair import LeakPlace
-
-    return LeakPlace(**{**place, "where_m": tuple(place["where_m"])}).describe()
+def _json(facts: BaseModel | None) -> dict[str, Any] | None:
+    return None if facts is None else facts.model_dump(mode="json")
 
 
 def format_facts(facts: SceneFacts) -> str:
@@ -196,27 +195,25 @@ def format_facts(facts: SceneFacts) -> str:
         f" m (size {' x '.join(f'{v:.2f}' for v in size)} m)",
         f"surface {facts.surface_area_m2:.1f} m², air volume {facts.air_volume_m3:.1f} m³",
     ]
-    # weld, repair and leak: the mesh step's report as it stores it (JSON)
     weld = facts.weld
     if weld is not None:
         lines.append(
-            f"seams welded on load (weld_distance_m {weld['distance_m']:g} m): "
-            f"{weld['merged_vertices']} vertices joined, {weld['t_junctions_stitched']} "
-            f"T-junctions stitched; open edges {weld['open_edges_before']} -> "
-            f"{weld['open_edges_after']}")
+            f"seams welded on load (weld_distance_m {weld.distance_m:g} m): "
+            f"{weld.merged_vertices} vertices joined, {weld.t_junctions_stitched} "
+            f"T-junctions stitched; open edges {weld.open_edges_before} -> "
+            f"{weld.open_edges_after}")
     rep = facts.repair
     if rep is not None:
         lines.append(
-            f"repair: faces {rep['before']['faces']} -> {rep['after']['faces']}, merged "
-            f"{rep['merged_vertices']} vertices, closed {rep['holes_closed']}/{rep['holes_found']}"
-            f" holes, removed {rep['debris_components_removed']} debris pieces; watertight "
-            f"{'yes' if rep['watertight'] else 'NO'}")
+            f"repair: faces {rep.before.faces} -> {rep.after.faces}, merged "
+            f"{rep.merged_vertices} vertices, closed {rep.holes_closed}/{rep.holes_found}"
+            f" holes, removed {rep.debris_components_removed} debris pieces; watertight "
+            f"{'yes' if rep.watertight else 'NO'}")
     leak = facts.leak
     if leak is not None:
-        where = "; ".join(_leak_place(p) for p in leak.get("places", [])[:3])
-        lines.append(f"leak test: {leak['fraction']:.4%} of {leak['rays']} rays from the "
-                     f"{leak.get('origins', 'sampled')} air escape" + (f": {where}" if where
-                                                                       else ""))
+        where = "; ".join(p.describe() for p in leak.places[:3])
+        lines.append(f"leak test: {leak.fraction:.4%} of {leak.rays} rays from the "
+                     f"{leak.origins} air escape" + (f": {where}" if where else ""))
     edges = facts.diffraction_edges
     if edges is not None:
         lines.append(f"diffraction: {edges.kept} of {edges.found} edges kept "

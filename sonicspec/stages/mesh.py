@@ -26,4 +26,5 @@ def run(ctx: JobContext) -> None:
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     arrays, facts = artifacts.mesh_arrays(mesh)
-    ctx.write(arrays, {**report, **facts})
+    # the report's absent parts (weld, repair, leak, warnings) stay absent
+    ctx.write(arrays, artifacts.encode("mesh", {**report.model_dump(mode="json"), **facts}))

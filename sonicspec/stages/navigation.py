@@ -17,4 +17,5 @@ def run(ctx: JobContext) -> None:
     mesh_art = ctx.input("mesh")
     mesh = artifacts.read_mesh(mesh_art.arrays, mesh_art.data)
     nav = build_navigation(mesh, settings_from(ctx.params))
-    ctx.write(*artifacts.navigation_arrays(nav, mesh_art.data["scene_id"]))
+    scene_id = artifacts.decode("mesh", mesh_art.data, ctx.job.label).scene_id
+    ctx.write(*artifacts.navigation_arrays(nav, scene_id))

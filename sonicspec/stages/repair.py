@@ -18,7 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sonicspec.errors import StoreError
+from sonicspec import artifacts
+from sonicspec.artifacts.records import DatasetData, ExportData, FileRecord
+from sonicspec.errors import StageError, StoreError
 from sonicspec.export.checksums import (
     CHECKSUMS_NAME,
     DATASET_MARKER,
@@ -65,33 +67,35 @@ def present_keys(plan: Plan, store: ArtifactStore) -> set[str]:
             for k in store.present(step, (j.key for j in jobs))}
 
 
-def written_files(step: str, data: Any) -> Iterator[dict[str, Any]]:
-    """The dataset-folder files an ``export`` or ``dataset`` artifact (its data) records."""
+def written_files(step: str, data: Any, where: str = "") -> Iterator[FileRecord]:
+    """The dataset-folder files an ``export`` or ``dataset`` artifact (its data) records;
+    :class:`~sonicspec.errors.StageError` if the data does not read as the step's model."""
     if step == "export":
-        for group in data.get("groups", []):
-            yield from group.get("files", [])
+        export: ExportData = artifacts.decode(step, data, where)
+        for group in export.groups:
+            yield from group.files
     elif step == "dataset":
-        yield from data.get("files", [])
+        dataset: DatasetData = artifacts.decode(step, data, where)
+        yield from dataset.files
 
 
-def _file_problem(out: Path, record: dict[str, Any], cache: CheckCache,
+def _file_problem(out: Path, record: FileRecord, cache: CheckCache,
                   report: CheckReport) -> str | None:
-    if "sha256" not in record:
+    if record.sha256 is None:
         return None
-    path = out / record["path"]
+    path = out / record.path
     report.files_checked += 1
     try:
         st = path.stat()
     except FileNotFoundError:
-        return f"dataset file {record['path']} is missing"
-    if cache.file_ok(path, st, record["sha256"]):
+        return f"dataset file {record.path} is missing"
+    if cache.file_ok(path, st, record.sha256):
         return None
     report.files_hashed += 1
-    if (record.get("bytes") not in (None, st.st_size)
-            or file_sha256(path) != record["sha256"]):
+    if record.bytes not in (None, st.st_size) or file_sha256(path) != record.sha256:
         cache.forget_file(path)
-        return f"dataset file {record['path']} differs from what the build wrote"
-    cache.mark_file(path, st, record["sha256"])
+        return f"dataset file {record.path} differs from what the build wrote"
+    cache.mark_file(path, st, record.sha256)
     return None
 
 
@@ -122,9 +126,13 @@ def check_existing(plan: Plan, store: ArtifactStore, cache: CheckCache, *, repai
             records = cache.written(job.key, fingerprint)
             if records is None:
                 report.records_read += 1
-                records = cache.mark_written(
-                    job.key, fingerprint,
-                    written_files(job.step, store.read_data(job.step, job.key)))
+                try:
+                    records = cache.mark_written(
+                        job.key, fingerprint,
+                        written_files(job.step, store.read_data(job.step, job.key), job.label))
+                except StageError as exc:
+                    bad[job.key] = f"store artifact's record does not read: {exc}"
+                    continue
             for record in records:
                 problem = _file_problem(out, record, cache, report)
                 if problem is not None:
@@ -170,14 +178,15 @@ def record_written(plan: Plan, store: ArtifactStore, cache: CheckCache,
         fingerprint = store.fingerprint(job.step, job.key)
         cache.mark_artifact(job.key, fingerprint)
         if job.step in FILE_STEPS:
-            records = list(written_files(job.step, store.read_data(job.step, job.key)))
+            records = list(written_files(job.step, store.read_data(job.step, job.key),
+                                         job.label))
             cache.mark_written(job.key, fingerprint, records)
             for record in records:
-                path = out / record["path"]
+                path = out / record.path
                 if not path.is_file():
-                    missing.append(record["path"])
-                elif "sha256" in record:
-                    cache.mark_file(path, path.stat(), record["sha256"])
+                    missing.append(record.path)
+                elif record.sha256 is not None:
+                    cache.mark_file(path, path.stat(), record.sha256)
     return missing
 
 
@@ -204,16 +213,21 @@ def verify_dataset_folder(out: Path, cache: CheckCache | None = None) -> tuple[i
         listed = read_checksums(out)
     except StoreError:
         return count, lines
-    recorded = list(written_files("dataset", store.read_data("dataset", key)))
-    for k in store.read("dataset", key).provenance["input_keys"]:
-        if store.exists("export", k):  # (the others are corpora)
-            recorded += written_files("export", store.read_data("export", k))
+    try:
+        recorded = list(written_files("dataset", store.read_data("dataset", key)))
+        for k in store.read("dataset", key).provenance["input_keys"]:
+            if store.exists("export", k):  # (the others are corpora)
+                recorded += written_files("export", store.read_data("export", k))
+    except StageError as exc:
+        lines.append(f"{DATASET_MARKER}: the store's record of what the build wrote does not "
+                     f"read ({exc})")
+        return count, lines
     for r in recorded:
-        if r["path"] == CHECKSUMS_NAME:
+        if r.path == CHECKSUMS_NAME:
             continue
-        if listed.get(r["path"]) != r["sha256"]:
+        if listed.get(r.path) != r.sha256:
             if cache is not None:
-                cache.forget_files([out / r["path"], out / CHECKSUMS_NAME])
-            lines.append(f"{r['path']}: {CHECKSUMS_NAME} disagrees with the store's record of "
+                cache.forget_files([out / r.path, out / CHECKSUMS_NAME])
+            lines.append(f"{r.path}: {CHECKSUMS_NAME} disagrees with the store's record of "
                          "what the build wrote")
     return count, lines

@@ -263,7 +263,7 @@ def run(ctx) -> None:
     scene = acoustic_scene(mesh, spec_materials(params.materials), settings)
     regions = scene_regions(scene, settings)
     placements = artifacts.read(ctx, "placement").groups
-    scene_name = f"scene {mesh_art.data.get('scene_id', '?')!r}"
+    scene_name = f"scene {artifacts.decode('mesh', mesh_art.data, ctx.job.label).scene_id!r}"
     patterns = source_patterns(params.directivity, ctx.job.paths, settings.bands_hz)
     walk = arranged = None
     if params.walk is not None:
