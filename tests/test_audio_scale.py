@@ -266,9 +266,15 @@ def test_evaluate_applies_the_scales(built: dict[str, Path], tmp_path: Path) -> 
         if a["method"] == "oracle_mixture":
             assert b["si_snri"] == pytest.approx(0.0, abs=1e-9)
             assert c["si_snri"] == pytest.approx(0.0, abs=1e-9)
-            # 18 bits against float: the mixture's SI-SNR the same to 0.01 dB
-            assert b["si_snr"] == pytest.approx(a["si_snr"], abs=0.01)
-            assert c["si_snr"] == pytest.approx(a["si_snr"], abs=0.01)
+            # 18 bits against float: the mixture's SI-SNR the same to 0.01 dB where the
+            # target is heard in the window; in a window where it is all but silent (its
+            # reverberant tail 40 dB under the mixture, most samples below 1e-6) the file's
+            # 18-bit steps are the target, and both builds only agree that it is not there
+            if a["si_snr"] > -30.0:
+                assert b["si_snr"] == pytest.approx(a["si_snr"], abs=0.01)
+                assert c["si_snr"] == pytest.approx(a["si_snr"], abs=0.01)
+            else:
+                assert b["si_snr"] < -30.0 and c["si_snr"] < -30.0
         else:
             assert b["sdr"] == c["sdr"] == 200.0  # the ceiling, as today
 
