@@ -165,3 +165,31 @@ def test_bad_keys_and_dtypes_are_refused(tmp_path: Path) -> None:
         store.write("rir", "a" * 64, {"names": np.array(["a", "b"])})
     with pytest.raises(StoreError, match="no artifact"):
         store.read("rir", "a" * 64)
+
+
+def test_stale_temp_of_a_zombie_writer_is_removed_and_a_live_one_kept(tmp_path: Path) -> None:
+    """A writer killed with its parent stays a zombie where nobody reaps it (a container's
+    first process): ``os.kill(pid, 0)`` succeeds on it, yet its folder is abandoned."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    store = ArtifactStore(tmp_path)
+    host = socket.gethostname()
+    zombie = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 10
+    while Path(f"/proc/{zombie.pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z":
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(zombie.pid, 0)  # still "exists"
+    dead = tmp_path / "mix" / "ab" / f".tmp-{'ab' * 32}-{zombie.pid}-0123abcd@{host}.zarr"
+    live = tmp_path / "mix" / "cd" / f".tmp-{'cd' * 32}-{os.getpid()}-0123abcd@{host}.zarr"
+    for folder in (dead, live):
+        folder.mkdir(parents=True)
+        (folder / "zarr.json").write_text("{}")
+    try:
+        assert store.clean_stale_temp() == 1
+        assert store.temp_folders() == [live]
+    finally:
+        zombie.wait()

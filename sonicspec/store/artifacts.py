@@ -290,13 +290,8 @@ class ArtifactStore:
             except (IndexError, ValueError):
                 pid = -1
             if owner == host and pid > 0:
-                try:
-                    os.kill(pid, 0)
+                if _writer_alive(pid, tmp):
                     continue  # still writing
-                except ProcessLookupError:
-                    pass
-                except PermissionError:
-                    continue
             elif time.time() - tmp.stat().st_mtime < max_age_s:
                 continue
             shutil.rmtree(tmp, ignore_errors=True)
@@ -365,3 +360,34 @@ class ArtifactStore:
                 )
             )
         return problems
+
+
+def _writer_alive(pid: int, folder: Path) -> bool:
+    """Whether process ``pid`` on this host may still be writing ``folder``.
+
+    A process killed while its parent died too stays a zombie until someone reaps it (in a
+    container whose first process does not reap, for ever): ``os.kill(pid, 0)`` still succeeds,
+    so on Linux its state is read from ``/proc``. A pid started after the folder was last
+    changed is another process that reused the number.
+    """
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        boot = next(float(line.split()[1]) for line in Path("/proc/stat").read_text().splitlines()
+                    if line.startswith("btime "))
+    except (OSError, StopIteration, ValueError, IndexError):
+        return True  # no /proc: trust os.kill
+    fields = stat.rpartition(")")[2].split()  # after "pid (comm)": state is first, starttime 20th
+    if fields[0] in ("Z", "X"):
+        return False
+    try:
+        started = boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")
+        changed = folder.stat().st_mtime
+    except (IndexError, ValueError, OSError):
+        return True
+    return started <= changed + 2.0
