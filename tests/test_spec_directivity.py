@@ -54,15 +54,67 @@ def test_bad_directivity_is_named(tmp_path: Path) -> None:
         compile_spec(load_spec(spec), cache=False)
 
 
-def test_a_directional_source_with_a_moving_microphone_is_refused(tmp_path: Path) -> None:
-    text = (ROOT / "specs" / "demo.yaml").read_text()
-    assert "microphone:" in text
+def test_a_directional_source_with_a_moving_microphone_compiles(tmp_path: Path) -> None:
+    """Once refused; now the rir step pairs the source's and the microphone's positions in
+    time (it reads the arrangement) and faces the source at each pair's time."""
     spec = _spec(tmp_path, "directivity:\n  noise: {pattern: cardioid}\n")
     loaded = load_spec(spec)
     moving = loaded.spec.model_copy(update={"microphone": loaded.spec.microphone.model_copy(
         update={"trajectory": _moving_trajectory()})})
-    with pytest.raises(CompileError, match="directivity: a directional source is rendered"):
-        compile_spec(type(loaded)(**{**loaded.__dict__, "spec": moving}), cache=False)
+    plan = compile_spec(type(loaded)(**{**loaded.__dict__, "spec": moving}), cache=False)
+    rir = next(j for j in plan.jobs if j.step == "rir")
+    arrange = next(j for j in plan.jobs if j.step == "arrange" and j.label.endswith(
+        rir.label.removeprefix("rir")))
+    assert rir.params["directivity"]["noise"]["pattern"] == "cardioid"
+    assert "walk" in rir.params and arrange.key in rir.inputs
+
+
+HEAD_TURN = "directivity:\n  speech: {pattern: PATTERN, head_turn: {std_deg: 15}}\n"
+
+
+@pytest.mark.parametrize("interpolation", ["sample_crossfade", "stft_crossfade",
+                                           "segment_ola"])
+def test_head_turns_without_the_paths_are_refused_by_name(tmp_path: Path,
+                                                         interpolation: str) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "speech"), interpolation)
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is None
+    (error,) = [p for p in problems if p.severity == "error"]
+    assert error.path == ("directivity", "speech", "head_turn")
+    message = error.format("s.yaml")
+    assert "directivity.speech.head_turn" in message and "mixture.interpolation" in message
+    assert f"got {interpolation!r}" in message
+
+
+@pytest.mark.parametrize("interpolation", ["paths", "auto"])
+def test_head_turns_along_the_paths_validate(tmp_path: Path, interpolation: str) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "speech"), interpolation)
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is not None, [p.format("s.yaml") for p in problems]
+    assert not [p for p in problems if p.path[:1] == ("directivity",)]
+
+
+def test_head_turns_of_an_omni_source_are_a_warning(tmp_path: Path) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "omni"), "sample_crossfade")
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is not None
+    (warning,) = [p for p in problems if p.path == ("directivity", "speech", "head_turn")]
+    assert warning.severity == "warning" and "has no effect" in warning.message
+
+
+def _with_interpolation(text: str, interpolation: str) -> str:
+    """The demo spec with ``mixture.interpolation`` set (it leaves it at its default)."""
+    assert "\nmixture:\n" in text and "interpolation:" not in text
+    return text.replace("\nmixture:\n", f"\nmixture:\n  interpolation: {interpolation}\n")
 
 
 def _moving_trajectory():

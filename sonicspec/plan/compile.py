@@ -361,11 +361,6 @@ def _directivity(spec: DatasetSpec, base_dir: Path, digests: FileDigests
     nothing), and its SOFA files: (params, digest by role, path by role)."""
     if spec.directivity.is_omni:
         return {}, {}, {}
-    if not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
-        raise CompileError("directivity: a directional source is rendered for a static "
-                           "microphone (microphone.trajectory is "
-                           f"{spec.microphone.trajectory.kind!r}); use omni sources or a "
-                           "static microphone")
     files, paths = {}, {}
     for role in ("speech", "noise", "music"):
         d = spec.directivity.role(role)
