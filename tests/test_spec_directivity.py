@@ -151,3 +151,51 @@ def test_a_sofa_talker_is_keyed_by_its_file_and_read_by_the_steps(tmp_path: Path
     assert set(patterns) == {"speech"} and isinstance(patterns["speech"], SofaPattern)
     back = patterns["speech"].gains(np.array([[-1.0, 0, 0], [0, 1.0, 0]]), (1000.0,))[:, 0]
     np.testing.assert_allclose(back, [0.0, 0.5], atol=0.02)
+
+
+def _moving_line(n: int = 16000, pairs: int = 9):
+    """A timeline of a source standing at (2, 0, 1.6) while the microphone walks from
+    (0, -2, 1.5) to (0, 2, 1.5) over ``n`` samples, ``pairs`` pairs evenly spread."""
+    import numpy as np
+
+    from sonicspec.stages.motion import Timeline
+
+    at = np.linspace(0, n - 1, pairs)
+    mic = np.stack([np.zeros(pairs), np.linspace(-2, 2, pairs), np.full(pairs, 1.5)], 1)
+    source = np.tile([2.0, 0.0, 1.6], (pairs, 1))
+    index = np.interp(np.arange(n), at, np.arange(pairs, dtype=float))
+    return Timeline(index, source, mic, np.zeros(pairs), 0.0, True), at
+
+
+@pytest.mark.parametrize("facing", ["toward_mic", "walk"])
+def test_a_standing_source_faces_a_moving_microphone_where_it_is(facing: str) -> None:
+    """``toward_mic`` (and ``walk`` for a source that never walks) turns with a moving
+    microphone: every 10 ms frame and every RIR pair faces where the microphone is then."""
+    import numpy as np
+
+    from sonicspec.stages.directivity import facing_frames, pair_yaws_deg
+
+    line, at = _moving_line()
+    d = DirectivitySpec(pattern="cardioid", facing=facing)
+    hop, frames = facing_frames(d, line, None, 16000, None)
+    mic = line.at(line.mic_m, line.index[::hop])
+    bearing = np.degrees(np.unwrap(np.arctan2(mic[:, 1], mic[:, 0] - 2.0)))  # through 180°
+    np.testing.assert_allclose(frames, bearing, atol=1e-9)
+    pairs = pair_yaws_deg(d, line, 16000)
+    # the facing track read at each pair's sample, as the render step reads it per sample
+    # (linear between 10 ms frames, held after the last: the last pair is 159 samples on)
+    seen = line.at(line.mic_m, np.interp(np.minimum(at, (len(frames) - 1) * hop),
+                                         np.arange(line.index.size), line.index))
+    expect = np.degrees(np.unwrap(np.arctan2(seen[:, 1], seen[:, 0] - 2.0)))
+    assert np.ptp(expect) > 85  # it turns through nearly a right angle
+    np.testing.assert_allclose(pairs, expect, atol=0.05)
+
+
+def test_a_fixed_source_keeps_its_yaw_at_every_pair() -> None:
+    import numpy as np
+
+    from sonicspec.stages.directivity import pair_yaws_deg
+
+    line, _ = _moving_line()
+    d = DirectivitySpec(pattern="speech", facing="fixed", yaw_deg=-30.0)
+    np.testing.assert_array_equal(pair_yaws_deg(d, line, 16000), -30.0)
