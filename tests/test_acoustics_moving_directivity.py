@@ -318,3 +318,35 @@ def test_the_talker_pattern_per_band_heard_by_a_walking_microphone() -> None:
     down = 10 * np.log10(np.sum(ours_b ** 2, axis=1)
                          / np.sum(bank.split(omni[core]) ** 2, axis=1))
     assert down[list(bank.bands_hz).index(4000.0)] < -6, down
+
+
+@pytest.mark.parametrize("kind", ["ambisonics", "array"])
+def test_every_moving_receiver_hears_the_directional_source_the_mono_one_does(kind: str
+                                                                            ) -> None:
+    """The pattern weights each emission before the receiver: the ambisonic W channel (SN3D:
+    gain 1) and a capsule at the array's centre hear what the mono microphone hears."""
+    from sonicspec.acoustics.moving.delays import Receiver, render_paths
+
+    n = FS
+    dry = pink(n, seed=19)
+    mic_track = walk([2.0, 1.0, 1.3], [-1.0, 1.4, 1.2], 1.2, n)
+    source_track = walk([-1.5, -0.6, 1.6], [1.5, -0.6, 1.6], 1.4, n)
+    points, mics, paths, index, bank = floor_pairs(source_track, mic_track)
+    source = SourceDirectivity(pattern_by_name("cardioid"),
+                               40.0 * np.sin(2 * np.pi * np.arange(n) / FS))
+    moving = {"mic_track_m": mics, "yaw_deg": np.linspace(0.0, 30.0, len(mics))}
+
+    def heard(receiver):
+        return render_paths(dry, index, points, paths, bank, n_out=n + 300,
+                            speed_of_sound_m_s=C, receiver=receiver, source=source)
+
+    (mono,) = heard(Receiver(**moving))
+    if kind == "ambisonics":
+        channel = heard(Receiver("ambisonics", order=1, **moving))[0]
+    else:
+        channel = heard(Receiver("array", offsets_m=np.array([[0.0, 0, 0], [0.05, 0, 0]]),
+                                 **moving))[0]
+    omni = render_paths(dry, index, points, paths, bank, n_out=n + 300, speed_of_sound_m_s=C,
+                        receiver=Receiver(**moving))[0]
+    np.testing.assert_allclose(channel, mono, atol=1e-9 * np.max(np.abs(mono)))
+    assert snr_db(omni, mono) < 20  # the pattern is heard
