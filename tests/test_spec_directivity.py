@@ -199,3 +199,13 @@ def test_a_fixed_source_keeps_its_yaw_at_every_pair() -> None:
     line, _ = _moving_line()
     d = DirectivitySpec(pattern="speech", facing="fixed", yaw_deg=-30.0)
     np.testing.assert_array_equal(pair_yaws_deg(d, line, 16000), -30.0)
+
+
+def test_head_turns_without_the_paths_are_refused_by_compile_too(tmp_path: Path) -> None:
+    """A spec changed in Python after validation: the compiler says what validate says."""
+    loaded = load_spec(_spec(tmp_path, HEAD_TURN.replace("PATTERN", "speech")))
+    crossfade = loaded.spec.model_copy(update={"mixture": loaded.spec.mixture.model_copy(
+        update={"interpolation": "sample_crossfade"})})
+    with pytest.raises(CompileError, match=r"directivity.speech.head_turn: head turns are "
+                                           r"rendered .* got 'sample_crossfade'"):
+        compile_spec(type(loaded)(**{**loaded.__dict__, "spec": crossfade}), cache=False)

@@ -177,7 +177,7 @@ def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = (),
         _check_trajectory,
         _check_heights_and_distances,
         _check_augmentation,
-        _check_directivity,
+        check_directivity,
     ):
         problems.extend(check(spec))
     return problems
@@ -495,7 +495,7 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
         )
 
 
-def _check_directivity(spec: DatasetSpec) -> Iterator[Problem]:
+def check_directivity(spec: DatasetSpec) -> Iterator[Problem]:
     """Head turns are heard only along the exact paths: RIRs at points cannot follow them
     (a standing source has one RIR; a walking one passes a point every 0.17–0.25 s, and the
     rir step of a static microphone does not know when), so any other rendering would leave
