@@ -67,7 +67,8 @@ augmentation:
     - {kind: mp3, bitrate_kbps: [64]}
 splits:
   train: {groups: 1, scenes: [room]}
-outputs: {dir: out, store_dir: store, manifests: [lhotse, csv, huggingface, webdataset]}
+outputs: {dir: out, store_dir: store, rirs: true,
+          manifests: [lhotse, csv, huggingface, webdataset]}
 """
 KINDS = ["response", "self_noise", "mp3"]
 
@@ -136,6 +137,10 @@ def test_the_built_group_records_every_feature(built: Path) -> None:
     store = ArtifactStore(built.parent / "store")
     rir = artifacts.decode("rir", store.read_data("rir", meta["keys"]["rir"]), "rir")
     assert [s.name for s in rir.groups[0].sources] == ["source1", "source2"]
+    # outputs.rirs: the talkers' RIRs are written, the untraced noise has none
+    rirs = built / "train" / "000000" / "rirs"
+    assert sorted(p.name for p in rirs.iterdir()) == ["source1", "source2"]
+    assert len(meta["source1"]["rir_points_m"]) == len(list((rirs / "source1").glob("*.wav")))
 
 
 def test_the_loader_reads_the_mixtures_as_augmented_and_the_targets_clean(built: Path) -> None:
