@@ -142,12 +142,43 @@ def test_a_point_field_keeps_every_group_jobs_key(tmp_path: Path) -> None:
     (tmp_path / "b.yaml").write_text(point.replace(
         "  tasks:", "  noise_field: {field: point}\n  tasks:"))
     (tmp_path / "c.yaml").write_text(SPEC)
-    a, b, c = (compile_spec(load_spec(tmp_path / n)) for n in ("a.yaml", "b.yaml", "c.yaml"))
-    keys = [{j.label: j.key for j in p.jobs if j.step != "dataset"} for p in (a, b, c)]
+    (tmp_path / "d.yaml").write_text(SPEC.replace("{field: diffuse_spherical}",
+                                                  "{field: diffuse_spherical, "
+                                                  "diffuse_fraction: 0.9}"))
+    a, b, c, d = (compile_spec(load_spec(tmp_path / n))
+                  for n in ("a.yaml", "b.yaml", "c.yaml", "d.yaml"))
+    keys = [{j.label: j.key for j in p.jobs if j.step != "dataset"} for p in (a, b, c, d)]
     assert keys[0] == keys[1]
-    # The diffuse spec changes the render job and what follows it, nothing before.
-    changed = {label.split()[0] for label in keys[0] if keys[0][label] != keys[2][label]}
-    assert changed == {"render", "mix", "export"}
+
+    def changed(k: dict[str, str]) -> set[str]:
+        return {label.split()[0] for label in keys[0] if keys[0][label] != k[label]}
+
+    # A background partly heard from its point: the render job and what follows it change,
+    # nothing before; heard only as a diffuse field (c), its point source is not traced
+    # either, so the rir job changes too.
+    assert changed(keys[3]) == {"render", "mix", "export"}
+    assert changed(keys[2]) == {"rir", "render", "mix", "export"}
+    rir_c = next(j for j in c.jobs if j.step == "rir")
+    assert rir_c.params["untraced"] == ["noise"]
+    assert "untraced" not in next(j for j in d.jobs if j.step == "rir").params
+
+
+def test_a_diffuse_only_background_is_not_traced(built: Plan) -> None:
+    """diffuse_fraction 1: the rir artifact holds no RIRs for the noise (music, half point,
+    keeps its), and its metadata says so: no RIR points, no RIR facts."""
+    from sonicspec import artifacts
+    from sonicspec.store import ArtifactStore
+
+    job = next(j for j in built.jobs if j.step == "rir")
+    store = ArtifactStore(built.store_dir)
+    rir = artifacts.decode("rir", store.read_data("rir", job.key), job.label)
+    assert [s.name for s in rir.groups[0].sources] == ["source1", "music"]
+    meta = json.loads((folder(built) / "metadata.json").read_text())
+    assert meta["noise"]["rir_points_m"] == []
+    for key in ("t30_s", "drr_db", "direct_path", "rir_tail", "image_source_order"):
+        assert key not in meta["noise"], key
+        assert key in meta["music"], key
+    assert len(meta["noise"]["position_m"]) == 3  # the placement is a point spec's
 
 
 def test_a_fraction_without_a_diffuse_field_is_an_error(tmp_path: Path) -> None:

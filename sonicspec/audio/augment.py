@@ -132,16 +132,18 @@ def _number(x: Any, where: str, lo: float | None = None, hi: float | None = None
 
 def _range(x: Any, where: str, lo: float, hi: float) -> tuple[float, float]:
     if not isinstance(x, list | tuple) or len(x) != 2:
-        raise _fail(where, "[min, max]", x)
+        raise _fail(where, f"a range [min, max] with both ends in [{lo:g}, {hi:g}] ([x, x] "
+                    "fixes the value)", x)
     a, b = (_number(v, where, lo, hi) for v in x)
     if a > b:
         raise _fail(where, "[min, max] with min <= max", list(x))
     return a, b
 
 
-def _choices(x: Any, where: str, check: Callable[[Any, str], Any]) -> tuple[Any, ...]:
+def _choices(x: Any, where: str, check: Callable[[Any, str], Any],
+             what: str = "values") -> tuple[Any, ...]:
     if not isinstance(x, list | tuple) or not x:
-        raise _fail(where, "a non-empty list", x)
+        raise _fail(where, f"a non-empty list of {what}, one drawn per group", x)
     return tuple(check(v, f"{where}[{i}]") for i, v in enumerate(x))
 
 
@@ -176,12 +178,14 @@ def _parse_params(kind: str, d: Mapping[str, Any], where: str) -> dict[str, Any]
             raise AudioError(f"{where}: expected either preset or points, got "
                              f"{'both' if has_preset else 'neither'}")
         if has_preset:
-            p["preset"] = _choices(d["preset"], f"{where}.preset", _preset)
+            p["preset"] = _choices(d["preset"], f"{where}.preset", _preset,
+                                   f"presets ({', '.join(sorted(RESPONSE_PRESETS))})")
         else:
             p["points"] = _points(d["points"], f"{where}.points")
     elif kind == "impulse_response":
         allowed = ("files",)
-        p["files"] = _choices(d.get("files"), f"{where}.files", _file_name)
+        p["files"] = _choices(d.get("files"), f"{where}.files", _file_name,
+                              "impulse-response files")
     elif kind == "self_noise":
         allowed = ("snr_db", "color")
         p["snr_db"] = _range(d.get("snr_db"), f"{where}.snr_db", -20.0, 100.0)
@@ -199,7 +203,8 @@ def _parse_params(kind: str, d: Mapping[str, Any], where: str) -> dict[str, Any]
     elif kind == "resample":
         allowed = ("rate_hz",)
         p["rate_hz"] = _choices(d.get("rate_hz"), f"{where}.rate_hz",
-                                lambda v, w: int(_number(v, w, 1000, 192000, integer=True)))
+                                lambda v, w: int(_number(v, w, 1000, 192000, integer=True)),
+                                "sample rates in Hz (1000-192000)")
     elif kind == "mp3":
         allowed = ("bitrate_kbps",)
         every = sorted(set(MP3_BITRATES_KBPS["mpeg1"]) | set(MP3_BITRATES_KBPS["mpeg2"]))
@@ -209,7 +214,8 @@ def _parse_params(kind: str, d: Mapping[str, Any], where: str) -> dict[str, Any]
                 raise _fail(w, f"an MP3 bit rate, kbit/s, one of {every}", v)
             return int(v)
 
-        p["bitrate_kbps"] = _choices(d.get("bitrate_kbps"), f"{where}.bitrate_kbps", bitrate)
+        p["bitrate_kbps"] = _choices(d.get("bitrate_kbps"), f"{where}.bitrate_kbps", bitrate,
+                                     "MP3 bit rates in kbit/s")
     elif kind == "opus":
         allowed = ("bitrate_kbps",)
         p["bitrate_kbps"] = _range(d.get("bitrate_kbps"), f"{where}.bitrate_kbps",
@@ -256,7 +262,8 @@ def parse_effect(d: Any, where: str, *, nested: bool = False) -> Effect:
         weights = d.get("weights")
         if weights is None:
             weights = [1.0] * len(inner)
-        w = _choices(weights, f"{where}.weights", lambda v, s: _number(v, s, 0.0, None))
+        w = _choices(weights, f"{where}.weights", lambda v, s: _number(v, s, 0.0, None),
+                     "weights >= 0, one per effect")
         if len(w) != len(inner) or sum(w) <= 0:
             raise _fail(f"{where}.weights", f"{len(inner)} weights >= 0 with a positive sum",
                         list(weights))

@@ -180,7 +180,11 @@ class SonicspecDataset:
     drawn; NaN when not drawn), ``group`` and ``mixture_name`` (str), and with ``labels``
     ``positions_m`` ``(k, F, 3)``, ``azimuth_deg``, ``elevation_deg``, ``distance_m``
     ``(k, F)``; with ``augmentation`` also ``augmentation``, the item's draw as JSON text
-    (as ``metadata.json`` records a group's).
+    (as ``metadata.json`` records a group's). A dataset built with ``augmentation:`` holds
+    its effects in the mixture files only (the tracks and targets stay clean unless an effect
+    says ``targets``): items read as written (``MixingConfig(dynamic=False)``) have them, and
+    ``augmentation`` is then the group's recorded draw; dynamic mixing re-mixes the clean
+    tracks, so pass the spec's block as ``augmentation`` to have them on the fly.
     """
 
     def __init__(self, root: str | Path, split: str, task: str = "separation", *,
@@ -348,6 +352,10 @@ class SonicspecDataset:
             out[stem] = np.stack([
                 gains[n] * group.read(f"{n}_{stem}", start, start + length, cfg.channels)
                 for n in d.targets]).astype(np.float32)
+        recorded = group.metadata.get("augmentation")
+        if recorded and not cfg.dynamic and d.mixture.get("file"):
+            # the built mixture, read as written: the effects the build applied to it
+            out["augmentation"] = json.dumps(recorded, sort_keys=True)
         if self.augmentation is not None:
             out.update(self._augment(out, index, epoch, group.sample_rate_hz))
         if self.labels:

@@ -107,14 +107,20 @@ class _Track(_Record):
     file: str | None = Field(description=(
         "The track's audio file, relative to the dataset folder (null: not written, "
         "outputs.sources / outputs.background off)."))
-    rir_points_m: list[Vector3] = Field(description="Where the RIRs were computed, metres.")
-    t30_s: float | None = Field(description="T30 of the first point's RIR, seconds "
-                                            "(null: the decay is too short to fit).")
-    drr_db: float | None = Field(description="Direct-to-reverberant ratio of the first "
-                                             "point's RIR, dB.")
-    direct_path: str = Field(description="The direct path at the first point: visible, "
-                                         "through walls or blocked.")
-    rir_tail: RirTail = Field(description="How the RIR's length was chosen at the first point.")
+    rir_points_m: list[Vector3] = Field(description=(
+        "Where the RIRs were computed, metres (empty for a background heard only as a "
+        "diffuse field, diffuse_fraction 1: its point source is not traced)."))
+    t30_s: float | None = Field(None, description=(
+        "T30 of the first point's RIR, seconds (null: the decay is too short to fit; "
+        "absent: no RIR, a background heard only as a diffuse field)."))
+    drr_db: float | None = Field(None, description=(
+        "Direct-to-reverberant ratio of the first point's RIR, dB (absent: no RIR)."))
+    direct_path: str | None = Field(None, description=(
+        "The direct path at the first point: visible, through walls or blocked (absent: no "
+        "RIR)."))
+    rir_tail: RirTail | None = Field(None, description=(
+        "How the RIR's length was chosen at the first point (absent: no RIR, a background "
+        "heard only as a diffuse field)."))
     loudness: Loudness = Field(description="How the track was levelled.")
     image_source_order: ImageSourceOrder | None = Field(None, description=(
         "The image-source order asked and reached by the track's RIRs (the lowest over its "
@@ -232,7 +238,8 @@ class GroupMetadata(BaseModel):
 
     def to_json(self) -> str:
         """Compact JSON, keys sorted, final newline; absent backgrounds, scales, capsules and
-        augmentation, and a point background's field, left out."""
+        augmentation, a point background's field and the RIR facts of a background without
+        RIRs (heard only as a diffuse field), left out."""
         data = self.model_dump(mode="json")
         for name in ("noise", "music", "audio_scales", "capsules", "augmentation"):
             if data[name] is None:
@@ -240,6 +247,10 @@ class GroupMetadata(BaseModel):
             elif name in ("noise", "music"):  # a point background: no field recorded
                 for key in ("field", "diffuse_fraction"):
                     if data[name][key] is None:
+                        del data[name][key]
+                if data[name]["rir_tail"] is None:  # diffuse only: no RIR, no RIR facts
+                    for key in ("t30_s", "drr_db", "direct_path", "rir_tail",
+                                "image_source_order"):
                         del data[name][key]
         for m in data["mixtures"]:
             if m.get("augmentation", 0) is None:

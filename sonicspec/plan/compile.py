@@ -470,6 +470,11 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
     diffuse = {role: getattr(spec.mixture, f"{role}_field").model_dump(mode="json")
                for role in ("noise", "music") if getattr(spec.mixture, f"{role}_field").diffuse}
     backgrounds = {"backgrounds": shared(diffuse)} if diffuse else {}
+    # a background heard only as a diffuse field: its point source is not traced
+    untraced = [role for role in ("noise", "music")
+                if getattr(spec.mixture, f"{role}_field").diffuse
+                and getattr(spec.mixture, f"{role}_field").diffuse_fraction >= 1.0]
+    untraced_roles = {"untraced": untraced} if untraced else {}
     rir_files_shared = shared(rir_files)
     corpus_inputs = tuple(corpus_keys[r] for r in ("speech", "noise", "music") if r in corpus_keys)
     rendering = spec.mixture.rendering()  # `auto` resolved
@@ -540,6 +545,7 @@ def compile_spec(loaded: LoadedSpec, *, cache: bool = True, output_dir: str | Pa
                         "early_paths": rendering == "paths",
                         **walk,
                         **directivity,
+                        **untraced_roles,
                     },
                     (mesh_keys[scene_id], placement.key, *((arrange.key,) if walk else ())),
                     f"rir {tag}",

@@ -289,8 +289,14 @@ class RirParams(ShardParams):
     """The spec's ``directivity`` when some source is not omnidirectional (its SOFA files'
     digests in ``files`` as ``directivity_<role>``); None: every source omni. The render
     step reads it from here."""
+    untraced: tuple[Literal["noise", "music"], ...] | None = None
+    """Background roles heard only as a diffuse field (``mixture.noise_field`` /
+    ``music_field`` with ``diffuse_fraction: 1``): their point source is not heard, so no RIR
+    is traced for it. None: every placed source is traced (left out then, so the other specs'
+    rir jobs keep their keys)."""
 
-    omitted_when: ClassVar[Mapping[str, Any]] = {"walk": None, "directivity": None}
+    omitted_when: ClassVar[Mapping[str, Any]] = {"walk": None, "directivity": None,
+                                                 "untraced": None}
 
 
 class RenderParams(ShardParams):

@@ -14,18 +14,66 @@ data (the loader's argument); ``tests/test_augment.py`` keeps the two in step.
 from __future__ import annotations
 
 import itertools
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, StrictBool, field_validator, model_validator
+from pydantic import (
+    BeforeValidator,
+    Field,
+    StrictBool,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import PydanticCustomError
 
-from sonicspec.spec.base import SpecModel, value_range
+from sonicspec.spec.base import SpecModel, _fmt, value_range
 
 ResponsePreset = Literal["smartphone", "laptop", "headset", "telephone"]
 """The presets of :data:`sonicspec.audio.augment.RESPONSE_PRESETS` (parametric device-class
 shapes, each with where it comes from)."""
 Mp3Bitrate = Literal[8, 16, 24, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 192, 224, 256,
                      320]
+
+
+def _got(v: Any) -> str:
+    """A value as the user wrote it, for a message."""
+    if isinstance(v, dict):
+        return "a mapping"
+    if isinstance(v, str):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_got(x) for x in v) + "]"
+    return _fmt([v])[1:-1]
+
+
+def _listed(what: str, example: str, min_length: int = 1) -> Any:
+    """Before-validator of a list field: a single value, or too few, gets a message naming
+    what the list holds and an example (not pydantic's "must be a valid list")."""
+
+    def check(v: Any) -> Any:
+        if v is None:
+            return v
+        if not isinstance(v, (list, tuple)):
+            raise PydanticCustomError("list_of", "expected a list of {what}, e.g. {example} "
+                                      "(got {got})",
+                                      {"what": what, "example": example, "got": _got(v)})
+        if len(v) < min_length:
+            least = "a non-empty list" if min_length == 1 else f"at least {min_length}"
+            raise PydanticCustomError("list_length", "expected {least} of {what}, e.g. "
+                                      "{example} (got {got})",
+                                      {"least": least, "what": what, "example": example,
+                                       "got": _got(v)})
+        return v
+
+    return BeforeValidator(check)
+
+
+def _pair(v: Any) -> Any:
+    """Before-validator of one response point: a [frequency Hz, gain dB] pair."""
+    if not isinstance(v, (list, tuple)) or len(v) != 2:
+        raise PydanticCustomError("response_pair", "expected a [frequency Hz, gain dB] pair, "
+                                  "e.g. [1000, -3] (got {got})", {"got": _got(v)})
+    return v
 
 
 MP3_RATES_HZ = (8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000)
@@ -56,11 +104,15 @@ class ResponseEffectSpec(_EffectSpec):
     """A microphone's frequency response, as a minimum-phase filter (no bulk delay)."""
 
     kind: Literal["response"] = Field(description="Effect type.")
-    preset: list[ResponsePreset] | None = Field(
+    preset: Annotated[list[ResponsePreset] | None, _listed(
+        "device-class presets ('smartphone', 'laptop', 'headset', 'telephone'), one drawn "
+        "per group", "[smartphone, laptop]")] = Field(
         None, min_length=1, description="Device-class responses, one drawn per group: "
         "'smartphone', 'laptop', 'headset', 'telephone' (300-3400 Hz); parametric shapes, "
         "their sources listed in sonicspec.audio.augment.RESPONSE_PRESETS.")
-    points: list[Annotated[tuple[float, float], Field()]] | None = Field(
+    points: Annotated[list[Annotated[tuple[float, float], BeforeValidator(_pair)]] | None,
+                      _listed("[frequency Hz, gain dB] pairs in increasing frequency",
+                              "[[100, -6], [1000, 0], [8000, -3]]", 2)] = Field(
         None, min_length=2, description="A response of your own: [frequency Hz, gain dB] "
         "pairs in increasing frequency (1 Hz-100 kHz, -60 to +30 dB), linear in dB over log "
         "frequency between them, flat beyond the ends.")
@@ -69,7 +121,7 @@ class ResponseEffectSpec(_EffectSpec):
     def _one_source(self) -> ResponseEffectSpec:
         if (self.preset is None) == (self.points is None):
             raise PydanticCustomError("response_source", "expected either preset or points, "
-                                      "got {what}",
+                                      "one of the two (got {what})",
                                       {"what": "neither" if self.preset is None else "both"})
         return self
 
@@ -78,13 +130,14 @@ class ResponseEffectSpec(_EffectSpec):
     def _points(cls, v: list[tuple[float, float]] | None) -> list[tuple[float, float]] | None:
         if v is None:
             return v
-        bad = [p for p in v if not (1 <= p[0] <= 1e5 and -60 <= p[1] <= 30)]
+        bad = [i for i, p in enumerate(v) if not (1 <= p[0] <= 1e5 and -60 <= p[1] <= 30)]
         if bad:
             raise PydanticCustomError("response_points", "expected [Hz, dB] with 1 <= Hz <= "
-                                      "100000 and -60 <= dB <= 30, got {p}", {"p": list(bad[0])})
+                                      "100000 and -60 <= dB <= 30 (got {p} as point {i})",
+                                      {"p": _got(v[bad[0]]), "i": bad[0]})
         if any(b[0] <= a[0] for a, b in itertools.pairwise(v)):
             raise PydanticCustomError("response_order", "expected points in increasing "
-                                      "frequency", {})
+                                      "frequency (got {got})", {"got": _got(v)})
         return v
 
 
@@ -92,7 +145,9 @@ class ImpulseResponseEffectSpec(_EffectSpec):
     """A measured device impulse response from a file (WAV/FLAC; the first channel)."""
 
     kind: Literal["impulse_response"] = Field(description="Effect type.")
-    files: list[str] = Field(
+    files: Annotated[list[str], _listed(
+        "impulse-response files (relative to the spec), one drawn per group",
+        "[device_ir.wav]")] = Field(
         min_length=1, description="Impulse-response files relative to the spec, one drawn "
         "per group; scaled to unit energy and advanced by their peak, so they colour the "
         "mixture without moving or re-levelling it; resampled to sample_rate_hz if needed.")
@@ -129,7 +184,8 @@ class ResampleEffectSpec(_EffectSpec):
     """Down to a lower rate and back (a narrow-band link)."""
 
     kind: Literal["resample"] = Field(description="Effect type.")
-    rate_hz: list[Annotated[int, Field(ge=1000, le=192000)]] = Field(
+    rate_hz: Annotated[list[Annotated[int, Field(ge=1000, le=192000)]], _listed(
+        "sample rates in Hz (1000-192000), one drawn per group", "[8000, 11025]")] = Field(
         min_length=1, description="Rates, one drawn per group, Hz: the signal is resampled "
         "to it and back with sonicspec's resampler (flat to 0.9 × its Nyquist frequency, "
         "about 90 dB down above it); a rate at or above the dataset's does nothing.")
@@ -139,7 +195,9 @@ class Mp3EffectSpec(_EffectSpec):
     """MP3 at a constant bit rate (LAME through libsndfile)."""
 
     kind: Literal["mp3"] = Field(description="Effect type.")
-    bitrate_kbps: list[Mp3Bitrate] = Field(
+    bitrate_kbps: Annotated[list[Mp3Bitrate], _listed(
+        "MP3 bit rates in kbit/s (8, 16, 24, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, "
+        "192, 224, 256 or 320), one drawn per group", "[64, 128]")] = Field(
         min_length=1, description="Bit rates per channel, one drawn per group, kbit/s "
         "(32-320 at 32 kHz and above; 8-160 at 16-24 kHz; 8-64 below).")
 
@@ -170,20 +228,26 @@ class OneOfEffectSpec(_EffectSpec):
     """One of several effects, drawn per group (e.g. one codec of three)."""
 
     kind: Literal["one_of"] = Field(description="Effect type.")
-    effects: list[SingleEffectSpec] = Field(
+    effects: Annotated[list[SingleEffectSpec], _listed(
+        "effects to choose from (each a mapping with its kind; not one_of)",
+        "[{kind: opus, bitrate_kbps: [16, 32]}, {kind: gsm}]")] = Field(
         min_length=1, description="The effects to choose from (their own probability and "
         "targets are ignored: this effect's apply).")
-    weights: list[Annotated[float, Field(ge=0)]] | None = Field(
+    weights: Annotated[list[Annotated[float, Field(ge=0)]] | None, _listed(
+        "relative weights >= 0, one per effect", "[2, 1]")] = Field(
         None, description="Relative weight of each effect (null: equal).")
 
-    @model_validator(mode="after")
-    def _weights(self) -> OneOfEffectSpec:
-        if self.weights is not None and (len(self.weights) != len(self.effects)
-                                         or sum(self.weights) <= 0):
+    @field_validator("weights")
+    @classmethod
+    def _weights(cls, v: list[float] | None, info: ValidationInfo) -> list[float] | None:
+        effects = info.data.get("effects")
+        if v is None or effects is None:  # (bad effects are reported on their own)
+            return v
+        if len(v) != len(effects) or sum(v) <= 0:
             raise PydanticCustomError(
-                "weights", "expected {n} weights >= 0 with a positive sum, got {w}",
-                {"n": len(self.effects), "w": self.weights})
-        return self
+                "weights", "expected {n} weights >= 0 (one per effect) with a positive sum "
+                "(got {w})", {"n": len(effects), "w": _got(v)})
+        return v
 
 
 EffectSpec = Annotated[SingleEffectSpec | OneOfEffectSpec, Field(discriminator="kind")]
@@ -192,6 +256,8 @@ EffectSpec = Annotated[SingleEffectSpec | OneOfEffectSpec, Field(discriminator="
 class AugmentationSpec(SpecModel):
     """Device and channel effects applied to each group's mixtures, in order."""
 
-    effects: list[EffectSpec] = Field(
+    effects: Annotated[list[EffectSpec], _listed(
+        "effects, each a mapping with its kind, applied in order",
+        "[{kind: self_noise, snr_db: [30, 50]}, {kind: mp3, bitrate_kbps: [64]}]", 0)] = Field(
         default_factory=list, description="The chain, applied in this order (a device's "
         "order: response, self_noise, gain, clipping, then resample and a codec).")

@@ -74,7 +74,7 @@ def _length_check(n: int, shape: str | None = None) -> Any:
         if isinstance(v, (list, tuple)) and len(v) != n:
             raise PydanticCustomError(
                 "vector_length",
-                "expected {n} values {shape}, got {k}: {got}",
+                "expected {n} values {shape} (got {k}: {got})",
                 {"n": n, "shape": shape, "k": len(v), "got": _fmt(v)},
             )
         return v
@@ -130,6 +130,19 @@ def value_range(
     """
     item = _number_schema(gt, ge, le, integer=integer)
     py_type = int if integer else float
+    bound = _bound_text(gt, ge, le)
+    expected = "a range [min, max]" + (f" with both ends {bound}" if bound else "")
+
+    def shape(v: Any) -> Any:
+        """A single number or text is not a range: say what one looks like."""
+        if not isinstance(v, (list, tuple)):
+            raise PydanticCustomError(
+                "range_type",
+                "expected {expected}; [x, x] fixes the value (got {got})",
+                {"expected": expected,
+                 "got": repr(v) if isinstance(v, str) else _fmt([v])[1:-1]},
+            )
+        return _length_check(2, "[min, max]")(v)
 
     def check(v: tuple[float, float]) -> tuple[float, float]:
         if not all(_within(x, gt, ge, le) for x in v):
@@ -148,7 +161,7 @@ def value_range(
 
     return Annotated[
         tuple[py_type, py_type],
-        BeforeValidator(_length_check(2, "[min, max]")),
+        BeforeValidator(shape),
         AfterValidator(check),
         WithJsonSchema(
             {

@@ -186,7 +186,10 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
     for name, track in tracks.items():
         role = track.role
         a = arranged[name]
-        rir_source = rir.source(name)
+        field = (backgrounds or {}).get(role)
+        # a background heard only as a diffuse field: its point source was not traced
+        traced = field is None or field.diffuse_fraction < 1.0
+        rir_source = rir.source(name) if traced else None
         signal = gains[name] * np.asarray(arrays[track.arrays["reverberant"]], dtype=np.float64)
         geometry = placement.source(name)
         line = timeline(geometry, a.segment_list(), placement, walk, speech,
@@ -205,7 +208,7 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                 w.audio(f"{role}_{kind}", f"{name}_{kind}",
                         clean(gains[f"{name}_{kind}"] * np.asarray(arrays[track.arrays[kind]],
                                                                    dtype=np.float64)))
-        if outputs.rirs:
+        if outputs.rirs and rir_source is not None:
             stack = np.asarray(rir_arrays[rir_source.array])
             for j in range(stack.shape[0]):
                 w.audio("rir", f"rirs/{name}/{j:03d}", stack[j], float_wav=True)
@@ -214,11 +217,11 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
             "audio": [a.files[s.id].path for s in segs],
             "start_end_points": [(s.start, s.end) for s in segs],
             "file": audio_rel,
-            "rir_points_m": [tuple(p) for p in geometry.rir_points_m],
-            "t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
-            "direct_path": rir_source.direct,
-            "rir_tail": RirTail(**rir_source.tail.to_dict()),
-            "image_source_order": _order(rir_source),
+            "rir_points_m": ([tuple(p) for p in geometry.rir_points_m] if traced else []),
+            **({"t30_s": rir_source.t30_s, "drr_db": rir_source.drr_db,
+                "direct_path": rir_source.direct,
+                "rir_tail": RirTail(**rir_source.tail.to_dict()),
+                "image_source_order": _order(rir_source)} if rir_source is not None else {}),
             "loudness": Loudness(**mix.components[name].model_dump()),
             "track": TrackReference(**track_labels),
         }
@@ -229,7 +232,6 @@ def export_group(out: Path, params: ExportParams, arrays: dict[str, np.ndarray],
                 path_length_m=geometry.path_length_m)
             spoken[name] = (a.speaker, segs)
         else:
-            field = (backgrounds or {}).get(role)
             heard = ({"field": field.field, "diffuse_fraction": field.diffuse_fraction}
                      if field is not None else {})
             entries[name] = BackgroundTrack(**common, position_m=tuple(geometry.rir_points_m[0]),

@@ -344,12 +344,14 @@ def run(ctx: JobContext) -> None:
         tracks = []
         for n, track in enumerate(arr.tracks):
             ctx.progress(f"group {g + 1}/{len(arrange)}, track {n + 1}/{len(arr.tracks)}")
-            entry = rir_group.source(track.name)
-            rirs = np.asarray(rir_art.arrays[entry.array], dtype=np.float64)
+            field = (params.backgrounds or {}).get(track.role)
+            # a background heard only as a diffuse field: its point source has no RIRs
+            point_heard = field is None or field.diffuse_fraction < 1.0
+            entry = rir_group.source(track.name) if point_heard else None
             line = timeline(placement.source(track.name), track.segment_list(), placement,
                             walk, speech, arr.clip_samples, params.sample_rate_hz)
             paths = None
-            if params.interpolation == "paths":
+            if params.interpolation == "paths" and entry is not None:
                 if entry.paths is None:
                     raise StageError(f"{ctx.job.label}: interpolation 'paths' but the RIRs of "
                                      f"group {arr.group} {track.name} hold no early paths")
@@ -369,12 +371,12 @@ def run(ctx: JobContext) -> None:
                     source = SourceDirectivity(patterns[track.role],
                                                yaw_per_sample(facing, hop, line.index.size),
                                                d.pitch_deg)
-            field = (params.backgrounds or {}).get(track.role)
-            if field is not None and field.diffuse_fraction >= 1.0:
+            if entry is None:
                 # The point source is not heard: its dry track is all the diffuse field needs.
                 signals = {"dry": track_dry(track, cache, arr.clip_samples,
                                             roots[track.role])[None, :].astype(np.float32)}
             else:
+                rirs = np.asarray(rir_art.arrays[entry.array], dtype=np.float64)
                 signals = render_track(track, rirs, line, params, cache, arr.clip_samples,
                                        roots[track.role], paths, source)
             if field is not None:

@@ -272,7 +272,9 @@ def run(ctx) -> None:
     arrays: dict[str, np.ndarray] = {}
     groups = []
     for g, placement in enumerate(placements):
-        sources = _source_points(placement)
+        # a background heard only as a diffuse field has no RIR (the render step needs none)
+        sources = [(name, pts) for name, pts in _source_points(placement)
+                   if name not in (params.untraced or ())]
         lines: list[Timeline | None] = [None] * len(sources)
         if walk is not None:
             check_inside(mesh.vertices, scene_name, **{
