@@ -92,6 +92,7 @@ out.write_text(json.dumps({"jobs": rows, "checksums": checksums}))
 
 def _tree(rev: str, into: Path) -> Path:
     """``rev`` of this repository extracted into ``into`` (``git archive``)."""
+    shutil.rmtree(into, ignore_errors=True)
     into.mkdir(parents=True)
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
                              capture_output=True).stdout
@@ -143,9 +144,7 @@ def main() -> None:
         for n, (name, tree) in enumerate(trees.items()):
             folder = work / f"run{n}"
             shutil.rmtree(folder, ignore_errors=True)
-            folder.mkdir()
-            (folder / "cheap.yaml").write_text(text)
-            shutil.copytree(base / "out" / "store", folder / "out" / "store")
+            shutil.copytree(base, folder)  # the store and the generated corpora beside it
             _child(tree, folder / "cheap.yaml", "all", folder / "result.json")
             results[name] = json.loads((folder / "result.json").read_text())
     (old_name, old), (new_name, new) = results.items()
