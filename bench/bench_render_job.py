@@ -1,9 +1,10 @@
 """Benchmark (issue 27): CPU per group of the render, mix and export steps, two code
 revisions side by side on the same inputs, and whether their outputs are the same bytes.
 
-The spec is ``bench_scale.py``'s cheap build (the demo at 100 rays, image-source order 1,
-0.2 s RIRs, 1 m RIR spacing, ``--seconds`` groups of 2 talkers + noise + music) cut to
-``--groups`` groups (all but two in one train shard). Its steps up to ``rir`` are built once
+The spec is (``--spec cheap``) ``bench_scale.py``'s cheap build (the demo at 100 rays,
+image-source order 1, 0.2 s RIRs, 1 m RIR spacing, ``--seconds`` groups of 2 talkers + noise
++ music) cut to ``--groups`` groups (all but two in one train shard), or (``--spec demo``)
+the tests' cut-down demo (``tests/build_cases.write_spec``). Its steps up to ``rir`` are built once
 (by this checkout, in a child process); then each revision — ``--against`` (a git revision,
 extracted with ``git archive``; default ``main``) and this checkout — runs in its own child
 process (``PYTHONPATH`` = its tree) on a copy of that store: its numba kernels are compiled
@@ -18,6 +19,7 @@ Run it ``nice`` on a shared machine: CPU seconds stay comparable while wall time
 Reproduce:
     nice -n 10 python bench/bench_render_job.py                    # main vs this checkout
     nice -n 10 python bench/bench_render_job.py --groups 8 --against b26bb05
+    nice -n 10 python bench/bench_render_job.py --spec demo       # the tests' cut-down demo
 """
 
 from __future__ import annotations
@@ -122,6 +124,10 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="seconds per group")
     parser.add_argument("--against", default="main",
                         help="the git revision to compare with (default: main)")
+    parser.add_argument("--spec", choices=("cheap", "demo"), default="cheap",
+                        help="cheap: bench_scale.py's cheap build (default); demo: the tests' "
+                             "cut-down demo (tests/build_cases.write_spec: 2 + 1 + 1 groups "
+                             "of 10 s, 600 rays, image-source order 2, 0.4 s RIRs)")
     parser.add_argument("--keep", type=Path, help="work here (kept) instead of a temp folder")
     args = parser.parse_args()
     rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.against],
@@ -133,7 +139,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench-render-job-") as tmp:
         work = (args.keep or Path(tmp)).resolve()
         work.mkdir(parents=True, exist_ok=True)
-        text = cheap_spec(args.groups, args.seconds)
+        if args.spec == "demo":
+            sys.path.insert(0, str(ROOT / "tests"))
+            from build_cases import write_spec
+
+            text = write_spec(work).read_text()
+        else:
+            text = cheap_spec(args.groups, args.seconds)
         base = work / "base"
         base.mkdir(exist_ok=True)
         (base / "cheap.yaml").write_text(text)
@@ -152,7 +164,9 @@ def main() -> None:
                  and r["label"].startswith("render train"))
     shard = train.split(" ", 1)[1]
     groups = _groups_of(new["jobs"], train)
-    print(f"cheap build, {args.groups} groups of {args.seconds:g} s; the train shard "
+    what = (f"cheap build, {args.groups} groups of {args.seconds:g} s" if args.spec == "cheap"
+            else "the tests' cut-down demo")
+    print(f"{what}; the train shard "
           f"({shard}, {groups} groups); CPU s per group (getrusage of the job):")
     print(f"| step | {old_name} | {new_name} | ratio | same artifact bytes |")
     print("|---|---|---|---|---|")
