@@ -7,7 +7,8 @@ missing) written as PLY, declared as a ``kind: mesh`` scene (repair on, holes up
 closed, the default 20,000-ray leak test). Each revision — ``--against`` (a git revision,
 extracted with ``git archive``; default ``main``) and this checkout — runs the plan's one
 ``mesh`` job through ``sonicspec.stages.run_job`` in a fresh child process (``PYTHONPATH`` =
-its tree, its own store): its peak RSS (``getrusage`` ``ru_maxrss``) and CPU. The two mesh
+its tree, its own store): its peak RSS (``VmHWM``: ``ru_maxrss`` would carry the spawning
+process's peak over ``exec``, here the scan generator's) and CPU (``getrusage``). The two mesh
 artifacts are compared file by file.
 
 Reproduce:
@@ -58,13 +59,16 @@ plan = compile_spec(load_spec(Path(sys.argv[1])))
 job = next(j for j in plan.jobs if j.step == "mesh")
 run_job(plan, job.key)
 r = resource.getrusage(resource.RUSAGE_SELF)
+# VmHWM, not ru_maxrss: Linux carries ru_maxrss over exec from the parent that spawned us
+with open("/proc/self/status") as status:
+    hwm = next(int(line.split()[1]) for line in status if line.startswith("VmHWM:"))
 art = Path(plan.store_dir) / "mesh" / job.key[:2] / f"{job.key}.zarr"
 h = hashlib.sha256()
 for f in sorted(art.rglob("*")):
     if f.is_file():
         h.update(f.relative_to(art).as_posix().encode())
         h.update(f.read_bytes())
-print(json.dumps({"peak_mb": r.ru_maxrss / 1024, "cpu_s": r.ru_utime + r.ru_stime,
+print(json.dumps({"peak_mb": hwm / 1024, "cpu_s": r.ru_utime + r.ru_stime,
                   "digest": h.hexdigest(), "key": job.key}))
 '''
 
@@ -74,6 +78,8 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--triangles", type=int, default=1_000_000)
+    parser.add_argument("--ply", type=Path,
+                        help="measure this PLY instead of generating the apartment")
     parser.add_argument("--against", default="main",
                         help="the git revision to compare with (default: main)")
     args = parser.parse_args()
@@ -85,8 +91,16 @@ def main() -> None:
                           check=True, capture_output=True, text=True).stdout.strip()
     with tempfile.TemporaryDirectory(prefix="bench-mesh-memory-") as tmp:
         work = Path(tmp)
-        ply = work / "apartment.ply"
-        n_faces, n_vertices = damaged_ply(ply, args.triangles)
+        if args.ply:
+            import trimesh
+
+            ply = args.ply.resolve()
+            scan = trimesh.load(ply, process=False)
+            n_faces, n_vertices = len(scan.faces), len(scan.vertices)
+            del scan
+        else:
+            ply = work / "apartment.ply"
+            n_faces, n_vertices = damaged_ply(ply, args.triangles)
         old = work / "tree-old"
         old.mkdir()
         archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
