@@ -64,6 +64,27 @@ def numpy_shaping_spectra(bank: OctaveFilterBank, g: np.ndarray, n_fft: int) -> 
     return out
 
 
+@pytest.mark.parametrize(("rate", "n_fft"), [(16000, 2048), (48000, 16384)])
+def test_shaping_spectra_at_other_sizes_are_the_numpy_bytes(rate: int, n_fft: int) -> None:
+    """RIR synthesis asks for its own FFT sizes (and 48 kHz has a 7th band)."""
+    bank = OctaveFilterBank(rate, (*BANDS_HZ, 8000.0) if rate > 16000 else BANDS_HZ)
+    g = np.random.default_rng(rate).uniform(-0.1, 1.0, (23, bank.n_bands))
+    ours, ref = bank.shaping_spectra(g, n_fft), numpy_shaping_spectra(bank, g, n_fft)
+    assert np.array_equal(ours, ref)
+    assert np.array_equal(np.signbit(ours.imag), np.signbit(ref.imag))
+
+
+def test_shaping_filters_of_some_rows_are_those_rows_of_all() -> None:
+    """A row's filter does not depend on the rows made with it (each is computed alone)."""
+    bank = OctaveFilterBank(16000, BANDS_HZ)
+    rng = np.random.default_rng(11)
+    g = rng.uniform(-0.02, 0.3, (41, bank.n_bands))
+    every = bank.shaping_filters(g)
+    some = np.flatnonzero(rng.random(len(g)) < 0.5)
+    for n, h in zip(some, bank.shaping_filters(g[some]), strict=True):
+        assert np.array_equal(h, every[n])
+
+
 def numpy_decayed_length(h: np.ndarray, cap: int) -> int:
     """The cut of one shaping filter as numpy found it before (the reference)."""
     tail = np.cumsum((h * h)[::-1])[::-1]
