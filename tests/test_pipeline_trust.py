@@ -475,6 +475,22 @@ def test_a_running_job_shows_how_far_it_is_on_the_progress_line(tmp_path: Path) 
     assert _job_progress(plan, [rir]) == ""
 
 
+def test_a_killed_jobs_progress_is_not_shown_by_the_next_build(tmp_path: Path) -> None:
+    """A job killed with its build leaves its progress file; the next build's line showed it as
+    running (seen in the 1,000-group bench: 'group 33/50' for a job dead since the last run)."""
+    from sonicspec.export.checksums import claim_folder
+    from sonicspec.stages.context import JobContext, progress_path
+    from sonicspec.stages.workflow import build
+
+    plan = plan_for(write_spec(tmp_path))
+    claim_folder(Path(plan.store_dir), "store", "outputs.store_dir", {})  # as the killed build did
+    rir = plan.by_step()["rir"][0]
+    JobContext(rir, plan, ArtifactStore(plan.store_dir)).progress("group 1/2")
+    assert progress_path(plan.store_dir, rir.key).is_file()
+    assert build(plan, dry_run=True, stream=io.StringIO()).code == 0
+    assert not progress_path(plan.store_dir, rir.key).exists()
+
+
 def test_planning_a_mesh_scene_does_not_block_claiming_its_fresh_store(tmp_path: Path) -> None:
     # Planning reads mesh files and caches their digests in <store>/cache before a build
     # claims the store: the claim must accept that cache (a fresh store of a spec with mesh

@@ -54,15 +54,67 @@ def test_bad_directivity_is_named(tmp_path: Path) -> None:
         compile_spec(load_spec(spec), cache=False)
 
 
-def test_a_directional_source_with_a_moving_microphone_is_refused(tmp_path: Path) -> None:
-    text = (ROOT / "specs" / "demo.yaml").read_text()
-    assert "microphone:" in text
+def test_a_directional_source_with_a_moving_microphone_compiles(tmp_path: Path) -> None:
+    """Once refused; now the rir step pairs the source's and the microphone's positions in
+    time (it reads the arrangement) and faces the source at each pair's time."""
     spec = _spec(tmp_path, "directivity:\n  noise: {pattern: cardioid}\n")
     loaded = load_spec(spec)
     moving = loaded.spec.model_copy(update={"microphone": loaded.spec.microphone.model_copy(
         update={"trajectory": _moving_trajectory()})})
-    with pytest.raises(CompileError, match="directivity: a directional source is rendered"):
-        compile_spec(type(loaded)(**{**loaded.__dict__, "spec": moving}), cache=False)
+    plan = compile_spec(type(loaded)(**{**loaded.__dict__, "spec": moving}), cache=False)
+    rir = next(j for j in plan.jobs if j.step == "rir")
+    arrange = next(j for j in plan.jobs if j.step == "arrange" and j.label.endswith(
+        rir.label.removeprefix("rir")))
+    assert rir.params["directivity"]["noise"]["pattern"] == "cardioid"
+    assert "walk" in rir.params and arrange.key in rir.inputs
+
+
+HEAD_TURN = "directivity:\n  speech: {pattern: PATTERN, head_turn: {std_deg: 15}}\n"
+
+
+@pytest.mark.parametrize("interpolation", ["sample_crossfade", "stft_crossfade",
+                                           "segment_ola"])
+def test_head_turns_without_the_paths_are_refused_by_name(tmp_path: Path,
+                                                         interpolation: str) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "speech"), interpolation)
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is None
+    (error,) = [p for p in problems if p.severity == "error"]
+    assert error.path == ("directivity", "speech", "head_turn")
+    message = error.format("s.yaml")
+    assert "directivity.speech.head_turn" in message and "mixture.interpolation" in message
+    assert f"got {interpolation!r}" in message
+
+
+@pytest.mark.parametrize("interpolation", ["paths", "auto"])
+def test_head_turns_along_the_paths_validate(tmp_path: Path, interpolation: str) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "speech"), interpolation)
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is not None, [p.format("s.yaml") for p in problems]
+    assert not [p for p in problems if p.path[:1] == ("directivity",)]
+
+
+def test_head_turns_of_an_omni_source_are_a_warning(tmp_path: Path) -> None:
+    from sonicspec.spec import validate_text
+
+    text = _with_interpolation((ROOT / "specs" / "demo.yaml").read_text()
+                               + HEAD_TURN.replace("PATTERN", "omni"), "sample_crossfade")
+    loaded, problems = validate_text(text, str(tmp_path / "s.yaml"), tmp_path)
+    assert loaded is not None
+    (warning,) = [p for p in problems if p.path == ("directivity", "speech", "head_turn")]
+    assert warning.severity == "warning" and "has no effect" in warning.message
+
+
+def _with_interpolation(text: str, interpolation: str) -> str:
+    """The demo spec with ``mixture.interpolation`` set (it leaves it at its default)."""
+    assert "\nmixture:\n" in text and "interpolation:" not in text
+    return text.replace("\nmixture:\n", f"\nmixture:\n  interpolation: {interpolation}\n")
 
 
 def _moving_trajectory():
@@ -99,3 +151,61 @@ def test_a_sofa_talker_is_keyed_by_its_file_and_read_by_the_steps(tmp_path: Path
     assert set(patterns) == {"speech"} and isinstance(patterns["speech"], SofaPattern)
     back = patterns["speech"].gains(np.array([[-1.0, 0, 0], [0, 1.0, 0]]), (1000.0,))[:, 0]
     np.testing.assert_allclose(back, [0.0, 0.5], atol=0.02)
+
+
+def _moving_line(n: int = 16000, pairs: int = 9):
+    """A timeline of a source standing at (2, 0, 1.6) while the microphone walks from
+    (0, -2, 1.5) to (0, 2, 1.5) over ``n`` samples, ``pairs`` pairs evenly spread."""
+    import numpy as np
+
+    from sonicspec.stages.motion import Timeline
+
+    at = np.linspace(0, n - 1, pairs)
+    mic = np.stack([np.zeros(pairs), np.linspace(-2, 2, pairs), np.full(pairs, 1.5)], 1)
+    source = np.tile([2.0, 0.0, 1.6], (pairs, 1))
+    index = np.interp(np.arange(n), at, np.arange(pairs, dtype=float))
+    return Timeline(index, source, mic, np.zeros(pairs), 0.0, True), at
+
+
+@pytest.mark.parametrize("facing", ["toward_mic", "walk"])
+def test_a_standing_source_faces_a_moving_microphone_where_it_is(facing: str) -> None:
+    """``toward_mic`` (and ``walk`` for a source that never walks) turns with a moving
+    microphone: every 10 ms frame and every RIR pair faces where the microphone is then."""
+    import numpy as np
+
+    from sonicspec.stages.directivity import facing_frames, pair_yaws_deg
+
+    line, at = _moving_line()
+    d = DirectivitySpec(pattern="cardioid", facing=facing)
+    hop, frames = facing_frames(d, line, None, 16000, None)
+    mic = line.at(line.mic_m, line.index[::hop])
+    bearing = np.degrees(np.unwrap(np.arctan2(mic[:, 1], mic[:, 0] - 2.0)))  # through 180°
+    np.testing.assert_allclose(frames, bearing, atol=1e-9)
+    pairs = pair_yaws_deg(d, line, 16000)
+    # the facing track read at each pair's sample, as the render step reads it per sample
+    # (linear between 10 ms frames, held after the last: the last pair is 159 samples on)
+    seen = line.at(line.mic_m, np.interp(np.minimum(at, (len(frames) - 1) * hop),
+                                         np.arange(line.index.size), line.index))
+    expect = np.degrees(np.unwrap(np.arctan2(seen[:, 1], seen[:, 0] - 2.0)))
+    assert np.ptp(expect) > 85  # it turns through nearly a right angle
+    np.testing.assert_allclose(pairs, expect, atol=0.05)
+
+
+def test_a_fixed_source_keeps_its_yaw_at_every_pair() -> None:
+    import numpy as np
+
+    from sonicspec.stages.directivity import pair_yaws_deg
+
+    line, _ = _moving_line()
+    d = DirectivitySpec(pattern="speech", facing="fixed", yaw_deg=-30.0)
+    np.testing.assert_array_equal(pair_yaws_deg(d, line, 16000), -30.0)
+
+
+def test_head_turns_without_the_paths_are_refused_by_compile_too(tmp_path: Path) -> None:
+    """A spec changed in Python after validation: the compiler says what validate says."""
+    loaded = load_spec(_spec(tmp_path, HEAD_TURN.replace("PATTERN", "speech")))
+    crossfade = loaded.spec.model_copy(update={"mixture": loaded.spec.mixture.model_copy(
+        update={"interpolation": "sample_crossfade"})})
+    with pytest.raises(CompileError, match=r"directivity.speech.head_turn: head turns are "
+                                           r"rendered .* got 'sample_crossfade'"):
+        compile_spec(type(loaded)(**{**loaded.__dict__, "spec": crossfade}), cache=False)

@@ -22,9 +22,10 @@
   sample arrives at its retarded time with 1/(4π r), Doppler included; with
   :func:`shoebox_moving_images`, the exact time-varying image-source sum of a shoebox. The
   reference the moving-source renderer is measured against (issue 18).
-* A moving, turning directional source in free field and above one reflecting plane
-  (:func:`directional_source_with_plane`): the same sums with the pattern's gain applied at
-  each emission time for the direction each path leaves in (issue 30).
+* A moving, turning directional source in free field and above one reflecting plane, heard
+  by a static or moving receiver (:func:`directional_source_with_plane`): the same sums with
+  the pattern's gain applied at each emission time for the direction each path leaves in,
+  towards where the receiver (or its mirror image) is when that emission reaches it (issue 30).
 * The infinite rigid wedge and thin half-plane (:class:`Wedge`): the exact diffracted field of
   a point source, Biot–Tolstoy–Medwin in time (:func:`wedge_diffraction_ir`) and its Fourier
   transform, Macdonald's solution (:func:`wedge_diffraction_spectrum`), with the geometric field
@@ -300,10 +301,9 @@ def moving_arrival_times(source_m, receiver_m, n_samples: int, sample_rate_hz: f
         r = np.linalg.norm(src - rcv, axis=1)
         return t_e + r / c, r
     rcv = _track(rcv, len(rcv) if rcv.ndim == 2 and len(rcv) else -1, "receiver_m")
-    grid = np.arange(len(rcv)) / fs
 
     def receiver_at(t: np.ndarray) -> np.ndarray:
-        return np.stack([np.interp(t, grid, rcv[:, i]) for i in range(3)], axis=1)
+        return _receiver_at(rcv, fs, t)
 
     t_a = t_e + np.linalg.norm(src - receiver_at(t_e), axis=1) / c
     for _ in range(50):
@@ -316,6 +316,13 @@ def moving_arrival_times(source_m, receiver_m, n_samples: int, sample_rate_hz: f
         raise AcousticsError("receiver_m: the retarded time did not converge (does the "
                              "receiver move near the speed of sound?)")
     return t_a, c * (t_a - t_e)
+
+
+def _receiver_at(receiver: np.ndarray, fs: float, t: np.ndarray) -> np.ndarray:
+    """A receiver given at the times ``j / fs`` (``(m, 3)``) read at times ``t`` (seconds):
+    linear between them, held beyond."""
+    grid = np.arange(len(receiver)) / fs
+    return np.stack([np.interp(t, grid, receiver[:, i]) for i in range(3)], axis=1)
 
 
 def windowed_sinc(x: np.ndarray, half_width: int = FRACTIONAL_DELAY_HALF_WIDTH,
@@ -387,16 +394,17 @@ def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rat
                                   reflection: float = 1.0,
                                   speed_of_sound_m_s: float = SPEED_OF_SOUND_M_S,
                                   n_out: int | None = None) -> np.ndarray:
-    """The exact pressure at a static receiver of a moving, *turning* directional point
+    """The exact pressure at a (moving) receiver of a moving, *turning* directional point
     source, in free field or above one reflecting plane, ``(n_out,)``.
 
     Each emitted sample leaves with the pattern's gain for the direction it leaves in, in the
-    source's frame at that emission time: towards the receiver for the direct sound, towards
-    the reflection point for the plane's reflection — the direction from the source to the
-    receiver's mirror image, i.e. the mirror of the direction from the source's image to the
-    receiver. Both are :func:`moving_point_source` sums (retarded time, 1/(4πr), Doppler) with
-    that gain per emitted sample; the reflection is the source's image with pressure factor
-    ``reflection``.
+    source's frame at that emission time: towards where the receiver is when that sample
+    reaches it (its retarded-time reception, :func:`moving_arrival_times`) for the direct
+    sound; for the plane's reflection towards the reflection point, i.e. towards the
+    receiver's mirror image at that reception time (the mirror of the direction from the
+    source's image to the receiver then). Both are :func:`moving_point_source` sums
+    (retarded time, 1/(4πr), Doppler) with that gain per emitted sample; the reflection is
+    the source's image with pressure factor ``reflection``.
 
     Parameters
     ----------
@@ -407,8 +415,9 @@ def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rat
     yaw_deg : float or (n,) float
         Where the source faces at each emission time: degrees counter-clockwise from +x
         seen from above (the front is horizontal).
-    receiver_m : (3,) float
-        The receiver, metres (static).
+    receiver_m : (3,) or (m, 3) float
+        The receiver, metres: a point, or its position at each output sample time ``j / fs``
+        (linear between them, held beyond), as :func:`moving_point_source` takes it.
     sample_rate_hz : float
     gain : callable
         ``gain(local) -> (n,)``: the pattern's pressure gain for unit directions ``(n, 3)``
@@ -423,10 +432,13 @@ def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rat
     """
     s = np.asarray(dry, dtype=np.float64)
     fs = _positive("sample_rate_hz", sample_rate_hz)
+    c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
     src = _track(source_m, len(s), "source_m")
     rcv = np.asarray(receiver_m, dtype=np.float64)
-    if rcv.shape != (3,):
-        raise AcousticsError(f"receiver_m: expected a static point (3,), got {rcv.shape}")
+    if rcv.shape != (3,) and (rcv.ndim != 2 or rcv.shape[1] != 3 or not len(rcv)
+                              or not np.all(np.isfinite(rcv))):
+        raise AcousticsError(f"receiver_m: expected a point (3,) or finite positions (m, 3) "
+                             f"at the output sample times, got shape {rcv.shape}")
     yaw = np.radians(np.broadcast_to(np.asarray(yaw_deg, dtype=np.float64), s.shape))
     cos_y, sin_y = np.cos(yaw), np.sin(yaw)
 
@@ -436,7 +448,14 @@ def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rat
                           d[:, 2]], axis=1)
         return np.asarray(gain(local), dtype=np.float64).reshape(len(s))
 
-    paths = [(src, gains(rcv[None] - src))]
+    def heard_at(position: np.ndarray) -> np.ndarray:
+        """Where the receiver is when each emission from ``position`` reaches it."""
+        if rcv.shape == (3,):
+            return rcv[None]
+        t_a, _ = moving_arrival_times(position, rcv, len(s), fs, c)
+        return _receiver_at(rcv, fs, t_a)
+
+    paths = [(src, gains(heard_at(src) - src))]
     if plane_point_m is not None:
         p0 = np.asarray(plane_point_m, dtype=np.float64).reshape(3)
         nrm = np.asarray(plane_normal, dtype=np.float64).reshape(3)
@@ -444,17 +463,16 @@ def directional_source_with_plane(dry, source_m, yaw_deg, receiver_m, sample_rat
             raise AcousticsError(f"plane_normal: expected a non-zero vector, got {plane_normal!r}")
         nrm = nrm / np.linalg.norm(nrm)
         image = _mirror(src, p0, nrm)
-        leaving = _mirror(rcv[None] - image, np.zeros(3), nrm)  # mirrored back to the source
+        leaving = _mirror(heard_at(image) - image, np.zeros(3), nrm)  # mirrored back
         paths.append((image, reflection * gains(leaving)))
     if n_out is None:
-        c = _positive("speed_of_sound_m_s", speed_of_sound_m_s)
-        last = max(float(np.max(np.arange(len(s)) + np.linalg.norm(p - rcv, axis=1) / c * fs))
+        last = max(float(np.max(moving_arrival_times(p, rcv, len(s), fs, c)[0])) * fs
                    for p, _ in paths) if len(s) else 0.0
         n_out = int(np.ceil(last)) + FRACTIONAL_DELAY_HALF_WIDTH + 1
     out = np.zeros(n_out)
     for position, g in paths:
-        out += moving_point_source(s, position, rcv, fs, speed_of_sound_m_s=speed_of_sound_m_s,
-                                   gain=g, n_out=n_out)
+        out += moving_point_source(s, position, rcv, fs, speed_of_sound_m_s=c, gain=g,
+                                   n_out=n_out)
     return out
 
 

@@ -253,7 +253,8 @@ class RirSource(_Data):
     candidates"``: the ray tracer covers the rest), None when it is not."""
     facing_yaw_deg: list[float] | None = None
     """A directional source: where it faced at each RIR point (degrees counter-clockwise
-    from +x), as its RIRs were computed; left out (None) for an omnidirectional one."""
+    from +x), as its RIRs were computed (a moving microphone: at each pair of source and
+    microphone positions, at that pair's time); left out (None) for an omnidirectional one."""
     paths: str | None = None
     """With ``interpolation: paths``: the prefix of the source's exact early paths (arrays
     ``<paths>_images``, ``_weights``, ``_order``, ``_isometries`` for a moving

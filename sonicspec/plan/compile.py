@@ -33,9 +33,10 @@ from sonicspec.plan.params import (
     without_omitted,
 )
 from sonicspec.shares import split_shares
+from sonicspec.spec.checks import check_directivity
 from sonicspec.spec.corpora import GeneratedSpeechSpec, LibriSpeechCorpusSpec
 from sonicspec.spec.dataset import DatasetSpec
-from sonicspec.spec.load import LoadedSpec
+from sonicspec.spec.load import LoadedSpec, format_path
 from sonicspec.spec.scene import MeshObstacleSpec, MeshSceneSpec
 from sonicspec.spec.splits import EACH_SPEAKER_PER_SCENE, MAX_GROUPS
 from sonicspec.spec.trajectory import StaticTrajectorySpec
@@ -361,11 +362,9 @@ def _directivity(spec: DatasetSpec, base_dir: Path, digests: FileDigests
     nothing), and its SOFA files: (params, digest by role, path by role)."""
     if spec.directivity.is_omni:
         return {}, {}, {}
-    if not isinstance(spec.microphone.trajectory, StaticTrajectorySpec):
-        raise CompileError("directivity: a directional source is rendered for a static "
-                           "microphone (microphone.trajectory is "
-                           f"{spec.microphone.trajectory.kind!r}); use omni sources or a "
-                           "static microphone")
+    for problem in check_directivity(spec):  # validate's check, for a spec made in Python
+        if problem.severity == "error":
+            raise CompileError(f"{format_path(problem.path)}: {problem.message}")
     files, paths = {}, {}
     for role in ("speech", "noise", "music"):
         d = spec.directivity.role(role)

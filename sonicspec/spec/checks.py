@@ -177,6 +177,7 @@ def check_spec(spec: DatasetSpec, *, cli_outputs: Collection[str] = (),
         _check_trajectory,
         _check_heights_and_distances,
         _check_augmentation,
+        check_directivity,
     ):
         problems.extend(check(spec))
     return problems
@@ -492,6 +493,27 @@ def _check_mixture(spec: DatasetSpec) -> Iterator[Problem]:
         yield _warn(
             ("mixture", "interpolation"), f"{m.interpolation!r} has no effect: sources are static"
         )
+
+
+def check_directivity(spec: DatasetSpec) -> Iterator[Problem]:
+    """Head turns are heard only along the exact paths: RIRs at points cannot follow them
+    (a standing source has one RIR; a walking one passes a point every 0.17–0.25 s, and the
+    rir step of a static microphone does not know when), so any other rendering would leave
+    them out without a word (docs/guide/directivity.md)."""
+    for role in ("speech", "noise", "music"):
+        d = spec.directivity.role(role)
+        if d.head_turn is None:
+            continue
+        path = ("directivity", role, "head_turn")
+        if d.is_omni:
+            yield _warn(path, f"has no effect: directivity.{role}.pattern is 'omni' (it "
+                              "radiates the same whichever way it faces)")
+        elif spec.mixture.rendering() != "paths":
+            yield _err(path, "head turns are rendered along the exact paths: expected "
+                             "mixture.interpolation 'paths' or 'auto', got "
+                             f"{spec.mixture.interpolation!r} (RIRs at points face as "
+                             f"directivity.{role}.facing says and cannot follow a turn); set "
+                             "mixture.interpolation: paths or remove the head_turn")
 
 
 def _check_acoustics(spec: DatasetSpec) -> Iterator[Problem]:

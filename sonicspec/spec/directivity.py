@@ -49,7 +49,8 @@ class DirectivitySpec(SpecModel):
         description=(
             "Where the source's front points: walk (the direction of travel, smoothed over "
             "facing_smoothing_s; a source that does not move faces the microphone), "
-            "toward_mic, or fixed (yaw_deg)."))
+            "toward_mic (a moving microphone: where it is at each moment), or fixed "
+            "(yaw_deg)."))
     yaw_deg: float = Field(
         0.0,
         description=("With facing fixed: the yaw of the front, degrees counter-clockwise from "
@@ -62,9 +63,10 @@ class DirectivitySpec(SpecModel):
         0.0, ge=-90, le=90, description="Elevation of the front above horizontal, degrees.")
     head_turn: HeadTurnSpec | None = Field(
         None,
-        description=("Seeded random head turns around the facing direction (rendered with "
-                     "mixture.interpolation paths; RIRs at points use the facing alone); "
-                     "none by default."))
+        description=("Seeded random head turns around the facing direction, drawn per group "
+                     "and track; none by default. Heard along the exact paths only: needs "
+                     "mixture.interpolation paths (or auto) — with a crossfade of RIRs at "
+                     "points validate refuses it, as those RIRs cannot follow a turn."))
 
     @model_validator(mode="after")
     def _sofa_needs_a_file(self) -> DirectivitySpec:

@@ -29,12 +29,7 @@ import numpy as np
 
 from sonicspec import artifacts
 from sonicspec.acoustics.bands import OctaveFilterBank
-from sonicspec.acoustics.directivity import (
-    SourceDirectivity,
-    facing_yaw_deg,
-    head_turns_deg,
-    yaw_per_sample,
-)
+from sonicspec.acoustics.directivity import SourceDirectivity, yaw_per_sample
 from sonicspec.acoustics.engine import (
     SimulationSettings,
     array_offsets,
@@ -65,12 +60,11 @@ from sonicspec.audio.mix import measurement_channels
 from sonicspec.audio.render import EARLY_MS, render_moving, split_rir
 from sonicspec.errors import StageError
 from sonicspec.plan.params import RenderParams
-from sonicspec.spec.directivity import DirectivitySpec
 from sonicspec.spec.microphone import SofaHrtfSpec
 from sonicspec.spec.mixture import BackgroundFieldSpec
 from sonicspec.stages.context import JobContext
 from sonicspec.stages.corpus import corpus_roots
-from sonicspec.stages.directivity import source_patterns
+from sonicspec.stages.directivity import facing_frames, source_patterns
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 
@@ -162,25 +156,6 @@ def render_track(track: ArrangedTrack, rirs: np.ndarray, line: Timeline,
                             + render_moving(dry, early_tail, position,
                                             "sample_crossfade")[:, :clip_samples])
     return {k: v.astype(np.float32) for k, v in out.items()}
-
-
-#: Where a directional source faces is recorded every this many seconds (the position
-#: tracks' hop, :data:`sonicspec.stages.export.TRACK_HOP_S`).
-FACING_HOP_S = 0.01
-
-
-def facing_frames(d: DirectivitySpec, line: Timeline, mic_m, rate: int,
-                  rng: np.random.Generator | None) -> tuple[int, np.ndarray]:
-    """Where a directional source faces every :data:`FACING_HOP_S` of the clip (frames read
-    at the same samples as its position track), unwrapped degrees, with its head turns when
-    ``rng`` is given: ``(hop in samples, yaw per frame)``."""
-    hop = max(1, round(FACING_HOP_S * rate))
-    positions = line.at(line.source_m, line.index[::hop])
-    yaw = facing_yaw_deg(positions, hop / rate, d.facing_rule, mic_m, d.facing_smoothing_s)
-    if d.head_turn is not None and rng is not None:
-        yaw = yaw + head_turns_deg(len(yaw), hop / rate, d.head_turn.std_deg,
-                                   d.head_turn.time_constant_s, rng)
-    return hop, yaw
 
 
 def path_receiver(microphone, center_m, line: Timeline | None = None, hrirs=None,

@@ -50,7 +50,7 @@ from sonicspec.geometry.materials import material_library
 from sonicspec.plan.params import MaterialTable, RirParams
 from sonicspec.spec.materials import MaterialsSpec
 from sonicspec.spec.microphone import SofaHrtfSpec
-from sonicspec.stages.directivity import source_patterns, track_role
+from sonicspec.stages.directivity import pair_yaws_deg, source_patterns, track_role
 from sonicspec.stages.motion import Timeline, Walk, group_speech, timeline
 
 log = logging.getLogger("sonicspec.stages.rir")
@@ -297,13 +297,15 @@ def run(ctx) -> None:
         # a directional source: its pattern at every point, facing as the spec says
         point_dirs: list[list[SourceDirectivity | None]] = [[None] * len(p) for *_, p in traces]
         facings: list[np.ndarray | None] = []
-        for (name, pts), ref in zip(sources, refs, strict=True):
+        for (name, pts), line, ref in zip(sources, lines, refs, strict=True):
             role = track_role(name)
             if role not in patterns:
                 facings.append(None)
                 continue
             d = params.directivity.role(role)
-            yaws = point_yaws_deg(pts, d.facing_rule, placement.mic_m)
+            # a moving microphone: where the source faces at each pair's time
+            yaws = (point_yaws_deg(pts, d.facing_rule, placement.mic_m) if line is None
+                    else pair_yaws_deg(d, line, params.sample_rate_hz))
             facings.append(yaws)
             for (t, i), yaw in zip(ref, yaws, strict=True):
                 point_dirs[t][i] = SourceDirectivity(patterns[role], float(yaw), d.pitch_deg)

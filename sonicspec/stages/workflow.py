@@ -345,6 +345,20 @@ def job_warnings(plan: Plan, keys: set[str]) -> list[str]:
     return out
 
 
+def _clear_progress(plan: Plan) -> None:
+    """Remove the progress files a killed build's jobs left (a job still running somewhere,
+    e.g. on a cluster node, writes its file again at its next step)."""
+    folder = progress_path(plan.store_dir, "0" * 64).parent
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return
+    for name in names:
+        if name.endswith(".txt"):
+            with contextlib.suppress(OSError):
+                (folder / name).unlink()
+
+
 def _job_progress(plan: Plan, waiting: Mapping[str, Job] | Iterable[Job]) -> str:
     """What the running jobs say of themselves (``JobContext.progress``), briefly.
 
@@ -491,6 +505,7 @@ def build(
         claim_folder(*claims[1], write=not dry_run)
         start = time.monotonic()
         removed = store.clean_stale_temp()
+        _clear_progress(plan)
         if removed:
             print(f"removed {removed} unfinished artifact(s) left by an interrupted build",
                   file=stream)

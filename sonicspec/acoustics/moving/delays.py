@@ -637,7 +637,8 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
     source : SourceDirectivity, optional
         A directional source, its yaw one per dry sample (or one): each path's emission
         is weighted by the pattern's gain for the direction it leaves the source in at
-        that emission (:func:`_source_gains`); default omnidirectional.
+        that emission (:func:`_source_gains`; with a moving microphone, towards where the
+        path's image of it is when the emission reaches it); default omnidirectional.
     """
     s = np.asarray(dry, dtype=np.float64)
     index = np.asarray(point_index, dtype=np.float64)
@@ -664,11 +665,8 @@ def render_paths(dry, point_index, points_m, paths: PathSet, bank, *, n_out: int
         raise AcousticsError(f"source.yaw_deg: expected one yaw per dry sample {s.shape}, "
                              f"got {source.yaw_deg.shape}")
     if receiver.mic_track_m is not None:
-        if source is not None:
-            raise AcousticsError("source: a directional source is rendered for a static "
-                                 "microphone; this one moves")
         return _render_moving_receiver(s, index, points, paths, bank, n_out,
-                                       float(speed_of_sound_m_s), receiver)
+                                       float(speed_of_sound_m_s), receiver, source)
     if receiver.kind != "mono" and paths.directions is None:
         raise AcousticsError(f"paths: a {receiver.kind} receiver needs the paths' directions "
                              "at the microphone (PathSet.identify(..., at_mic=...))")
@@ -810,14 +808,15 @@ _SOURCE_STEP = 64
 
 def _source_gains(source: SourceDirectivity, paths: PathSet, k: int, edge: bool,
                   track: np.ndarray, index: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                  frac: np.ndarray, part: slice, static: bool, bands_hz
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  frac: np.ndarray, part: slice, static: bool, bands_hz,
+                  image_at=None) -> tuple[np.ndarray, np.ndarray]:
     """Path ``k``'s pattern gains as a broadband factor per emission of ``part`` and a
     spectral tilt per point ``(N, B)`` (:func:`~sonicspec.acoustics.directivity.split_gains`).
 
     The departure direction: towards the path's image of the microphone from where the
-    source is at each emission (exact, the image is fixed), or an edge path's departures
-    between points. Gains are evaluated every :data:`_SOURCE_STEP` emissions and read
+    source is at each emission (exact: the image is fixed, or ``image_at(q)`` gives where a
+    moving microphone's image is when emissions ``q`` reach it), or an edge path's
+    departures between points. Gains are evaluated every :data:`_SOURCE_STEP` emissions and read
     linearly between; a pattern that is the same in every band has tilt 1, so its gain is
     exact per emission; otherwise each point's filter carries the tilt of the emission
     nearest to it (for a source that stays put, the mean tilt of its emissions).
@@ -836,7 +835,8 @@ def _source_gains(source: SourceDirectivity, paths: PathSet, k: int, edge: bool,
         dep = np.broadcast_to(dep, (q.size, 3))
     else:
         where = track[:1] if static else track[q]
-        dep = np.broadcast_to(paths.images_m[k] - where, (q.size, 3))
+        target = paths.images_m[k] if image_at is None else image_at(q)
+        dep = np.broadcast_to(target - where, (q.size, 3))
     gains = emission_gains(source.pattern, dep, source.yaw_at(q), bands_hz, source.pitch_deg)
     broad_q, tilt_q = split_gains(gains)
     broad = np.interp(np.arange(part.start, part.stop), q, broad_q) if q.size > 1 else \
@@ -1039,9 +1039,27 @@ def _directions_at(directions: np.ndarray, lo: np.ndarray, hi: np.ndarray, frac:
     return np.divide(d, norm, out=np.zeros_like(d), where=norm > 0)
 
 
+def _mic_images_at(mic: np.ndarray, m: np.ndarray, b: np.ndarray, source_q: np.ndarray,
+                   q: np.ndarray, fs: float, c: float) -> np.ndarray:
+    """Where a moving microphone's image ``M m(t) + b`` is when the emissions ``q`` (dry
+    samples, the source at ``source_q``) reach it: the retarded-time equation
+    ``t = q + |M m(t) + b − s_q| fs / c`` solved by fixed-point iteration (a contraction by
+    the microphone's speed over c, 1/200 at a run: six steps reach 1e-13 samples), ``mic``
+    given at every sample and held beyond."""
+    grid = np.arange(len(mic), dtype=np.float64)
+
+    def image(t: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(t, grid, mic[:, i]) for i in range(3)], axis=1) @ m.T + b
+
+    t = q.astype(np.float64)
+    for _ in range(6):
+        t = q + np.linalg.norm(image(t) - source_q, axis=1) * (fs / c)
+    return image(t)
+
+
 def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray,
-                            paths: PathSet, bank, n_out: int, c: float, receiver: Receiver
-                            ) -> np.ndarray:
+                            paths: PathSet, bank, n_out: int, c: float, receiver: Receiver,
+                            directivity: SourceDirectivity | None = None) -> np.ndarray:
     """:func:`render_paths` for a microphone that moves (and turns) too.
 
     Path ``k``'s image of the microphone is ``M_k m(t) + b_k`` (its isometry), so the path
@@ -1049,7 +1067,10 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
     (:func:`~sonicspec.acoustics.theory.moving_arrival_times`). Its direction of arrival
     is from the microphone to the source's image ``M_kᵀ (s − b_k)``, turned into the
     microphone's frame ``R(t)`` (yaw, pitch); array capsules at ``m(t) + R(t) o`` each hear
-    their own image; ears turn with the head.
+    their own image; ears turn with the head. A ``directivity`` (a directional source)
+    weights each emission by its pattern's gain towards where the path's image of the
+    microphone is when that emission reaches it (:func:`_mic_images_at`; an edge path: its
+    departures between the pairs), in the source's frame at emission (:func:`_source_gains`).
     """
     from sonicspec.acoustics.receivers.arrays import rotation
 
@@ -1086,9 +1107,20 @@ def _render_moving_receiver(s: np.ndarray, index: np.ndarray, points: np.ndarray
         w = paths.weights[k]
         if not np.any(w):
             continue
-        x = shaped_emission(s, index, w, bank, 0, s.size, monotonic)
         m, b = paths.isometries[k, :, :3], paths.isometries[k, :, 3]
         edge = paths.lengths_m is not None and bool(np.isnan(m[0, 0]))
+        broad = None
+        if directivity is not None:  # the pattern: per emission, its tilt at the points
+            def image_at(q: np.ndarray, m=m, b=b) -> np.ndarray:
+                return _mic_images_at(mic, m, b, source[q], q, fs, c)
+
+            broad, tilt = _source_gains(directivity, paths, k, edge, source, index, lo, hi,
+                                        frac, slice(0, s.size), False, bank.bands_hz,
+                                        image_at=image_at)
+            w = w * tilt
+        x = shaped_emission(s, index, w, bank, 0, s.size, monotonic)
+        if broad is not None:
+            x = x * broad
         length = _length_at(paths.lengths_m[k], index) if edge else None
 
         def heard(at_m: np.ndarray, gain=1.0, extra_delay_s=None, x=x, m=m, b=b,
