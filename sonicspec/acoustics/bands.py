@@ -178,6 +178,8 @@ class OctaveFilterBank:
         signs is shaped as its positive part minus its negative part (each minimum-phase).
         Gains are floored at -100 dB of the row's largest.
         """
+        from sonicspec.acoustics._band_kernels import band_sums
+
         g = np.atleast_2d(np.asarray(gains, dtype=np.float64))
         if g.ndim != 2 or g.shape[1] != self.n_bands:
             raise AcousticsError(f"shaping gains: expected (N, {self.n_bands}), got "
@@ -193,18 +195,25 @@ class OctaveFilterBank:
                 part = part[rows]
                 floor = _SHAPING_FLOOR * part.max(axis=1, keepdims=True)
                 logs = np.log(np.maximum(part, floor))
-                # log-magnitude and phase, band by band (real arithmetic; no BLAS, whose
-                # threads fight the build's other jobs)
-                level = logs[:, :1] * level_basis[0]
-                phase = logs[:, :1] * phase_basis[0]
-                for b in range(1, self.n_bands):
-                    level += logs[:, b:b + 1] * level_basis[b]
-                    phase += logs[:, b:b + 1] * phase_basis[b]
+                # log-magnitude and phase, band by band (real arithmetic in one compiled
+                # pass; no BLAS, whose threads fight the build's other jobs)
+                level = np.empty((rows.size, level_basis.shape[1]))
+                phase = np.empty_like(level)
+                band_sums(logs, level_basis, phase_basis, level, phase)
                 np.exp(level, out=level)
-                spectra = np.empty(level.shape, dtype=np.complex128)
-                spectra.real = level * np.cos(phase)
-                spectra.imag = level * np.sin(phase)
-                out[rows] += sign * spectra
+                real = np.cos(phase)
+                real *= level
+                imag = np.sin(phase, out=phase)
+                imag *= level
+                if sign < 0:
+                    np.negative(real, out=real)
+                    np.negative(imag, out=imag)
+                if rows.size == g.shape[0]:  # every row: added in place, no temporaries
+                    out.real += real
+                    out.imag += imag
+                else:
+                    out.real[rows] += real
+                    out.imag[rows] += imag
         return out
 
     def shaping_filters(self, gains: np.ndarray) -> list[np.ndarray]:
@@ -218,8 +227,8 @@ class OctaveFilterBank:
         if shaped.size:
             n_fft = self.shaping_fft_size()
             h = np.fft.irfft(self.shaping_spectra(g[shaped], n_fft), n_fft, axis=-1)
-            for n, row in zip(shaped, h, strict=True):
-                out[n] = row[:_decayed_length(row, n_fft)]
+            for n, row, length in zip(shaped, h, _decayed_lengths(h, n_fft), strict=True):
+                out[n] = row[:length]
         return out
 
     @staticmethod
@@ -253,11 +262,12 @@ def _analytic_responses(sample_rate_hz: float, bands_hz: tuple[float, ...],
     return level, phase
 
 
-def _decayed_length(h: np.ndarray, cap: int) -> int:
-    """Samples of ``h`` before all but ``_SHAPING_TAIL`` of its energy has come, capped."""
-    energy = h * h
-    tail = np.cumsum(energy[::-1])[::-1]
-    total = tail[0]
-    if total <= 0:
-        return 1
-    return int(min(cap, np.flatnonzero(tail > _SHAPING_TAIL * total)[-1] + 1))
+def _decayed_lengths(h: np.ndarray, cap: int) -> np.ndarray:
+    """Samples of each row of ``h`` ``(N, n)`` before all but ``_SHAPING_TAIL`` of its energy
+    has come, capped at ``cap`` (1 for a silent row); compiled
+    (:func:`~sonicspec.acoustics._band_kernels.decayed_lengths`)."""
+    from sonicspec.acoustics._band_kernels import decayed_lengths
+
+    out = np.empty(h.shape[0], dtype=np.int64)
+    decayed_lengths(np.ascontiguousarray(h, dtype=np.float64), _SHAPING_TAIL, cap, out)
+    return out
