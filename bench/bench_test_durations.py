@@ -6,7 +6,13 @@ teardown of its tests), the share of the sum, and the summary line of the run.
 
     nice -n 10 python -m pytest -n 2 --dist loadfile --durations=0 -q -p no:cacheprovider \\
         > /tmp/durations.txt 2>&1
-    python bench/bench_test_durations.py /tmp/durations.txt [--top 25]
+    python bench/bench_test_durations.py /tmp/durations.txt [--top 25] [--workers 2]
+
+``--workers N`` also estimates the wall time of N workers taking files greedily (a worker that
+runs out takes the next file: the shape of xdist's loadfile scheduling) in three orders: the
+order xdist uses by default (most tests first), the longest file first, and the order of
+``tests/conftest.py``'s ``SLOW_FIRST`` list. An estimate from the run's own per-file seconds:
+files that shared one build (conftest's session builds) are counted as they ran.
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("log", type=Path, help="the output of pytest --durations=0")
     parser.add_argument("--top", type=int, default=25, help="files to list (default 25)")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="estimate the wall time of this many workers (default: no)")
     args = parser.parse_args(argv)
     totals, lines, summary = per_file(args.log.read_text(errors="replace"))
     if not lines:
@@ -52,7 +60,50 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'seconds':>8} {'share':>6}  file")
     for name, seconds in sorted(totals.items(), key=lambda kv: -kv[1])[:args.top]:
         print(f"{seconds:8.1f} {seconds / whole:6.1%}  {name}")
+    if args.workers:
+        print(f"estimated wall time on {args.workers} workers, files taken greedily in order:")
+        counts = _test_counts()
+        collected = [f for f in counts if f in totals] + [f for f in totals if f not in counts]
+        orders = {
+            "most tests first (xdist's default)": sorted(
+                collected, key=lambda f: -counts.get(f, 0)),
+            "longest first": sorted(collected, key=lambda f: -totals[f]),
+            "conftest SLOW_FIRST, then the rest as collected": _slow_first(collected),
+        }
+        for name, order in orders.items():
+            print(f"  {greedy(order, totals, args.workers):7.0f} s  {name}")
+        print(f"  {whole / args.workers:7.0f} s  the bound: sum / workers")
     return 0
+
+
+def greedy(order: list[str], seconds: dict[str, float], workers: int) -> float:
+    """When the last of ``workers`` finishes if each, once free, takes the next file."""
+    free = [0.0] * workers
+    for name in order:
+        i = free.index(min(free))
+        free[i] += seconds[name]
+    return max(free)
+
+
+def _test_counts() -> dict[str, int]:
+    """Tests per file, as collected here (xdist's default order sorts files by this)."""
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q",
+                          "-p", "no:cacheprovider"], capture_output=True, text=True).stdout
+    counts: dict[str, int] = defaultdict(int)
+    for line in out.splitlines():
+        if "::" in line:
+            counts[line.split("::")[0]] += 1
+    return dict(counts)
+
+
+def _slow_first(files: list[str]) -> list[str]:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from conftest import SLOW_FIRST
+
+    rank = {name: i for i, name in enumerate(SLOW_FIRST)}
+    return sorted(files, key=lambda f: rank.get(Path(f).name, len(rank)))
 
 
 if __name__ == "__main__":

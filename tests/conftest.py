@@ -19,6 +19,31 @@ from pathlib import Path
 import pytest
 from build_cases import build_digest, plan_for, write_spec
 
+# The test files that take longest, longest first (measured with `--durations=0`, summed per
+# file by bench/bench_test_durations.py). CI runs `--dist loadfile --no-loadscope-reorder`:
+# each file on one worker, files handed out in collection order, so these start first and no
+# long file is left to run alone at the end (xdist's default order, most tests first, put
+# the long build files with few tests last). Files not named keep their collection order.
+SLOW_FIRST: list[str] = [
+    "test_pipeline_trust.py",  # builds the shared demo (conftest's demo_reference) ...
+    "test_dataload.py",  # ... while the other worker builds the dataload dataset
+    "test_trust_round2.py",
+    "test_pipeline_build.py",
+    "test_audio_scale.py",
+    "test_report_browser.py",
+    "test_pipeline_capsules.py",
+    "test_pipeline_augment.py",
+    "test_pipeline_motion.py",
+    "test_sonicset_realistic.py",
+    "test_sonicset_preset.py",
+    "test_docs.py",
+]
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    rank = {name: i for i, name in enumerate(SLOW_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole
+
 
 def shared_folder(factory: pytest.TempPathFactory, name: str,
                   make: Callable[[Path], None]) -> Path:
