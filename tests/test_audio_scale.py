@@ -171,11 +171,13 @@ def _variant(base_spec: Path, name: str, outputs: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory) -> dict[str, Path]:
-    from dataload_cases import build_dataset
+def built(tmp_path_factory, dataload_reference: Path) -> dict[str, Path]:
+    """A copy of conftest's ``dataload_reference`` (``dataload_cases.build_dataset``, built once
+    per session) and its two variants built from the copy's store."""
+    import shutil
 
-    tmp = tmp_path_factory.mktemp("scaled")
-    build_dataset(tmp)
+    tmp = tmp_path_factory.mktemp("scaled") / "b"
+    shutil.copytree(dataload_reference, tmp, symlinks=True)
     spec = tmp / "demo.yaml"
     return {"float": _variant(spec, "float", "audio_format: wav\n  subtype: FLOAT"),
             "scaled": _variant(spec, "scaled", "audio_format: flac\n  subtype: PCM_24\n"

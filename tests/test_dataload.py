@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
-from dataload_cases import build_dataset
+from build_cases import plan_for
 
 from sonicspec.dataload import DatasetError, MixingConfig, SonicspecDataset, preset
 from sonicspec.dataload.evaluate import evaluate
@@ -26,8 +26,10 @@ STATIC = MixingConfig(dynamic=False, crop_s=None)
 
 
 @pytest.fixture(scope="module")
-def root(tmp_path_factory) -> Path:
-    return Path(build_dataset(tmp_path_factory.mktemp("dataload")).output_dir)
+def root(dataload_reference: Path) -> Path:
+    """The dataset folder of conftest's ``dataload_reference`` (built once per session by
+    ``dataload_cases.build_dataset``); read-only."""
+    return Path(plan_for(dataload_reference / "demo.yaml").output_dir)
 
 
 def read(root: Path, rel: str) -> np.ndarray:

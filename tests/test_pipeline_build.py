@@ -23,12 +23,11 @@ from sonicspec.store import ArtifactStore
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory) -> tuple[Plan, dict[str, str]]:
-    """One finished build of the test spec and its digests, shared by the tests below."""
-    folder = tmp_path_factory.mktemp("reference")
-    plan = plan_for(write_spec(folder))
-    assert run_build(plan, cores=2) == 0
-    return plan, build_digest(plan)
+def reference(demo_reference) -> tuple[Plan, dict[str, str]]:
+    """One finished build of the test spec and its digests (conftest's, made once per session
+    by another process or this one), shared by the tests below; read-only."""
+    folder, digest = demo_reference
+    return plan_for(folder / "demo.yaml"), digest
 
 
 def test_two_builds_from_empty_stores_are_byte_identical(reference, tmp_path: Path) -> None:

@@ -2,7 +2,8 @@
 once, and bad output folders (issue 16's fault table; ``bench/bench_trust.py`` prints it).
 
 Every case builds the cut-down demo of ``test_pipeline_build`` through Snakemake. A reference
-build is made once; each test works on a copy of it (spec, store and dataset folder).
+build is made once per session (conftest's ``demo_reference``); each test works on a copy of it
+(spec, store and dataset folder).
 """
 
 from __future__ import annotations
@@ -37,12 +38,10 @@ def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory) -> tuple[Path, dict[str, str]]:
-    """A finished build (its folder: spec, store, dataset) and its digests."""
-    folder = tmp_path_factory.mktemp("trust-reference")
-    plan = plan_for(write_spec(folder))
-    assert build(plan, cores=2, stream=io.StringIO()).code == 0
-    return folder, build_digest(plan)
+def reference(demo_reference) -> tuple[Path, dict[str, str]]:
+    """A finished build (its folder: spec, store, dataset) and its digests: conftest's, made
+    once per session; read-only (each test works on a ``copy``)."""
+    return demo_reference
 
 
 @pytest.fixture

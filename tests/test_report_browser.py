@@ -13,7 +13,6 @@ from urllib.parse import unquote, urlparse
 
 import numpy as np
 import pytest
-from build_cases import write_spec
 
 # Imported at collection: build() binds sys.stderr as its default stream when its module is
 # first imported, and a first import under another test's capsys would bind a closed stream.
@@ -29,10 +28,13 @@ HAVE_BROWSER = importlib.util.find_spec("playwright") is not None and Path(CHROM
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory) -> Path:
-    """The cut-down demo built with ``outputs.report`` on; its dataset folder."""
-    folder = tmp_path_factory.mktemp("demo")
-    spec = write_spec(folder)
+def demo(tmp_path_factory, demo_reference) -> Path:
+    """The cut-down demo built with ``outputs.report`` on; its dataset folder. Built on a copy
+    of conftest's ``demo_reference`` (the report changes no artifact key: the build makes the
+    dataset folder again, now with its report)."""
+    folder = tmp_path_factory.mktemp("demo") / "b"
+    shutil.copytree(demo_reference[0], folder, symlinks=True)
+    spec = folder / "demo.yaml"
     text = spec.read_text()
     assert "  groups_per_shard: 2\n" in text
     spec.write_text(text.replace("  groups_per_shard: 2\n", "  groups_per_shard: 2\n"

@@ -1,6 +1,7 @@
 """Issue 28, second round of trust: the faults a hostile machine and a new user found (items 2,
 3, 4, 5, 10 and 13). Each test reproduces its fault first; the builds are copies of the
-cut-down demo that ``test_pipeline_trust`` builds once (its ``reference`` and ``copy``)."""
+cut-down demo built once per session (conftest's ``demo_reference``, through
+``test_pipeline_trust``'s ``reference`` and ``copy``)."""
 
 from __future__ import annotations
 
